@@ -1,0 +1,54 @@
+# brdfgan — `make demo` and `make test` work on a fresh clone: both build .venv first.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.setup-complete
+TORCH_PIN := torch==2.13.0
+# Mitsuba's LLVM variant needs LLVM >= 17 (Debian's default 14-16 abort, DESIGN.md §4).
+LIBLLVM := $(firstword $(wildcard /usr/lib/x86_64-linux-gnu/libLLVM-19.so /usr/lib/aarch64-linux-gnu/libLLVM-19.so))
+ifneq ($(LIBLLVM),)
+export DRJIT_LIBLLVM_PATH ?= $(LIBLLVM)
+endif
+
+.PHONY: setup test test-slow demo lint format bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml Makefile
+	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || { echo "error: $(PYTHON) must be Python >= 3.11" >&2; exit 1; }
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet $(TORCH_PIN)
+	$(PY) -m pip install --quiet -e '.[dev]'
+	@if [ "$$(id -u)" = 0 ] && ! ls /usr/lib/*/libLLVM-19.so* >/dev/null 2>&1 && command -v apt-get >/dev/null; then \
+		echo "installing Debian's libllvm19 for Mitsuba's LLVM variant"; \
+		export DEBIAN_FRONTEND=noninteractive; \
+		apt-get install -y -qq libllvm19 >/dev/null 2>&1 || { apt-get update -qq >/dev/null 2>&1 && apt-get install -y -qq libllvm19 >/dev/null 2>&1; } \
+		|| echo "warning: libllvm19 could not be installed; Mitsuba falls back to the slower scalar_rgb variant" >&2; \
+	fi
+	@touch $(STAMP)
+
+test: setup
+	$(PY) -m pytest -q
+
+test-slow: setup
+	$(PY) -m pytest -q -m slow
+
+demo: setup
+	$(PY) -m brdfgan.demo
+
+lint: setup
+	$(PY) -m ruff check src tests benchmarks
+	$(PY) -m ruff format --check src tests benchmarks
+
+format: setup
+	$(PY) -m ruff format src tests benchmarks
+	$(PY) -m ruff check --fix src tests benchmarks
+
+bench: setup
+	$(PY) -m benchmarks.bench_renderer
+
+clean:
+	rm -rf $(VENV) outputs multirun .pytest_cache .ruff_cache src/*.egg-info
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -1,0 +1,120 @@
+"""Renderer forward+backward benchmark: the rendering-loss workload of one training step.
+
+Each case runs in a fresh subprocess so its peak resident memory is its own (CPU); on CUDA the
+peak comes from the allocator. Prints a Markdown table; ratios are relative to the first row.
+
+    python -m benchmarks.bench_renderer [--device cpu|cuda] [--repeats N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+
+import torch
+
+CASES: list[tuple[int, int, int]] = [(256, 8, 10), (512, 8, 10)]  # (resolution, batch, configurations)
+
+
+def _measure(resolution: int, batch: int, configs: int, device: str, repeats: int) -> dict[str, float]:
+    from tests.conftest import random_maps
+
+    from brdfgan.core.render import render_point_lights
+    from brdfgan.core.sampling import RenderingLossSampling, log_transform, sample_rendering_loss_configs
+
+    torch.manual_seed(0)
+    maps = random_maps(resolution, resolution, batch=(batch,)).to(device)
+    target = random_maps(resolution, resolution, batch=(batch,), seed=1).to(device)
+    sampling = RenderingLossSampling(random_configs=configs // 2, specular_configs=configs - configs // 2)
+    scene = sample_rendering_loss_configs(
+        batch, sampling, generator=torch.Generator().manual_seed(0), device=device
+    )
+
+    def sync() -> None:
+        if device == "cuda":
+            torch.cuda.synchronize()
+
+    def step(backward: bool) -> float:
+        prediction = maps.clone().requires_grad_(backward)
+        sync()
+        start = time.perf_counter()
+        with torch.set_grad_enabled(backward):
+            rendered = log_transform(render_point_lights(prediction, scene.camera_position, scene.lights))
+            with torch.no_grad():
+                reference = log_transform(render_point_lights(target, scene.camera_position, scene.lights))
+            loss = (rendered - reference).abs().mean()
+            if backward:
+                loss.backward()
+        sync()
+        return time.perf_counter() - start
+
+    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+    step(True)  # warm-up
+    if device == "cuda":
+        torch.cuda.reset_peak_memory_stats()
+    forward = min(step(False) for _ in range(repeats))
+    both = min(step(True) for _ in range(repeats))
+    if device == "cuda":
+        peak = torch.cuda.max_memory_allocated() / 2**30
+    else:
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20 - rss_before
+    return {"forward_s": forward, "forward_backward_s": both, "peak_gib": peak}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--case", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.case:
+        print(json.dumps(_measure(*map(int, args.case.split(",")), args.device, args.repeats)))
+        return
+
+    rows = []
+    for resolution, batch, configs in CASES:
+        out = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "benchmarks.bench_renderer",
+                "--device",
+                args.device,
+                "--repeats",
+                str(args.repeats),
+                "--case",
+                f"{resolution},{batch},{configs}",
+            ],
+            check=True,
+            capture_output=True,
+            text=True,
+        )
+        rows.append(((resolution, batch, configs), json.loads(out.stdout.strip().splitlines()[-1])))
+
+    base = rows[0][1]
+    print(
+        f"\nRenderer forward+backward (rendering loss: prediction + no-grad target), device={args.device}, "
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads, best of {args.repeats}\n"
+    )
+    print(
+        "| resolution | batch | configs | Mpix renders | forward s | fwd+bwd s | peak GiB "
+        "| fwd+bwd ratio | peak ratio | Mpix renders/s |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for (resolution, batch, configs), m in rows:
+        mpix = resolution * resolution * batch * configs / 1e6
+        print(
+            f"| {resolution}² | {batch} | {configs} | {mpix:.1f} | {m['forward_s']:.3f} | "
+            f"{m['forward_backward_s']:.3f} | {m['peak_gib']:.2f} | "
+            f"{m['forward_backward_s'] / base['forward_backward_s']:.2f}× | "
+            f"{m['peak_gib'] / base['peak_gib']:.2f}× | "
+            f"{mpix / m['forward_backward_s']:.1f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,4 @@
+"""Pure maths: map representation, BRDF, renderer, light sampling, exposure.
+
+Nothing in this package imports Lightning, Hydra or Mitsuba.
+"""

@@ -1,0 +1,86 @@
+"""Auto exposure of HDR renderings to linear LDR (paper appendix, DESIGN.md §2).
+
+Derivation. Exposure values at ISO 100 are ``EV100 = log2(N²/t)`` (aperture N, shutter time t).
+A reflected-light meter with calibration constant K = 12.5 cd·s/m²·ISO picks, for average scene
+luminance L_avg and sensitivity S, the setting with ``EV = log2(L_avg·S/K)``. Saturation-based
+sensitivity (ISO 12232, Kerr 2007) says the sensor saturates at photometric exposure
+``H_sbs = 78/S``; with ``H = q·t·L/N²`` the luminance that just saturates is
+
+    L_max = (78 / (S·q)) · N²/t = (78 / (S·q)) · 2^EV100.
+
+With S = 100 and lens/vignetting attenuation q = 0.65: ``78/65 = 1.2``, hence
+``L_max = 1.2 · 2^EV100`` (the paper prints "1.2·EV100²", a typo for this standard photometric
+result). The image is divided by L_max and clipped:
+
+    LDR = clip(HDR / L_max, 0, 1),   L_max = 1.2 · 2^(log2(L_avg·100/12.5)) = 9.6 · L_avg.
+
+Because L_max is proportional to L_avg, scaling the HDR image by any constant leaves the LDR
+result unchanged. No tone curve is applied: the output stays linear, like a RAW photo.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+ISO_SPEED = 100.0
+METER_CALIBRATION_K = 12.5
+LENS_ATTENUATION_Q = 0.65
+SATURATION_CONSTANT = 78.0
+# Rec. 709 / sRGB primaries, the colour space of our linear renderings.
+LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)
+
+
+def luminance(rgb: Tensor) -> Tensor:
+    """Relative luminance of linear RGB. Shape: ``(*, 3, H, W)`` → ``(*, 1, H, W)``."""
+    if rgb.ndim < 3 or rgb.shape[-3] != 3:
+        raise ValueError(f"expected linear RGB of shape (*, 3, H, W), got {tuple(rgb.shape)}")
+    weights = rgb.new_tensor(LUMINANCE_WEIGHTS).view(3, 1, 1)
+    return (rgb * weights).sum(dim=-3, keepdim=True)
+
+
+def exposure_value_100(average_luminance: Tensor) -> Tensor:
+    """EV100 = log2(L_avg · S / K). Shape: any → same."""
+    return torch.log2(average_luminance * ISO_SPEED / METER_CALIBRATION_K)
+
+
+def saturation_luminance(ev100: Tensor) -> Tensor:
+    """L_max = 78 / (S q) · 2^EV100 = 1.2 · 2^EV100. Shape: any → same."""
+    return SATURATION_CONSTANT / (ISO_SPEED * LENS_ATTENUATION_Q) * torch.exp2(ev100)
+
+
+def auto_exposure_scale(hdr: Tensor) -> Tensor:
+    """The multiplier ``1 / L_max`` per image; 0 for an all-black image (nothing to expose).
+
+    Shape:
+        - hdr: ``(*, 3, H, W)`` linear HDR
+        - output: ``(*)``
+    """
+    if not torch.isfinite(hdr).all():
+        raise ValueError("HDR image contains NaN or infinite values")
+    average = luminance(hdr).mean(dim=(-3, -2, -1))
+    positive = average > 0
+    safe_average = torch.where(positive, average, torch.ones_like(average))
+    scale = 1.0 / saturation_luminance(exposure_value_100(safe_average))
+    return torch.where(positive, scale, torch.zeros_like(scale))
+
+
+def auto_expose(hdr: Tensor) -> tuple[Tensor, Tensor]:
+    """Linear HDR → linear LDR in [0, 1] with the paper's auto exposure.
+
+    Returns:
+        ``(ldr, scale)`` where ``ldr = clip(hdr · scale, 0, 1)``.
+
+    Shape:
+        - hdr: ``(*, 3, H, W)``
+        - output: ldr ``(*, 3, H, W)``, scale ``(*)``
+    """
+    scale = auto_exposure_scale(hdr)
+    return (hdr * scale[..., None, None, None]).clamp(0.0, 1.0), scale
+
+
+def ev100_to_scale(ev100: float) -> float:
+    """The exposure multiplier for a given EV100, for metadata and manual exposure."""
+    return 1.0 / (SATURATION_CONSTANT / (ISO_SPEED * LENS_ATTENUATION_Q) * math.pow(2.0, ev100))

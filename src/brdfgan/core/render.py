@@ -1,0 +1,180 @@
+"""Differentiable point-light renderer for a planar SVBRDF sample (pure torch).
+
+Scene (DESIGN.md §2): the sample is the square ``[-s, s]²`` of the plane z = 0 (``s`` =
+``plane_half_size``), texel (i, j) sits at ``x = -s + (j + ½)·2s/W``, ``y = s − (i + ½)·2s/H``
+(row 0 is +Y), the tangent frame is the world frame. Every output pixel is one texel, shaded
+with the exact view direction towards the camera position and lit by point lights with inverse
+square falloff:
+
+    L_o(p) = Σ_k f(l_k, v) · max(n·l_k, 0) · I_k / |x_k − p|²
+
+where ``I_k`` is the RGB radiant intensity (W/sr) of light k. For the capture camera — above the
+sample centre, looking down −Z, framing the square exactly (:func:`capture_camera_height`) — this
+texture-space image *is* the perspective photograph (cross-checked against Mitsuba); for other
+camera positions it is the usual rendering-loss image of the sample seen from there.
+
+Batched over samples ``B`` and light/view configurations ``V`` (each with its own camera and
+``K`` lights that add up), on any device, differentiable w.r.t. every map.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor, nn
+
+from brdfgan.core.brdf import VECTOR_DIM, evaluate_brdf, normalize
+from brdfgan.core.svbrdf import check_map_shape, normalize_normal, split_maps, srgb_to_linear
+
+
+@dataclass(frozen=True)
+class PointLights:
+    """Point lights: ``position`` ``(B, V, K, 3)``, scalar ``intensity`` ``(B, V, K)`` in W/sr,
+    and ``color`` ``(B, V, K, 3)`` (linear RGB multipliers)."""
+
+    position: Tensor
+    intensity: Tensor
+    color: Tensor
+
+    def radiant_intensity(self) -> Tensor:
+        """RGB radiant intensity ``(B, V, K, 3)``."""
+        return self.intensity.unsqueeze(-1) * self.color
+
+
+def capture_camera_height(fov_deg: float, plane_half_size: float = 1.0) -> float:
+    """Height above z = 0 at which a camera with horizontal field of view ``fov_deg`` looking
+    down −Z frames exactly the square ``[-s, s]²``."""
+    if not 0.0 < fov_deg < 180.0:
+        raise ValueError(f"fov_deg must lie in (0, 180), got {fov_deg}")
+    return plane_half_size / math.tan(math.radians(fov_deg) / 2.0)
+
+
+def plane_positions(
+    height: int,
+    width: int,
+    plane_half_size: float = 1.0,
+    *,
+    dtype: torch.dtype = torch.float32,
+    device: torch.device | str | None = None,
+) -> Tensor:
+    """World positions of the texel centres on z = 0, row 0 at +Y.
+
+    Shape:
+        - output: ``(3, height, width)``
+    """
+    s = plane_half_size
+    xs = -s + (torch.arange(width, dtype=dtype, device=device) + 0.5) * (2.0 * s / width)
+    ys = s - (torch.arange(height, dtype=dtype, device=device) + 0.5) * (2.0 * s / height)
+    grid_y, grid_x = torch.meshgrid(ys, xs, indexing="ij")
+    return torch.stack([grid_x, grid_y, torch.zeros_like(grid_x)], dim=0)
+
+
+def _check_scene_shapes(maps: Tensor, camera_position: Tensor, lights: PointLights) -> None:
+    check_map_shape(maps)
+    if maps.ndim != 4:
+        raise ValueError(f"maps must have shape (B, 8, H, W), got {tuple(maps.shape)}")
+    batch = maps.shape[0]
+    if camera_position.ndim != 3 or camera_position.shape[0] != batch or camera_position.shape[-1] != 3:
+        raise ValueError(
+            f"camera_position must have shape ({batch}, V, 3), got {tuple(camera_position.shape)}"
+        )
+    views = camera_position.shape[1]
+    expected = (batch, views)
+    if lights.position.ndim != 4 or lights.position.shape[:2] != expected or lights.position.shape[-1] != 3:
+        raise ValueError(
+            f"light position must have shape ({batch}, {views}, K, 3), got {tuple(lights.position.shape)}"
+        )
+    k = lights.position.shape[2]
+    if tuple(lights.intensity.shape) != (batch, views, k):
+        raise ValueError(
+            f"light intensity must have shape ({batch}, {views}, {k}), got {tuple(lights.intensity.shape)}"
+        )
+    if tuple(lights.color.shape) != (batch, views, k, 3):
+        raise ValueError(
+            f"light color must have shape ({batch}, {views}, {k}, 3), got {tuple(lights.color.shape)}"
+        )
+
+
+def render_point_lights(
+    maps: Tensor, camera_position: Tensor, lights: PointLights, plane_half_size: float = 1.0
+) -> Tensor:
+    """Render map sets under point lights, one image per light/view configuration.
+
+    Args:
+        maps: map sets in the layout of :mod:`brdfgan.core.svbrdf` (base color sRGB-encoded,
+            normals unit — they are renormalised here so gradients stay tangent).
+        camera_position: world position of the camera of each configuration.
+        lights: ``K`` point lights per configuration; their contributions add up.
+        plane_half_size: half the side length of the sample square in world units.
+
+    Returns:
+        Linear HDR radiance.
+
+    Shape:
+        - maps: ``(B, 8, H, W)``
+        - camera_position: ``(B, V, 3)``
+        - lights: position ``(B, V, K, 3)``, intensity ``(B, V, K)``, color ``(B, V, K, 3)``
+        - output: ``(B, V, 3, H, W)``
+    """
+    _check_scene_shapes(maps, camera_position, lights)
+    _, _, height, width = maps.shape
+    parts = split_maps(maps.unsqueeze(1))  # (B, 1, C, H, W): broadcast over configurations
+    basecolor = srgb_to_linear(parts.basecolor)
+    normal = normalize_normal(parts.normal, dim=VECTOR_DIM)
+    surface = plane_positions(height, width, plane_half_size, dtype=maps.dtype, device=maps.device)
+
+    view_dir = normalize(camera_position[..., None, None] - surface)  # (B, V, 3, H, W)
+    radiance = maps.new_zeros(())
+    intensity = lights.radiant_intensity()
+    for k in range(lights.position.shape[2]):
+        to_light = lights.position[:, :, k, :, None, None] - surface
+        distance_sq = (to_light * to_light).sum(dim=VECTOR_DIM, keepdim=True)
+        light_dir = to_light / distance_sq.sqrt().clamp(min=1e-7)
+        brdf = evaluate_brdf(basecolor, normal, parts.roughness, parts.metallic, light_dir, view_dir)
+        cosine = (normal * light_dir).sum(dim=VECTOR_DIM, keepdim=True).clamp(min=0.0)
+        irradiance = intensity[:, :, k, :, None, None] * cosine / distance_sq.clamp(min=1e-12)
+        radiance = radiance + brdf * irradiance
+    return radiance
+
+
+class PointLightRenderer(nn.Module):
+    """Thin module around :func:`render_point_lights` holding the scene scale.
+
+    Shape: as :func:`render_point_lights`.
+    """
+
+    def __init__(self, plane_half_size: float = 1.0) -> None:
+        super().__init__()
+        self.plane_half_size = plane_half_size
+
+    def forward(self, maps: Tensor, camera_position: Tensor, lights: PointLights) -> Tensor:
+        return render_point_lights(maps, camera_position, lights, self.plane_half_size)
+
+    def extra_repr(self) -> str:
+        return f"plane_half_size={self.plane_half_size}"
+
+
+def render_flash(
+    maps: Tensor,
+    fov_deg: float = 45.0,
+    intensity: float = 1.0,
+    color: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    plane_half_size: float = 1.0,
+) -> Tensor:
+    """The capture configuration: one point light at the capture camera (a phone flash).
+
+    Shape:
+        - maps: ``(B, 8, H, W)``
+        - output: ``(B, 3, H, W)``
+    """
+    batch = maps.shape[0]
+    height = capture_camera_height(fov_deg, plane_half_size)
+    camera = maps.new_tensor([0.0, 0.0, height]).expand(batch, 1, 3)
+    lights = PointLights(
+        position=camera.unsqueeze(2),
+        intensity=maps.new_full((batch, 1, 1), intensity),
+        color=maps.new_tensor(color).expand(batch, 1, 1, 3),
+    )
+    return render_point_lights(maps, camera, lights, plane_half_size)[:, 0]

@@ -1,0 +1,161 @@
+"""Light/view configurations for the rendering loss (paper §4.1) and its log(1 + x) transform.
+
+Per sample the paper renders ten configurations "with randomly sampled viewing and lighting
+directions from the upper hemisphere"; five of them are "chosen such that they contain a specular
+highlight by mirroring one randomly sampled direction on a random surface point", and the light
+colour is random. Concretely, for a sample square ``[-s, s]²``:
+
+- *random* configurations: camera and light directions are drawn independently,
+  cosine-weighted on the upper hemisphere (grazing directions render almost black and teach
+  little), and placed at random distances from the sample centre;
+- *specular* configurations: a surface point ``p`` is drawn uniformly on the square and a
+  direction ``d`` cosine-weighted; the light sits at ``p + a·d`` and the camera at
+  ``p + b·reflect(d)``, with ``reflect(d) = (-d_x, -d_y, d_z)`` the mirror about the geometric
+  normal, so ``p`` shows the mirror highlight whatever the distances;
+- light colour: each RGB channel uniform in ``[color_min, 1]``, then scaled so its brightest
+  channel is 1; light intensity ``π·r²·U(intensity_min, intensity_max)`` so that a white
+  Lambertian surface facing the light at distance r renders around 1 whatever the distance.
+
+Everything is reproducible from a ``torch.Generator``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from brdfgan.core.render import PointLights
+
+
+@dataclass(frozen=True)
+class RenderingLossSampling:
+    """Parameters of the rendering-loss configurations (distances in units of the half size)."""
+
+    random_configs: int = 5
+    specular_configs: int = 5
+    distance_min: float = 2.0
+    distance_max: float = 5.0
+    intensity_min: float = 0.5
+    intensity_max: float = 1.5
+    color_min: float = 0.3
+
+    def __post_init__(self) -> None:
+        if (
+            self.random_configs < 0
+            or self.specular_configs < 0
+            or self.random_configs + self.specular_configs == 0
+        ):
+            raise ValueError("need at least one rendering-loss configuration")
+        if not 0.0 < self.distance_min <= self.distance_max:
+            raise ValueError(
+                f"need 0 < distance_min <= distance_max, got {self.distance_min}, {self.distance_max}"
+            )
+        if not 0.0 < self.intensity_min <= self.intensity_max:
+            raise ValueError("need 0 < intensity_min <= intensity_max")
+        if not 0.0 <= self.color_min <= 1.0:
+            raise ValueError(f"color_min must lie in [0, 1], got {self.color_min}")
+
+    @property
+    def num_configs(self) -> int:
+        return self.random_configs + self.specular_configs
+
+
+@dataclass(frozen=True)
+class RenderConfigs:
+    """Cameras ``(B, V, 3)`` and one point light per configuration; ``V`` = random + specular,
+    random ones first."""
+
+    camera_position: Tensor
+    lights: PointLights
+
+
+def sample_cosine_hemisphere(
+    shape: tuple[int, ...], generator: torch.Generator | None = None, **kw
+) -> Tensor:
+    """Cosine-weighted unit directions on the +Z hemisphere.
+
+    Shape:
+        - output: ``(*shape, 3)``
+    """
+    u1 = torch.rand(shape, generator=generator, **kw)
+    u2 = torch.rand(shape, generator=generator, **kw)
+    radius = u1.sqrt()
+    phi = 2.0 * math.pi * u2
+    z = (1.0 - u1).clamp(min=0.0).sqrt()
+    return torch.stack([radius * torch.cos(phi), radius * torch.sin(phi), z], dim=-1)
+
+
+def _uniform(
+    shape: tuple[int, ...], low: float, high: float, generator: torch.Generator | None, **kw
+) -> Tensor:
+    return low + (high - low) * torch.rand(shape, generator=generator, **kw)
+
+
+def sample_rendering_loss_configs(
+    batch: int,
+    sampling: RenderingLossSampling = RenderingLossSampling(),
+    *,
+    plane_half_size: float = 1.0,
+    generator: torch.Generator | None = None,
+    dtype: torch.dtype = torch.float32,
+    device: torch.device | str | None = None,
+) -> RenderConfigs:
+    """Draw the rendering-loss light/view configurations for a batch.
+
+    Random numbers are drawn on the CPU (so a seeded generator gives the same configurations on
+    every device) and moved to ``device``.
+
+    Shape:
+        - output: camera_position ``(batch, V, 3)``; lights position ``(batch, V, 1, 3)``,
+          intensity ``(batch, V, 1)``, color ``(batch, V, 1, 3)``
+    """
+    s = plane_half_size
+    kw = {"dtype": torch.float64}
+    n_rand, n_spec = sampling.random_configs, sampling.specular_configs
+    dist = (sampling.distance_min * s, sampling.distance_max * s)
+
+    def distances(n: int) -> Tensor:
+        return _uniform((batch, n, 1), *dist, generator, **kw)
+
+    cam_random = sample_cosine_hemisphere((batch, n_rand), generator, **kw) * distances(n_rand)
+    light_random = sample_cosine_hemisphere((batch, n_rand), generator, **kw) * distances(n_rand)
+    light_distance_random = torch.linalg.vector_norm(light_random, dim=-1)
+
+    point = torch.cat(
+        [_uniform((batch, n_spec, 2), -s, s, generator, **kw), torch.zeros((batch, n_spec, 1), **kw)], dim=-1
+    )
+    direction = sample_cosine_hemisphere((batch, n_spec), generator, **kw)
+    mirrored = direction * direction.new_tensor([-1.0, -1.0, 1.0])
+    light_distance_spec = distances(n_spec)
+    light_spec = point + direction * light_distance_spec
+    cam_spec = point + mirrored * distances(n_spec)
+
+    camera = torch.cat([cam_random, cam_spec], dim=1)
+    light = torch.cat([light_random, light_spec], dim=1)
+    light_distance = torch.cat([light_distance_random, light_distance_spec[..., 0]], dim=1)
+    scale = _uniform(
+        (batch, sampling.num_configs), sampling.intensity_min, sampling.intensity_max, generator, **kw
+    )
+    intensity = math.pi * light_distance.square() * scale
+    color = _uniform((batch, sampling.num_configs, 3), sampling.color_min, 1.0, generator, **kw)
+    color = color / color.amax(dim=-1, keepdim=True)
+
+    def out(t: Tensor) -> Tensor:
+        return t.to(device=device, dtype=dtype)
+
+    return RenderConfigs(
+        camera_position=out(camera),
+        lights=PointLights(
+            position=out(light).unsqueeze(2),
+            intensity=out(intensity).unsqueeze(2),
+            color=out(color).unsqueeze(2),
+        ),
+    )
+
+
+def log_transform(radiance: Tensor) -> Tensor:
+    """log(1 + x), the paper's range compression of re-renderings before the L1. Shape: any."""
+    return torch.log1p(radiance)

@@ -1,0 +1,219 @@
+"""The SVBRDF map representation: the one place that defines the 8-channel layout.
+
+A map set is a tensor of shape ``(B, 8, H, W)`` (or ``(8, H, W)``) with channels
+
+====== ========= =========================================================
+index  map       encoding
+====== ========= =========================================================
+0:3    basecolor sRGB-encoded in [0, 1], like a texture file
+3:6    normal    unit vector in tangent space, +Z out of the surface,
+                 +X right, +Y up in the image (OpenGL); components in [-1, 1]
+6      roughness perceptual roughness in [0, 1]; GGX alpha = max(r², 0.001)
+7      metallic  in [0, 1]
+====== ========= =========================================================
+
+Files encode normals as ``(n + 1) / 2`` (:func:`encode_normal`). Base color is converted to
+linear (:func:`srgb_to_linear`) before shading, and the derived albedos of the paper (§3) are
+``diffuse = b (1 - m)`` and ``specular = 0.04 (1 - m) + b m`` with ``b`` the *linear* base color.
+
+Everything here is a pure torch function; nothing imports Lightning or Hydra.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+from torch import Tensor
+
+NUM_CHANNELS = 8
+BASECOLOR = slice(0, 3)
+NORMAL = slice(3, 6)
+ROUGHNESS = slice(6, 7)
+METALLIC = slice(7, 8)
+CHANNELS: dict[str, slice] = {
+    "basecolor": BASECOLOR,
+    "normal": NORMAL,
+    "roughness": ROUGHNESS,
+    "metallic": METALLIC,
+}
+MAP_NAMES: tuple[str, ...] = tuple(CHANNELS)
+
+DIELECTRIC_F0 = 0.04
+MIN_ALPHA = 1e-3
+NORMAL_UNIT_TOLERANCE = 1e-2
+
+
+class SVBRDFMaps(NamedTuple):
+    """The four maps of a map set, each ``(*, C, H, W)`` with C = 3, 3, 1, 1."""
+
+    basecolor: Tensor
+    normal: Tensor
+    roughness: Tensor
+    metallic: Tensor
+
+
+class InvalidMapsError(ValueError):
+    """A map tensor or file does not satisfy the representation."""
+
+
+def split_maps(maps: Tensor) -> SVBRDFMaps:
+    """Split an 8-channel map tensor into its named maps (views, no copy).
+
+    Shape:
+        - maps: ``(*, 8, H, W)``
+        - output: basecolor ``(*, 3, H, W)``, normal ``(*, 3, H, W)``,
+          roughness ``(*, 1, H, W)``, metallic ``(*, 1, H, W)``
+    """
+    check_map_shape(maps)
+    return SVBRDFMaps(*(maps[..., channels, :, :] for channels in CHANNELS.values()))
+
+
+def join_maps(basecolor: Tensor, normal: Tensor, roughness: Tensor, metallic: Tensor) -> Tensor:
+    """Concatenate the four maps into the 8-channel layout.
+
+    Shape:
+        - basecolor, normal: ``(*, 3, H, W)``; roughness, metallic: ``(*, 1, H, W)``
+        - output: ``(*, 8, H, W)``
+    """
+    maps = torch.cat([basecolor, normal, roughness, metallic], dim=-3)
+    check_map_shape(maps)
+    return maps
+
+
+def check_map_shape(maps: Tensor) -> None:
+    """Raise :class:`InvalidMapsError` unless ``maps`` is ``(*, 8, H, W)`` floating point."""
+    if not isinstance(maps, Tensor):
+        raise InvalidMapsError(f"maps must be a torch.Tensor, got {type(maps).__name__}")
+    if maps.ndim < 3 or maps.shape[-3] != NUM_CHANNELS:
+        raise InvalidMapsError(
+            f"maps must have shape (*, {NUM_CHANNELS}, H, W) "
+            f"[basecolor 3, normal 3, roughness 1, metallic 1], got {tuple(maps.shape)}"
+        )
+    if not maps.is_floating_point():
+        raise InvalidMapsError(f"maps must be floating point, got {maps.dtype}")
+
+
+def validate_maps(maps: Tensor, *, normal_tolerance: float = NORMAL_UNIT_TOLERANCE) -> None:
+    """Check shape, finiteness, value ranges and unit normals; raise a one-line error if bad.
+
+    Shape:
+        - maps: ``(*, 8, H, W)``
+    """
+    check_map_shape(maps)
+    if not torch.isfinite(maps).all():
+        bad = [name for name, ch in CHANNELS.items() if not torch.isfinite(maps[..., ch, :, :]).all()]
+        raise InvalidMapsError(f"maps contain NaN or infinite values in: {', '.join(bad)}")
+    parts = split_maps(maps)
+    for name in ("basecolor", "roughness", "metallic"):
+        values = getattr(parts, name)
+        low, high = values.min().item(), values.max().item()
+        if low < 0.0 or high > 1.0:
+            raise InvalidMapsError(f"{name} must lie in [0, 1], found values in [{low:.4g}, {high:.4g}]")
+    lengths = torch.linalg.vector_norm(parts.normal, dim=-3)
+    worst = (lengths - 1.0).abs().max().item()
+    if worst > normal_tolerance:
+        raise InvalidMapsError(
+            f"normal vectors must have unit length (tolerance {normal_tolerance}), "
+            f"worst deviation {worst:.4g}; decode file values with decode_normal()"
+        )
+    if (parts.normal[..., 2:3, :, :] < -normal_tolerance).any():
+        raise InvalidMapsError("normal vectors must point out of the surface (z >= 0)")
+
+
+def srgb_to_linear(srgb: Tensor) -> Tensor:
+    """The IEC 61966-2-1 sRGB decoding curve, elementwise, for values in [0, 1].
+
+    Shape: any; output has the input's shape.
+    """
+    low = srgb / 12.92
+    high = ((srgb.clamp(min=0.04045) + 0.055) / 1.055) ** 2.4
+    return torch.where(srgb <= 0.04045, low, high)
+
+
+def linear_to_srgb(linear: Tensor) -> Tensor:
+    """The IEC 61966-2-1 sRGB encoding curve, elementwise, for values in [0, 1].
+
+    The clamp inside the power keeps the gradient finite on the linear segment.
+
+    Shape: any; output has the input's shape.
+    """
+    low = linear * 12.92
+    high = 1.055 * linear.clamp(min=0.0031308) ** (1.0 / 2.4) - 0.055
+    return torch.where(linear <= 0.0031308, low, high)
+
+
+def encode_normal(normal: Tensor) -> Tensor:
+    """Unit normal in [-1, 1] → file encoding ``(n + 1) / 2`` in [0, 1]. Shape: any."""
+    return (normal + 1.0) * 0.5
+
+
+def decode_normal(encoded: Tensor, dim: int = -3) -> Tensor:
+    """File encoding in [0, 1] → renormalised unit normal (quantisation breaks unit length).
+
+    Shape:
+        - encoded: ``(*, 3, H, W)`` (vector axis ``dim``)
+        - output: same
+    """
+    return normalize_normal(encoded * 2.0 - 1.0, dim=dim)
+
+
+def normalize_normal(normal: Tensor, dim: int = -3, eps: float = 1e-8) -> Tensor:
+    """Rescale vectors to unit length along ``dim``; a zero vector becomes +Z.
+
+    Shape:
+        - normal: ``(*, 3, H, W)`` (vector axis ``dim``)
+        - output: same
+    """
+    length = torch.linalg.vector_norm(normal, dim=dim, keepdim=True)
+    up = torch.zeros_like(normal).narrow(dim, 2, 1).fill_(1.0)
+    flat = torch.cat([torch.zeros_like(up), torch.zeros_like(up), up], dim=dim)
+    return torch.where(length > eps, normal / length.clamp(min=eps), flat)
+
+
+def roughness_to_alpha(roughness: Tensor) -> Tensor:
+    """Perceptual roughness → GGX alpha = max(r², 0.001) (Mitsuba principled, Disney). Shape: any."""
+    return (roughness * roughness).clamp(min=MIN_ALPHA)
+
+
+def diffuse_albedo(basecolor_linear: Tensor, metallic: Tensor) -> Tensor:
+    """Paper §3: d = b (1 - m), with b the linear base color.
+
+    Shape:
+        - basecolor_linear: ``(*, 3, H, W)``; metallic: ``(*, 1, H, W)``
+        - output: ``(*, 3, H, W)``
+    """
+    return basecolor_linear * (1.0 - metallic)
+
+
+def specular_albedo(basecolor_linear: Tensor, metallic: Tensor) -> Tensor:
+    """Paper §3: F0 = s = 0.04 (1 - m) + b m, with b the linear base color.
+
+    Shape:
+        - basecolor_linear: ``(*, 3, H, W)``; metallic: ``(*, 1, H, W)``
+        - output: ``(*, 3, H, W)``
+    """
+    return DIELECTRIC_F0 * (1.0 - metallic) + basecolor_linear * metallic
+
+
+def flat_maps(
+    height: int,
+    width: int,
+    basecolor: tuple[float, float, float] = (0.5, 0.5, 0.5),
+    roughness: float = 0.5,
+    metallic: float = 0.0,
+    batch: tuple[int, ...] = (),
+    dtype: torch.dtype = torch.float32,
+    device: torch.device | str | None = None,
+) -> Tensor:
+    """A uniform map set with a flat (+Z) normal; handy as a default and in tests.
+
+    Shape:
+        - output: ``(*batch, 8, height, width)``
+    """
+    values = torch.tensor([*basecolor, 0.0, 0.0, 1.0, roughness, metallic], dtype=dtype, device=device)
+    return (
+        values.view(*([1] * len(batch)), NUM_CHANNELS, 1, 1)
+        .expand(*batch, NUM_CHANNELS, height, width)
+        .clone()
+    )

@@ -1,0 +1,1 @@
+"""Reading and writing images and map sets on disk."""

@@ -1,0 +1,162 @@
+"""A Mitsuba 3 scene of a planar map set: ``principled`` + ``normalmap`` on a rectangle.
+
+Geometry matches :mod:`brdfgan.core.render`: the sample covers ``[-s, s]²`` of z = 0, the camera
+looks down −Z from above the centre and frames the square. Mitsuba's ``rectangle`` maps bitmap
+row 0 to y = −s (the bottom of the image) while our row 0 is +Y, so rows are flipped on the way
+in — rows only; the Y component of the normals stays as it is (DESIGN.md §4).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from brdfgan.core.render import capture_camera_height
+from brdfgan.core.svbrdf import encode_normal, split_maps, srgb_to_linear, validate_maps
+from brdfgan.mitsuba_render.variant import mitsuba
+
+
+@dataclass(frozen=True)
+class MitsubaPointLight:
+    """A point light: world ``position`` and RGB radiant ``intensity`` in W/sr."""
+
+    position: tuple[float, float, float]
+    intensity: tuple[float, float, float]
+
+
+def _bitmap_texture(mi: Any, image: Tensor) -> dict[str, Any]:
+    """(C, H, W) tensor in our orientation → nearest-filtered raw bitmap texture, rows flipped."""
+    array = image.detach().to("cpu", torch.float32).flip(-2).permute(1, 2, 0).contiguous().numpy()
+    return {
+        "type": "bitmap",
+        "bitmap": mi.Bitmap(np.ascontiguousarray(array)),
+        "raw": True,
+        "filter_type": "nearest",
+    }
+
+
+def material_dict(maps: Tensor) -> dict[str, Any]:
+    """Mitsuba BSDF dict for one map set: normalmap( principled(base color, roughness, metallic) ).
+
+    Shape:
+        - maps: ``(8, H, W)``
+    """
+    mi = mitsuba()
+    validate_maps(maps)
+    parts = split_maps(maps)
+    principled = {
+        "type": "principled",
+        "base_color": _bitmap_texture(mi, srgb_to_linear(parts.basecolor)),
+        "roughness": _bitmap_texture(mi, parts.roughness),
+        "metallic": _bitmap_texture(mi, parts.metallic),
+        "specular": 0.5,
+    }
+    return {
+        "type": "normalmap",
+        "normalmap": _bitmap_texture(mi, encode_normal(parts.normal)),
+        "bsdf": principled,
+    }
+
+
+def plane_scene_dict(
+    maps: Tensor,
+    *,
+    lights: Sequence[MitsubaPointLight] = (),
+    fov_deg: float = 45.0,
+    plane_half_size: float = 1.0,
+    spp: int = 64,
+    seed: int = 0,
+    resolution: int | None = None,
+    integrator: dict[str, Any] | None = None,
+    extra_emitters: dict[str, dict[str, Any]] | None = None,
+) -> dict[str, Any]:
+    """Scene dict for ``mi.load_dict``: the textured plane, the capture camera and the lights.
+
+    Args:
+        maps: the map set to render.
+        lights: point lights (e.g. the flash at the camera position).
+        fov_deg: horizontal field of view; the camera height follows from it.
+        plane_half_size: half the side of the sample square.
+        spp: samples per pixel.
+        seed: sampler seed.
+        resolution: film size (default: the map size).
+        integrator: integrator dict (default: ``direct``, enough for a single plane).
+        extra_emitters: further emitters by name (environment maps, sun/sky).
+
+    Shape:
+        - maps: ``(8, H, W)``
+    """
+    mi = mitsuba()
+    _, height, width = maps.shape
+    camera_z = capture_camera_height(fov_deg, plane_half_size)
+    film_w, film_h = (resolution, resolution) if resolution else (width, height)
+    scene: dict[str, Any] = {
+        "type": "scene",
+        "integrator": integrator or {"type": "direct"},
+        "sensor": {
+            "type": "perspective",
+            "fov": float(fov_deg),
+            "fov_axis": "x",
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=[0.0, 0.0, camera_z], target=[0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0]
+            ),
+            "film": {
+                "type": "hdrfilm",
+                "width": film_w,
+                "height": film_h,
+                "rfilter": {"type": "box"},
+                "pixel_format": "rgb",
+            },
+            "sampler": {"type": "independent", "sample_count": int(spp), "seed": int(seed)},
+        },
+        "sample": {
+            "type": "rectangle",
+            "to_world": mi.ScalarTransform4f().scale([plane_half_size, plane_half_size, 1.0]),
+            "bsdf": material_dict(maps),
+        },
+    }
+    for index, light in enumerate(lights):
+        scene[f"point_light_{index}"] = {
+            "type": "point",
+            "position": list(map(float, light.position)),
+            "intensity": {"type": "rgb", "value": list(map(float, light.intensity))},
+        }
+    scene.update(extra_emitters or {})
+    return scene
+
+
+def render_scene(scene_dict: dict[str, Any], spp: int | None = None, seed: int = 0) -> Tensor:
+    """Load and render a scene dict; linear HDR image ``(3, H, W)`` in our orientation (row 0 = +Y)."""
+    mi = mitsuba()
+    scene = mi.load_dict(scene_dict)
+    image = mi.render(scene, spp=spp or 0, seed=seed)
+    return torch.from_numpy(np.array(image, dtype=np.float32)).permute(2, 0, 1)[:3].contiguous()
+
+
+def render_flash_mitsuba(
+    maps: Tensor,
+    *,
+    fov_deg: float = 45.0,
+    intensity: float = 1.0,
+    color: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    plane_half_size: float = 1.0,
+    spp: int = 64,
+    seed: int = 0,
+) -> Tensor:
+    """Mitsuba reference of :func:`brdfgan.core.render.render_flash`: point light at the camera.
+
+    Shape:
+        - maps: ``(8, H, W)``
+        - output: ``(3, H, W)``
+    """
+    camera_z = capture_camera_height(fov_deg, plane_half_size)
+    flash = MitsubaPointLight((0.0, 0.0, camera_z), tuple(intensity * c for c in color))
+    scene = plane_scene_dict(
+        maps, lights=[flash], fov_deg=fov_deg, plane_half_size=plane_half_size, spp=spp, seed=seed
+    )
+    return render_scene(scene, seed=seed)
