@@ -17,13 +17,16 @@ import time
 
 import torch
 
-CASES: list[tuple[int, int, int]] = [(256, 8, 10), (512, 8, 10)]  # (resolution, batch, configurations)
+# (resolution, batch, configurations, torch.compile)
+CASES: list[tuple[int, int, int, int]] = [(256, 8, 10, 0), (256, 8, 10, 1), (512, 8, 10, 0), (512, 8, 10, 1)]
 
 
-def _measure(resolution: int, batch: int, configs: int, device: str, repeats: int) -> dict[str, float]:
+def _measure(
+    resolution: int, batch: int, configs: int, compiled: int, device: str, repeats: int
+) -> dict[str, float]:
     from tests.conftest import random_maps
 
-    from brdfgan.core.render import render_point_lights
+    from brdfgan.core.render import PointLightRenderer
     from brdfgan.core.sampling import RenderingLossSampling, log_transform, sample_rendering_loss_configs
 
     torch.manual_seed(0)
@@ -34,6 +37,8 @@ def _measure(resolution: int, batch: int, configs: int, device: str, repeats: in
         batch, sampling, generator=torch.Generator().manual_seed(0), device=device
     )
 
+    renderer = PointLightRenderer(compile=bool(compiled))
+
     def sync() -> None:
         if device == "cuda":
             torch.cuda.synchronize()
@@ -43,9 +48,9 @@ def _measure(resolution: int, batch: int, configs: int, device: str, repeats: in
         sync()
         start = time.perf_counter()
         with torch.set_grad_enabled(backward):
-            rendered = log_transform(render_point_lights(prediction, scene.camera_position, scene.lights))
+            rendered = log_transform(renderer(prediction, scene.camera_position, scene.lights))
             with torch.no_grad():
-                reference = log_transform(render_point_lights(target, scene.camera_position, scene.lights))
+                reference = log_transform(renderer(target, scene.camera_position, scene.lights))
             loss = (rendered - reference).abs().mean()
             if backward:
                 loss.backward()
@@ -53,7 +58,9 @@ def _measure(resolution: int, batch: int, configs: int, device: str, repeats: in
         return time.perf_counter() - start
 
     rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
-    step(True)  # warm-up
+    warmup = time.perf_counter()
+    step(True)  # warm-up (and compilation)
+    warmup = time.perf_counter() - warmup
     if device == "cuda":
         torch.cuda.reset_peak_memory_stats()
     forward = min(step(False) for _ in range(repeats))
@@ -62,7 +69,7 @@ def _measure(resolution: int, batch: int, configs: int, device: str, repeats: in
         peak = torch.cuda.max_memory_allocated() / 2**30
     else:
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20 - rss_before
-    return {"forward_s": forward, "forward_backward_s": both, "peak_gib": peak}
+    return {"forward_s": forward, "forward_backward_s": both, "peak_gib": peak, "first_step_s": warmup}
 
 
 def main() -> None:
@@ -76,44 +83,32 @@ def main() -> None:
         return
 
     rows = []
-    for resolution, batch, configs in CASES:
-        out = subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "benchmarks.bench_renderer",
-                "--device",
-                args.device,
-                "--repeats",
-                str(args.repeats),
-                "--case",
-                f"{resolution},{batch},{configs}",
-            ],
-            check=True,
-            capture_output=True,
-            text=True,
-        )
-        rows.append(((resolution, batch, configs), json.loads(out.stdout.strip().splitlines()[-1])))
+    for case in CASES:
+        command = [sys.executable, "-m", "benchmarks.bench_renderer", "--device", args.device]
+        command += ["--repeats", str(args.repeats), "--case", ",".join(map(str, case))]
+        out = subprocess.run(command, check=True, capture_output=True, text=True)
+        rows.append((case, json.loads(out.stdout.strip().splitlines()[-1])))
 
-    base = rows[0][1]
     print(
         f"\nRenderer forward+backward (rendering loss: prediction + no-grad target), device={args.device}, "
-        f"torch {torch.__version__}, {torch.get_num_threads()} threads, best of {args.repeats}\n"
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads, best of {args.repeats}; "
+        "ratios against the eager row of the same size\n"
     )
-    print(
-        "| resolution | batch | configs | Mpix renders | forward s | fwd+bwd s | peak GiB "
-        "| fwd+bwd ratio | peak ratio | Mpix renders/s |"
-    )
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for (resolution, batch, configs), m in rows:
+    header = "resolution batch configs mode first-step-s forward-s fwd+bwd-s peak-GiB speed-up memory"
+    header += " Mpix-renders/s"
+    print("| " + " | ".join(header.split()) + " |")
+    print("|" + "---|" * len(header.split()))
+    eager = {case[0]: m for case, m in rows if not case[3]}
+    for (resolution, batch, configs, compiled), m in rows:
+        base = eager[resolution]
         mpix = resolution * resolution * batch * configs / 1e6
-        print(
-            f"| {resolution}² | {batch} | {configs} | {mpix:.1f} | {m['forward_s']:.3f} | "
-            f"{m['forward_backward_s']:.3f} | {m['peak_gib']:.2f} | "
-            f"{m['forward_backward_s'] / base['forward_backward_s']:.2f}× | "
-            f"{m['peak_gib'] / base['peak_gib']:.2f}× | "
-            f"{mpix / m['forward_backward_s']:.1f} |"
-        )
+        cells = [
+            f"{resolution}²", str(batch), str(configs), "compiled" if compiled else "eager",
+            f"{m['first_step_s']:.1f}", f"{m['forward_s']:.3f}", f"{m['forward_backward_s']:.3f}",
+            f"{m['peak_gib']:.2f}", f"{base['forward_backward_s'] / m['forward_backward_s']:.2f}×",
+            f"{m['peak_gib'] / base['peak_gib']:.2f}×", f"{mpix / m['forward_backward_s']:.1f}",
+        ]  # fmt: skip
+        print("| " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":

@@ -1,18 +1,18 @@
 """The torch renderer against Mitsuba 3 ``principled`` + ``normalmap`` under a flash.
 
 Mitsuba integrates each pixel's footprint (box filter) while our renderer shades texel centres,
-so the torch side renders maps upsampled ×4 with nearest neighbours (Mitsuba's texture filter)
-and averages 4×4 blocks; low-roughness highlights are a few pixels wide, so those cases get
-more samples per pixel to keep Mitsuba's Monte Carlo noise well under the tolerance.
+so the torch side shades 4×4 points per pixel (``render_flash(..., supersample=4)``, maps
+repeated nearest-neighbour like Mitsuba's texture filter) and averages them. Low-roughness
+highlights are a few pixels wide, so those cases get more samples per pixel to keep Mitsuba's
+Monte Carlo noise well under the tolerance.
 """
 
 from __future__ import annotations
 
 import pytest
 import torch
-import torch.nn.functional as F
 
-from brdfgan.core.render import render_flash
+from brdfgan.core.render import FlashCapture, render_flash
 from brdfgan.core.svbrdf import CHANNELS, flat_maps, normalize_normal
 from tests.conftest import random_maps
 
@@ -21,8 +21,7 @@ pytestmark = pytest.mark.mitsuba
 RESOLUTION = 48
 SUPERSAMPLE = 4
 TOLERANCE = 0.02
-FOV = 45.0
-INTENSITY = 8.0
+CAPTURE = FlashCapture(fov_deg=45.0, intensity=8.0)
 
 
 @pytest.fixture(scope="module")
@@ -33,14 +32,13 @@ def variant() -> str:
 
 
 def _torch_reference(maps: torch.Tensor) -> torch.Tensor:
-    big = maps.repeat_interleave(SUPERSAMPLE, -1).repeat_interleave(SUPERSAMPLE, -2)
-    return F.avg_pool2d(render_flash(big[None], fov_deg=FOV, intensity=INTENSITY), SUPERSAMPLE)[0]
+    return render_flash(maps[None], CAPTURE, supersample=SUPERSAMPLE)[0]
 
 
 def _mitsuba(maps: torch.Tensor, spp: int) -> torch.Tensor:
     from brdfgan.mitsuba_render.scene import render_flash_mitsuba
 
-    return render_flash_mitsuba(maps, fov_deg=FOV, intensity=INTENSITY, spp=spp, seed=3)
+    return render_flash_mitsuba(maps, CAPTURE, spp=spp, seed=3)
 
 
 def _relative_l1(ours: torch.Tensor, reference: torch.Tensor) -> float:

@@ -13,10 +13,9 @@ import sys
 from pathlib import Path
 
 import torch
-import torch.nn.functional as F
 
 from brdfgan.core.exposure import auto_expose
-from brdfgan.core.render import render_flash
+from brdfgan.core.render import FlashCapture, render_flash
 from brdfgan.core.svbrdf import join_maps, linear_to_srgb, normalize_normal
 from brdfgan.io.images import write_image
 from brdfgan.io.maps import write_maps
@@ -52,10 +51,9 @@ def main(argv: list[str] | None = None) -> int:
     variant = select_variant()
     maps = tile_maps(args.size)
     paths = write_maps(args.out / "maps", maps)
-    ss = 4  # integrate the pixel footprint like Mitsuba's box filter
-    big = maps.repeat_interleave(ss, -1).repeat_interleave(ss, -2)[None]
-    ours = F.avg_pool2d(render_flash(big, intensity=8.0), ss)
-    reference = render_flash_mitsuba(maps, intensity=8.0, spp=args.spp)[None]
+    capture = FlashCapture(intensity=8.0)
+    ours = render_flash(maps[None], capture, supersample=4)  # box-filtered pixels, like Mitsuba's
+    reference = render_flash_mitsuba(maps, capture, spp=args.spp)[None]
     error = ((ours - reference).abs().sum() / reference.abs().sum()).item()
     for name, hdr in (("flash_torch", ours), ("flash_mitsuba", reference)):
         ldr, _ = auto_expose(hdr)

@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 from brdfgan.core.brdf import VECTOR_DIM, evaluate_brdf, normalize
@@ -142,39 +143,72 @@ def render_point_lights(
 class PointLightRenderer(nn.Module):
     """Thin module around :func:`render_point_lights` holding the scene scale.
 
+    Args:
+        plane_half_size: half the side of the sample square.
+        compile: run the renderer through ``torch.compile``. Eager mode materialises every
+            intermediate of the ~40 elementwise steps at full size; the compiled kernel fuses
+            them (measured here: ~4–5× faster forward+backward on CPU at 256², after a one-off
+            compile of ~30 s), so training turns it on and short scripts leave it off.
+
     Shape: as :func:`render_point_lights`.
     """
 
-    def __init__(self, plane_half_size: float = 1.0) -> None:
+    def __init__(self, plane_half_size: float = 1.0, compile: bool = False) -> None:
         super().__init__()
         self.plane_half_size = plane_half_size
+        self.compiled = compile
+        self._render = torch.compile(render_point_lights) if compile else render_point_lights
 
     def forward(self, maps: Tensor, camera_position: Tensor, lights: PointLights) -> Tensor:
-        return render_point_lights(maps, camera_position, lights, self.plane_half_size)
+        return self._render(maps, camera_position, lights, self.plane_half_size)
 
     def extra_repr(self) -> str:
-        return f"plane_half_size={self.plane_half_size}"
+        return f"plane_half_size={self.plane_half_size}, compile={self.compiled}"
 
 
-def render_flash(
-    maps: Tensor,
-    fov_deg: float = 45.0,
-    intensity: float = 1.0,
-    color: tuple[float, float, float] = (1.0, 1.0, 1.0),
-    plane_half_size: float = 1.0,
-) -> Tensor:
-    """The capture configuration: one point light at the capture camera (a phone flash).
+@dataclass(frozen=True)
+class FlashCapture:
+    """The capture set-up: a camera above the sample centre looking down −Z and framing the
+    square exactly, with a point-light flash at the camera (DESIGN.md §2)."""
+
+    fov_deg: float = 45.0
+    intensity: float = 1.0
+    color: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    plane_half_size: float = 1.0
+
+    @property
+    def camera_height(self) -> float:
+        return capture_camera_height(self.fov_deg, self.plane_half_size)
+
+    @property
+    def radiant_intensity(self) -> tuple[float, float, float]:
+        """RGB radiant intensity of the flash in W/sr."""
+        r, g, b = self.color
+        return (self.intensity * r, self.intensity * g, self.intensity * b)
+
+
+def render_flash(maps: Tensor, capture: FlashCapture = FlashCapture(), supersample: int = 1) -> Tensor:
+    """Render the flash photograph of the capture set-up.
+
+    Args:
+        maps: map sets.
+        capture: camera and flash.
+        supersample: shade ``supersample²`` points per pixel (maps repeated nearest-neighbour, as a
+            texture lookup does) and average them: a box-filtered pixel footprint, like a
+            camera's, instead of the texel centre. Matters for highlights a few pixels wide.
 
     Shape:
         - maps: ``(B, 8, H, W)``
         - output: ``(B, 3, H, W)``
     """
     batch = maps.shape[0]
-    height = capture_camera_height(fov_deg, plane_half_size)
-    camera = maps.new_tensor([0.0, 0.0, height]).expand(batch, 1, 3)
+    camera = maps.new_tensor([0.0, 0.0, capture.camera_height]).expand(batch, 1, 3)
     lights = PointLights(
         position=camera.unsqueeze(2),
-        intensity=maps.new_full((batch, 1, 1), intensity),
-        color=maps.new_tensor(color).expand(batch, 1, 1, 3),
+        intensity=maps.new_full((batch, 1, 1), capture.intensity),
+        color=maps.new_tensor(capture.color).expand(batch, 1, 1, 3),
     )
-    return render_point_lights(maps, camera, lights, plane_half_size)[:, 0]
+    if supersample > 1:
+        maps = maps.repeat_interleave(supersample, -1).repeat_interleave(supersample, -2)
+    image = render_point_lights(maps, camera, lights, capture.plane_half_size)[:, 0]
+    return F.avg_pool2d(image, supersample) if supersample > 1 else image

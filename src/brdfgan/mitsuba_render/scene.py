@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from brdfgan.core.render import capture_camera_height
+from brdfgan.core.render import FlashCapture, capture_camera_height
 from brdfgan.core.svbrdf import encode_normal, split_maps, srgb_to_linear, validate_maps
 from brdfgan.mitsuba_render.variant import mitsuba
 
@@ -139,14 +139,7 @@ def render_scene(scene_dict: dict[str, Any], spp: int | None = None, seed: int =
 
 
 def render_flash_mitsuba(
-    maps: Tensor,
-    *,
-    fov_deg: float = 45.0,
-    intensity: float = 1.0,
-    color: tuple[float, float, float] = (1.0, 1.0, 1.0),
-    plane_half_size: float = 1.0,
-    spp: int = 64,
-    seed: int = 0,
+    maps: Tensor, capture: FlashCapture = FlashCapture(), *, spp: int = 64, seed: int = 0
 ) -> Tensor:
     """Mitsuba reference of :func:`brdfgan.core.render.render_flash`: point light at the camera.
 
@@ -154,9 +147,13 @@ def render_flash_mitsuba(
         - maps: ``(8, H, W)``
         - output: ``(3, H, W)``
     """
-    camera_z = capture_camera_height(fov_deg, plane_half_size)
-    flash = MitsubaPointLight((0.0, 0.0, camera_z), tuple(intensity * c for c in color))
+    flash = MitsubaPointLight((0.0, 0.0, capture.camera_height), capture.radiant_intensity)
     scene = plane_scene_dict(
-        maps, lights=[flash], fov_deg=fov_deg, plane_half_size=plane_half_size, spp=spp, seed=seed
+        maps,
+        lights=[flash],
+        fov_deg=capture.fov_deg,
+        plane_half_size=capture.plane_half_size,
+        spp=spp,
+        seed=seed,
     )
     return render_scene(scene, seed=seed)
