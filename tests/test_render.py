@@ -109,7 +109,6 @@ def test_module_matches_function_and_capture_height() -> None:
         capture_camera_height(0.0)
 
 
-@pytest.mark.slow
 def test_compiled_renderer_matches_eager() -> None:
     maps = random_maps(16, 16, batch=(2,))
     camera = torch.tensor([[[0.3, -0.2, 2.5]], [[-0.4, 0.1, 3.0]]])

@@ -26,7 +26,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from brdfgan.core.brdf import VECTOR_DIM, evaluate_brdf, normalize
+from brdfgan.core.brdf import VECTOR_DIM, dot, evaluate_brdf, normalize
 from brdfgan.core.svbrdf import check_map_shape, normalize_normal, split_maps, srgb_to_linear
 
 
@@ -134,7 +134,7 @@ def render_point_lights(
         distance_sq = (to_light * to_light).sum(dim=VECTOR_DIM, keepdim=True)
         light_dir = to_light / distance_sq.sqrt().clamp(min=1e-7)
         brdf = evaluate_brdf(basecolor, normal, parts.roughness, parts.metallic, light_dir, view_dir)
-        cosine = (normal * light_dir).sum(dim=VECTOR_DIM, keepdim=True).clamp(min=0.0)
+        cosine = dot(normal, light_dir).clamp(min=0.0)
         irradiance = intensity[:, :, k, :, None, None] * cosine / distance_sq.clamp(min=1e-12)
         radiance = radiance + brdf * irradiance
     return radiance
