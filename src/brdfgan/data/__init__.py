@@ -1,0 +1,1 @@
+"""Synthetic training data: procedural materials, capture simulation, shards, loading."""

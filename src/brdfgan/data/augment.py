@@ -1,0 +1,136 @@
+"""Paper §5 augmentation: random crops with rotation and scale from large maps to training size.
+
+A crop is a square of side ``2·scale`` (plane units; the source covers ``[-1, 1]²``) centred at
+``center`` and rotated by ``angle``: the feature at source position ``q`` lands at output
+position ``R(angle)·(q − center)/scale``. Procedural materials tile, so sampling wraps around.
+
+Per map:
+- base color is resampled in linear space (filtering sRGB values darkens edges) and re-encoded;
+- normals are resampled, their XY components rotated by the same angle as the content (a slope
+  facing +X rotated by 90° faces +Y), then renormalised;
+- roughness and metallic are resampled as they are.
+
+Downscaling pre-filters with an antialiased resize so a 2048² material reduced to 256² does not
+alias; the rotation then samples bilinearly at about one source texel per output texel.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from brdfgan.core.svbrdf import (
+    BASECOLOR,
+    METALLIC,
+    NORMAL,
+    ROUGHNESS,
+    check_map_shape,
+    linear_to_srgb,
+    normalize_normal,
+    srgb_to_linear,
+)
+
+
+@dataclass(frozen=True)
+class CropTransform:
+    """Where a crop comes from: centre in ``[-1, 1]²``, half side ``scale`` (1 = whole source),
+    rotation ``angle`` in radians (counter-clockwise, +Y up)."""
+
+    center: tuple[float, float]
+    scale: float
+    angle: float
+
+
+@dataclass(frozen=True)
+class CropSampling:
+    """Ranges of the random crops: crop side as a fraction of the source side, rotation."""
+
+    scale_min: float = 0.125
+    scale_max: float = 0.5
+    rotate: bool = True
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.scale_min <= self.scale_max <= 1.0:
+            raise ValueError(f"need 0 < scale_min <= scale_max <= 1, got {self.scale_min}, {self.scale_max}")
+
+    def sample(self, generator: torch.Generator) -> CropTransform:
+        u = torch.rand(4, generator=generator, dtype=torch.float64).tolist()
+        # Log-uniform scale: each octave of zoom is equally likely.
+        scale = math.exp(
+            math.log(self.scale_min) + u[0] * (math.log(self.scale_max) - math.log(self.scale_min))
+        )
+        angle = 2.0 * math.pi * u[1] if self.rotate else 0.0
+        return CropTransform(center=(2.0 * u[2] - 1.0, 2.0 * u[3] - 1.0), scale=scale, angle=angle)
+
+
+def _prefilter(maps: Tensor, size: int) -> Tensor:
+    """Antialiased resize of a (C, S, S) stack to (C, size, size) when that shrinks it."""
+    if size >= maps.shape[-1]:
+        return maps
+    return F.interpolate(maps[None], size=(size, size), mode="bilinear", antialias=True, align_corners=False)[
+        0
+    ]
+
+
+def _sampling_grid(transform: CropTransform, out_size: int, source_size: int, pad: int) -> Tensor:
+    """grid_sample coordinates ``(1, N, N, 2)`` into a source circularly padded by ``pad`` texels."""
+    c = (torch.arange(out_size, dtype=torch.float64) + 0.5) * (2.0 / out_size) - 1.0
+    y_out, x_out = torch.meshgrid(-c, c, indexing="ij")  # row 0 is +Y
+    cos, sin = math.cos(transform.angle), math.sin(transform.angle)
+    # Inverse rotation takes an output position back to the source.
+    x = transform.center[0] + transform.scale * (cos * x_out + sin * y_out)
+    y = transform.center[1] + transform.scale * (-sin * x_out + cos * y_out)
+    x, y = torch.remainder(x + 1.0, 2.0) - 1.0, torch.remainder(y + 1.0, 2.0) - 1.0
+    shrink = source_size / (source_size + 2 * pad)
+    return torch.stack([x * shrink, -y * shrink], dim=-1)[None].float()
+
+
+def crop_maps(maps: Tensor, transform: CropTransform, out_size: int) -> Tensor:
+    """Resample one map set through a crop transform.
+
+    Shape:
+        - maps: ``(8, S, S)``
+        - output: ``(8, out_size, out_size)``
+    """
+    check_map_shape(maps)
+    if maps.ndim != 3 or maps.shape[-1] != maps.shape[-2]:
+        raise ValueError(f"expected square maps of shape (8, S, S), got {tuple(maps.shape)}")
+    work = maps.clone()
+    work[BASECOLOR] = srgb_to_linear(maps[BASECOLOR])
+    # Source texels per output texel; pre-filter so the rotation samples ~1:1.
+    texels_per_output = transform.scale * maps.shape[-1] / out_size
+    source = _prefilter(work, max(out_size, round(maps.shape[-1] / max(texels_per_output, 1.0))))
+    pad = 2
+    padded = F.pad(source[None], (pad, pad, pad, pad), mode="circular")
+    grid = _sampling_grid(transform, out_size, source.shape[-1], pad).to(maps.dtype)
+    out = F.grid_sample(padded, grid, mode="bilinear", padding_mode="border", align_corners=False)[0]
+
+    cos, sin = math.cos(transform.angle), math.sin(transform.angle)
+    nx, ny, nz = out[NORMAL][0], out[NORMAL][1], out[NORMAL][2]
+    out[NORMAL] = normalize_normal(torch.stack([cos * nx - sin * ny, sin * nx + cos * ny, nz]))
+    out[BASECOLOR] = linear_to_srgb(out[BASECOLOR].clamp(0.0, 1.0))
+    # Resampling weights sum to 1 only up to rounding: keep the scalar maps inside [0, 1].
+    out[ROUGHNESS] = out[ROUGHNESS].clamp(0.0, 1.0)
+    out[METALLIC] = out[METALLIC].clamp(0.0, 1.0)
+    return out
+
+
+def random_crops(
+    maps: Tensor,
+    count: int,
+    out_size: int,
+    generator: torch.Generator,
+    sampling: CropSampling = CropSampling(),
+) -> tuple[Tensor, list[CropTransform]]:
+    """``count`` random crops of one material (paper: 7) and the transforms that made them.
+
+    Shape:
+        - maps: ``(8, S, S)``
+        - output: ``(count, 8, out_size, out_size)``
+    """
+    transforms = [sampling.sample(generator) for _ in range(count)]
+    return torch.stack([crop_maps(maps, t, out_size) for t in transforms]), transforms

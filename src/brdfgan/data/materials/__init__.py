@@ -1,0 +1,1 @@
+"""Procedural material library: families of parametric SVBRDF generators (paper §5)."""

@@ -1,0 +1,96 @@
+"""The material-family interface, parameter sampling and height → normal conversion.
+
+A family is a pure function of documented parameters producing a map set. A sample draws every
+parameter from a normal distribution centred on its default with σ spanning its range, clipped
+to the range (paper §5: "parameters … sampled from a normal distribution … clipped").
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import torch
+from torch import Tensor
+
+from brdfgan.core.svbrdf import join_maps, normalize_normal
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One family parameter: default, range ``[low, high]`` and what it means."""
+
+    default: float
+    low: float
+    high: float
+    doc: str
+
+    def __post_init__(self) -> None:
+        if not self.low <= self.default <= self.high:
+            raise ValueError(f"default {self.default} outside [{self.low}, {self.high}]")
+
+    def sample(self, generator: torch.Generator) -> float:
+        """Normal centred on the default with σ = (high − low)/2, clipped to the range."""
+        sigma = (self.high - self.low) / 2.0
+        value = self.default + sigma * torch.randn((), generator=generator, dtype=torch.float64).item()
+        return float(min(max(value, self.low), self.high))
+
+
+@dataclass(frozen=True)
+class MaterialLayers:
+    """What a family paints, all ``(C, H, W)`` float tensors in [0, 1] except ``height``.
+
+    basecolor (3, sRGB-encoded), height (1, in texels of the output: 1.0 = one texel width),
+    roughness (1), metallic (1).
+    """
+
+    basecolor: Tensor
+    height: Tensor
+    roughness: Tensor
+    metallic: Tensor
+
+
+GenerateFn = Callable[[Mapping[str, float], int, torch.Generator], MaterialLayers]
+
+
+@dataclass(frozen=True)
+class MaterialFamily:
+    """A named parametric generator: ``generate(params, size, generator)`` → layers."""
+
+    name: str
+    parameters: Mapping[str, Parameter]
+    generate: GenerateFn
+    description: str = ""
+    tags: tuple[str, ...] = field(default=())
+
+    def defaults(self) -> dict[str, float]:
+        return {key: p.default for key, p in self.parameters.items()}
+
+    def sample_parameters(self, generator: torch.Generator) -> dict[str, float]:
+        return {key: p.sample(generator) for key, p in self.parameters.items()}
+
+    def make_maps(self, params: Mapping[str, float], size: int, generator: torch.Generator) -> Tensor:
+        """The 8-channel map set ``(8, size, size)`` of these parameters."""
+        unknown = set(params) - set(self.parameters)
+        if unknown:
+            raise KeyError(f"{self.name}: unknown parameter(s) {', '.join(sorted(unknown))}")
+        layers = self.generate({**self.defaults(), **params}, size, generator)
+        return join_maps(
+            layers.basecolor.clamp(0.0, 1.0),
+            height_to_normal(layers.height),
+            layers.roughness.clamp(0.0, 1.0),
+            layers.metallic.clamp(0.0, 1.0),
+        )
+
+
+def height_to_normal(height: Tensor) -> Tensor:
+    """Tangent-space normals of a height field by central differences (wrapping at the borders,
+    so tileable heights give tileable normals). Row 0 is +Y, so +Y is *up the rows*.
+
+    Shape:
+        - height: ``(1, H, W)`` in texel units
+        - output: ``(3, H, W)`` unit normals
+    """
+    dh_dx = (torch.roll(height, -1, dims=-1) - torch.roll(height, 1, dims=-1)) / 2.0
+    dh_dy = (torch.roll(height, 1, dims=-2) - torch.roll(height, -1, dims=-2)) / 2.0  # row − 1 is +Y
+    return normalize_normal(torch.cat([-dh_dx, -dh_dy, torch.ones_like(height)], dim=0))

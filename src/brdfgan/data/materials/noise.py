@@ -1,0 +1,142 @@
+"""Vectorised, tileable noise primitives in torch (no per-pixel Python loops).
+
+Every field covers the unit square ``[0, 1)²`` sampled at ``size × size`` texel centres and is
+periodic over it (lattices wrap), so materials tile and crops/rotations never hit a seam. Lattice
+sizes are in cells per side. All randomness comes from the ``torch.Generator`` passed in.
+Fields are ``(size, size)`` float32 tensors, row 0 at the top.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+
+def texel_coordinates(size: int) -> tuple[Tensor, Tensor]:
+    """``(u, v)`` texel-centre coordinates in [0, 1), u along columns, v along rows.
+
+    Shape: each ``(size, size)``.
+    """
+    c = (torch.arange(size, dtype=torch.float32) + 0.5) / size
+    return c.view(1, size).expand(size, size), c.view(size, 1).expand(size, size)
+
+
+def _quintic(t: Tensor) -> Tensor:
+    return t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+
+
+def _lattice(size: int, cells: int) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Integer cell indices (i0, j0) and fractional positions (fu, fv) of every texel."""
+    u, v = texel_coordinates(size)
+    x, y = u * cells, v * cells
+    i0, j0 = x.floor(), y.floor()
+    return i0.long() % cells, j0.long() % cells, x - i0, y - j0
+
+
+def value_noise(size: int, cells: int, generator: torch.Generator) -> Tensor:
+    """Smoothly interpolated random lattice values in [0, 1], periodic. Shape: ``(size, size)``."""
+    lattice = torch.rand((cells, cells), generator=generator)
+    i0, j0, fu, fv = _lattice(size, cells)
+    i1, j1 = (i0 + 1) % cells, (j0 + 1) % cells
+    su, sv = _quintic(fu), _quintic(fv)
+    top = torch.lerp(lattice[j0, i0], lattice[j0, i1], su)
+    bottom = torch.lerp(lattice[j1, i0], lattice[j1, i1], su)
+    return torch.lerp(top, bottom, sv)
+
+
+def gradient_noise(size: int, cells: int, generator: torch.Generator) -> Tensor:
+    """Perlin gradient noise, periodic, roughly in [-1, 1] (mean 0). Shape: ``(size, size)``."""
+    angle = 2.0 * math.pi * torch.rand((cells, cells), generator=generator)
+    gx, gy = torch.cos(angle), torch.sin(angle)
+    i0, j0, fu, fv = _lattice(size, cells)
+    i1, j1 = (i0 + 1) % cells, (j0 + 1) % cells
+
+    def corner(i: Tensor, j: Tensor, du: Tensor, dv: Tensor) -> Tensor:
+        return gx[j, i] * du + gy[j, i] * dv
+
+    su, sv = _quintic(fu), _quintic(fv)
+    top = torch.lerp(corner(i0, j0, fu, fv), corner(i1, j0, fu - 1, fv), su)
+    bottom = torch.lerp(corner(i0, j1, fu, fv - 1), corner(i1, j1, fu - 1, fv - 1), su)
+    return torch.lerp(top, bottom, sv) * math.sqrt(2.0)
+
+
+def fbm(
+    size: int,
+    cells: int,
+    generator: torch.Generator,
+    octaves: int = 5,
+    persistence: float = 0.5,
+    lacunarity: int = 2,
+) -> Tensor:
+    """Fractal sum of gradient noise, normalised to roughly [-1, 1]. Shape: ``(size, size)``.
+
+    ``lacunarity`` is an integer so every octave stays periodic on the unit square.
+    """
+    total = torch.zeros((size, size))
+    amplitude, norm, frequency = 1.0, 0.0, cells
+    for _ in range(octaves):
+        if frequency > size:
+            break  # finer than a texel: only aliasing would be added
+        total += amplitude * gradient_noise(size, frequency, generator)
+        norm += amplitude
+        amplitude *= persistence
+        frequency *= lacunarity
+    return total / max(norm, 1e-8)
+
+
+def worley(
+    size: int, cells: int, generator: torch.Generator, jitter: float = 1.0
+) -> tuple[Tensor, Tensor, Tensor]:
+    """Periodic cellular (Worley) noise with one jittered feature point per lattice cell.
+
+    Returns:
+        ``(f1, f2, cell_id)``: distances (in cell units) to the nearest and second-nearest
+        feature points, and the integer id (``j·cells + i``) of the nearest point's cell — use it
+        to give every cell (stone, tile, pebble) its own random attributes.
+
+    Shape: each ``(size, size)``.
+    """
+    points = 0.5 + jitter * (torch.rand((cells, cells, 2), generator=generator) - 0.5)
+    i0, j0, fu, fv = _lattice(size, cells)
+    distances, ids = [], []
+    for dj in (-1, 0, 1):
+        for di in (-1, 0, 1):
+            i, j = (i0 + di) % cells, (j0 + dj) % cells
+            p = points[j, i]
+            du = di + p[..., 0] - fu
+            dv = dj + p[..., 1] - fv
+            distances.append(torch.sqrt(du * du + dv * dv))
+            ids.append(j * cells + i)
+    d = torch.stack(distances)
+    order = d.argsort(dim=0)
+    f1 = d.gather(0, order[:1])[0]
+    f2 = d.gather(0, order[1:2])[0]
+    cell_id = torch.stack(ids).gather(0, order[:1])[0]
+    return f1, f2, cell_id
+
+
+def random_per_cell(cell_id: Tensor, count: int, generator: torch.Generator, channels: int = 1) -> Tensor:
+    """A random value in [0, 1) per cell id, looked up per texel.
+
+    Shape:
+        - cell_id: ``(H, W)`` integers in ``[0, count)``
+        - output: ``(channels, H, W)``
+    """
+    table = torch.rand((count, channels), generator=generator)
+    return table[cell_id].permute(2, 0, 1)
+
+
+def smoothstep(edge0: float, edge1: float, x: Tensor) -> Tensor:
+    """Hermite step from 0 at ``edge0`` to 1 at ``edge1``. Shape: any."""
+    t = ((x - edge0) / (edge1 - edge0)).clamp(0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def lerp_color(a: tuple[float, float, float], b: tuple[float, float, float], t: Tensor) -> Tensor:
+    """Per-texel blend of two sRGB colours. Shape: t ``(1, H, W)`` or ``(H, W)`` → ``(3, H, W)``."""
+    t = t if t.ndim == 3 else t[None]
+    ca = torch.tensor(a, dtype=t.dtype).view(3, 1, 1)
+    cb = torch.tensor(b, dtype=t.dtype).view(3, 1, 1)
+    return ca + (cb - ca) * t

@@ -1,0 +1,96 @@
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from brdfgan.core.svbrdf import CHANNELS, flat_maps, join_maps, validate_maps
+from brdfgan.data.augment import CropSampling, CropTransform, crop_maps, random_crops
+from brdfgan.data.materials.base import height_to_normal
+from brdfgan.data.materials.noise import fbm, value_noise
+
+
+def _material(size: int = 64, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
+    """A tileable material whose normals come from its height, and the height."""
+    g = torch.Generator().manual_seed(seed)
+    height = (fbm(size, 4, g, octaves=3) * size * 0.05)[None]
+    base = torch.stack([value_noise(size, 4, g) for _ in range(3)])
+    rough = value_noise(size, 8, g)[None]
+    maps = join_maps(base, height_to_normal(height), rough, (rough > 0.6).float())
+    return maps, height
+
+
+def _as_maps(field: torch.Tensor) -> torch.Tensor:
+    """Carry a 1-channel field through crop_maps (in the roughness slot)."""
+    maps = flat_maps(*field.shape[-2:])
+    maps[CHANNELS["roughness"]] = field
+    return maps
+
+
+def test_identity_transform_reproduces_the_source() -> None:
+    maps, _ = _material()
+    out = crop_maps(maps, CropTransform(center=(0.0, 0.0), scale=1.0, angle=0.0), 64)
+    torch.testing.assert_close(out, maps, atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize("quarter_turns", [1, 2, 3])
+def test_rotation_rotates_normal_vectors_consistently_with_the_height(quarter_turns: int) -> None:
+    # Rotating the maps must equal building normals from the rotated height: the XY of the
+    # normals turns with the content. Quarter turns sample texel centres exactly.
+    maps, height = _material()
+    transform = CropTransform(center=(0.0, 0.0), scale=1.0, angle=quarter_turns * math.pi / 2)
+    rotated = crop_maps(maps, transform, 64)
+    rotated_height = crop_maps(_as_maps((height - height.min()) / 100.0), transform, 64)[
+        CHANNELS["roughness"]
+    ]
+    expected_normals = height_to_normal(rotated_height * 100.0)
+    torch.testing.assert_close(rotated[CHANNELS["normal"]], expected_normals, atol=1e-4, rtol=0)
+    # The content itself turned counter-clockwise: torch.rot90 over (H, W) with +Y up.
+    torch.testing.assert_close(
+        rotated[CHANNELS["basecolor"]],
+        torch.rot90(maps[CHANNELS["basecolor"]], quarter_turns, dims=(1, 2)),
+        atol=1e-5,
+        rtol=0,
+    )
+
+
+def test_rotating_without_turning_normals_would_be_caught() -> None:
+    maps, _ = _material()
+    rotated = crop_maps(maps, CropTransform(center=(0.0, 0.0), scale=1.0, angle=math.pi / 2), 64)
+    naive = torch.rot90(maps[CHANNELS["normal"]], 1, dims=(1, 2))
+    assert (rotated[CHANNELS["normal"]] - naive).abs().max() > 0.05
+
+
+def test_crops_wrap_around_tileable_sources() -> None:
+    maps, _ = _material()
+    # A crop centred on the corner straddles all four edges; a tileable source has no seam there.
+    out = crop_maps(maps, CropTransform(center=(1.0, 1.0), scale=1.0, angle=0.0), 64)
+    torch.testing.assert_close(out, torch.roll(maps, shifts=(32, 32), dims=(1, 2)), atol=1e-5, rtol=0)
+
+
+def test_downscaled_crops_are_antialiased() -> None:
+    # A one-texel checkerboard averages to grey when reduced 8×, instead of aliasing.
+    size = 256
+    checker = ((torch.arange(size)[:, None] + torch.arange(size)[None]) % 2).float()
+    out = crop_maps(_as_maps(checker), CropTransform(center=(0.0, 0.0), scale=1.0, angle=0.3), 32)
+    roughness = out[CHANNELS["roughness"]]
+    assert (roughness - 0.5).abs().max() < 0.05
+
+
+def test_random_crops_are_valid_reproducible_and_diverse() -> None:
+    maps, _ = _material(128)
+    crops, transforms = random_crops(maps, 7, 32, torch.Generator().manual_seed(4))
+    again, _ = random_crops(maps, 7, 32, torch.Generator().manual_seed(4))
+    assert crops.shape == (7, 8, 32, 32) and len(transforms) == 7
+    assert torch.equal(crops, again)
+    validate_maps(crops)
+    assert len({round(t.angle, 6) for t in transforms}) == 7
+    assert all(0.125 <= t.scale <= 0.5 for t in transforms)
+
+
+def test_bad_input() -> None:
+    with pytest.raises(ValueError, match="square"):
+        crop_maps(flat_maps(8, 16), CropTransform((0.0, 0.0), 1.0, 0.0), 8)
+    with pytest.raises(ValueError, match="scale_min"):
+        CropSampling(scale_min=0.6, scale_max=0.5)
