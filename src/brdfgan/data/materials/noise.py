@@ -100,20 +100,22 @@ def worley(
     """
     points = 0.5 + jitter * (torch.rand((cells, cells, 2), generator=generator) - 0.5)
     i0, j0, fu, fv = _lattice(size, cells)
-    distances, ids = [], []
+    # Running nearest/second-nearest over the 3×3 neighbourhood: no (9, size, size) stack and
+    # no sort, which at 2048² dominated the families that use cells.
+    f1 = torch.full((size, size), float("inf"))
+    f2 = torch.full((size, size), float("inf"))
+    cell_id = torch.zeros((size, size), dtype=torch.long)
     for dj in (-1, 0, 1):
         for di in (-1, 0, 1):
             i, j = (i0 + di) % cells, (j0 + dj) % cells
             p = points[j, i]
             du = di + p[..., 0] - fu
             dv = dj + p[..., 1] - fv
-            distances.append(torch.sqrt(du * du + dv * dv))
-            ids.append(j * cells + i)
-    d = torch.stack(distances)
-    order = d.argsort(dim=0)
-    f1 = d.gather(0, order[:1])[0]
-    f2 = d.gather(0, order[1:2])[0]
-    cell_id = torch.stack(ids).gather(0, order[:1])[0]
+            d = torch.sqrt(du * du + dv * dv)
+            nearer = d < f1
+            f2 = torch.where(nearer, f1, torch.minimum(f2, d))
+            f1 = torch.where(nearer, d, f1)
+            cell_id = torch.where(nearer, j * cells + i, cell_id)
     return f1, f2, cell_id
 
 
@@ -140,3 +142,16 @@ def lerp_color(a: tuple[float, float, float], b: tuple[float, float, float], t: 
     ca = torch.tensor(a, dtype=t.dtype).view(3, 1, 1)
     cb = torch.tensor(b, dtype=t.dtype).view(3, 1, 1)
     return ca + (cb - ca) * t
+
+
+def hsv_to_rgb(h: Tensor, s: Tensor, v: Tensor) -> Tensor:
+    """Per-texel HSV → RGB (hue in turns, all in [0, 1]); materials pick colours in HSV because
+    hue, saturation and brightness are what their parameters vary independently.
+
+    Shape: each ``(H, W)`` → ``(3, H, W)``.
+    """
+    channels = []
+    for n in (5.0, 3.0, 1.0):
+        k = (n + h * 6.0) % 6.0
+        channels.append(v - v * s * torch.minimum(k, 4.0 - k).clamp(0.0, 1.0))
+    return torch.stack(channels)
