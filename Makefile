@@ -11,7 +11,7 @@ ifneq ($(LIBLLVM),)
 export DRJIT_LIBLLVM_PATH ?= $(LIBLLVM)
 endif
 
-.PHONY: setup test test-slow demo lint format bench clean
+.PHONY: setup test test-slow demo lint format bench data clean
 
 setup: $(STAMP)
 
@@ -39,15 +39,21 @@ demo: setup
 	$(PY) -m brdfgan.demo
 
 lint: setup
-	$(PY) -m ruff check src tests benchmarks
-	$(PY) -m ruff format --check src tests benchmarks
+	$(PY) -m ruff check src tests benchmarks *.py
+	$(PY) -m ruff format --check src tests benchmarks *.py
 
 format: setup
-	$(PY) -m ruff format src tests benchmarks
-	$(PY) -m ruff check --fix src tests benchmarks
+	$(PY) -m ruff format src tests benchmarks *.py
+	$(PY) -m ruff check --fix src tests benchmarks *.py
 
 bench: setup
 	$(PY) -m benchmarks.bench_renderer
+	$(PY) -m benchmarks.bench_capture
+	$(PY) -m benchmarks.bench_generate
+	$(PY) -m benchmarks.bench_datamodule
+
+data: setup
+	$(PY) generate.py
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache .ruff_cache src/*.egg-info

@@ -85,3 +85,14 @@ def test_maps_tile_seamlessly(family: MaterialFamily) -> None:
             steps = (x - torch.roll(x, 1, dims=dim)).abs().mean(dim=(0, 1 if dim == -1 else 2))
             seam, interior = steps[0], steps[1:].max()
             assert seam <= 1.5 * interior + 1e-3, (family.name, channels, dim)
+
+
+def test_every_parameter_at_its_bounds_gives_valid_maps(family: MaterialFamily) -> None:
+    # σ = range/2 clips about a third of the draws to a bound, so the bounds are common inputs.
+    corners = [
+        {k: p.low for k, p in family.parameters.items()},
+        {k: p.high for k, p in family.parameters.items()},
+    ]
+    corners += [{k: getattr(p, end)} for k, p in family.parameters.items() for end in ("low", "high")]
+    for params in corners:
+        validate_maps(family.make_maps(params, 32, torch.Generator().manual_seed(0)))

@@ -32,12 +32,20 @@ RUST_BROWN = (0.29, 0.14, 0.07)
 
 def _threshold_for_coverage(field: Tensor, coverage: float) -> float:
     """The level above which ``coverage`` of ``field`` lies (estimated on a subsample, for speed)."""
-    if coverage <= 0.0:
-        return float("inf")
-    if coverage >= 1.0:
-        return float("-inf")
     sample = field.flatten()[:: max(1, field.numel() // 65536)]
     return torch.quantile(sample, 1.0 - coverage).item()
+
+
+def _coverage_mask(field: Tensor, coverage: float, edge: float) -> tuple[Tensor, float]:
+    """Soft mask of the ``coverage`` share of ``field`` with the highest values (edge width
+    ``edge``) and the level used. Coverage 0 and 1 give exact all-0 and all-1 masks: the
+    quantile level would be ±∞ there, and smoothstep of ∞ is NaN."""
+    if coverage <= 0.0:
+        return torch.zeros_like(field), float(field.max())
+    if coverage >= 1.0:
+        return torch.ones_like(field), float(field.min())
+    level = _threshold_for_coverage(field, coverage)
+    return smoothstep(level - edge, level + edge, field), level
 
 
 def _generate(params: Mapping[str, float], size: int, generator: torch.Generator) -> MaterialLayers:
@@ -46,19 +54,12 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     # Paint chips: the paint survives where a fbm field is above the coverage level; the chip
     # boundary is sharp because paint flakes off as a film, not gradually.
     chip_field = fbm(size, 6, generator, octaves=6, persistence=0.55)
-    paint_level = _threshold_for_coverage(chip_field, params["paint_coverage"])
-    painted = smoothstep(paint_level - 0.005, paint_level + 0.005, chip_field) if paint_level < 1e9 else None
-    if painted is None:
-        painted = torch.zeros(size, size)
+    painted, _ = _coverage_mask(chip_field, params["paint_coverage"], 0.005)
 
     # Rust: thresholded fbm, biased towards exposed steel (paint protects the metal beneath it).
     rust_field = fbm(size, max(1, round(params["rust_scale"])), generator, octaves=6, persistence=0.6)
     rust_field = rust_field + 0.25 * (1.0 - painted)
-    rust_level = _threshold_for_coverage(rust_field, params["rust_coverage"])
-    if rust_level < 1e9:
-        rust = smoothstep(rust_level - 0.03, rust_level + 0.03, rust_field)
-    else:
-        rust = torch.zeros(size, size)
+    rust, rust_level = _coverage_mask(rust_field, params["rust_coverage"], 0.03)
     # Paint over rust blisters and is lost; so rust covers paint wherever both are present.
     paint = painted * (1.0 - rust)
     bare = (1.0 - painted) * (1.0 - rust)
@@ -66,7 +67,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     # Rust crust: raised, thicker inside a patch, with a granular texture and deep pits.
     grain = fbm(size, 48, generator, octaves=3)
     pits = smoothstep(0.72, 0.85, value_noise(size, min(size, 96), generator))
-    depth_in = smoothstep(0.0, 0.15, rust_field - rust_level) if rust_level < 1e9 else rust
+    depth_in = smoothstep(0.0, 0.15, rust_field - rust_level)
     height = amplitude * (
         0.35 * painted  # paint film thickness: chip edges become small steps
         + rust * (0.6 + 0.6 * depth_in + 0.3 * grain)

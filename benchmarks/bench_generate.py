@@ -1,0 +1,95 @@
+"""Dataset generation benchmark: samples per hour and where the time goes.
+
+For each case, one material goes through the whole production path of
+:func:`brdfgan.data.generation.material_samples` — family maps at the material resolution,
+7 crops, 3 captures per crop (environment + flash, Mitsuba, auto exposure) — and every sample
+is encoded as it would be written to a shard. The time inside ``mi.render`` is Mitsuba's; the
+rest (material painting, crops, environment building, scene updates, exposure, PNG encoding) is
+our overhead.
+
+    python -m benchmarks.bench_generate [--materials N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+
+# (resolution, spp, material resolution)
+CASES: list[tuple[int, int, int]] = [(256, 64, 1024), (512, 196, 2048)]
+
+
+def _measure(resolution: int, spp: int, material_resolution: int, materials: int) -> dict[str, float]:
+    from brdfgan.data.generation import DatasetSpec, MitsubaPhotographer, derive_seed, material_samples
+    from brdfgan.data.lighting import build_environment_pools, load_environment
+    from brdfgan.data.shards import encode_sample
+
+    spec = DatasetSpec(
+        materials=10 * materials, material_resolution=material_resolution, resolution=resolution, spp=spp
+    )
+    pools = build_environment_pools(spec.lighting, derive_seed(spec.seed, "lighting"))
+    photographer = MitsubaPhotographer(spec)
+    # Warm-up: Mitsuba kernel compilation and the environment cache are one-off costs of a run.
+    for lighting_spec in pools.train:
+        load_environment(lighting_spec, spec.lighting.resolution)
+    next(material_samples(spec, "train", 0, pools, photographer))
+    photographer.mitsuba_seconds = 0.0
+
+    samples, encode_s = 0, 0.0
+    start = time.perf_counter()
+    for material in range(1, materials + 1):
+        for sample in material_samples(spec, "train", material, pools, photographer):
+            t = time.perf_counter()
+            encoded = encode_sample(sample)
+            encode_s += time.perf_counter() - t
+            samples += 1
+    total = time.perf_counter() - start
+    return {
+        "samples": samples,
+        "total_s": total,
+        "mitsuba_s": photographer.mitsuba_seconds,
+        "encode_s": encode_s,
+        "bytes_per_sample": sum(len(b) for b in encoded.values()),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--materials", type=int, default=1, help="materials per case (21 samples each)")
+    parser.add_argument("--case", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.case:
+        print(json.dumps(_measure(*map(int, args.case.split(",")), args.materials)))
+        return
+
+    rows = []
+    for case in CASES:
+        command = [sys.executable, "-m", "benchmarks.bench_generate", "--materials", str(args.materials)]
+        command += ["--case", ",".join(map(str, case))]
+        out = subprocess.run(command, check=True, capture_output=True, text=True)
+        rows.append((case, json.loads(out.stdout.strip().splitlines()[-1])))
+
+    print(
+        f"\nDataset generation, {args.materials} material(s) × 7 crops × 3 captures per case "
+        "(after warm-up); overhead = everything outside mi.render; ratios against the first row\n"
+    )
+    header = "resolution spp material-res samples s/sample samples/h in-mitsuba overhead MB/sample slower"
+    print("| " + " | ".join(header.split()) + " |")
+    print("|" + "---|" * len(header.split()))
+    base = rows[0][1]["total_s"] / rows[0][1]["samples"]
+    for (resolution, spp, material_resolution), m in rows:
+        per_sample = m["total_s"] / m["samples"]
+        cells = [
+            f"{resolution}²", str(spp), f"{material_resolution}²", str(m["samples"]), f"{per_sample:.2f}",
+            f"{3600.0 / per_sample:.0f}", f"{m['mitsuba_s'] / m['total_s']:.0%}",
+            f"{1.0 - m['mitsuba_s'] / m['total_s']:.0%}", f"{m['bytes_per_sample'] / 1e6:.2f}",
+            f"{per_sample / base:.1f}×",
+        ]  # fmt: skip
+        print("| " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()

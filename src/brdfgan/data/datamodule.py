@@ -1,0 +1,605 @@
+"""Streaming ``LightningDataModule`` over the WebDataset shards of :mod:`brdfgan.data.shards`.
+
+Pipeline (one per DataLoader worker; webdataset reads the shards)::
+
+    shard list ─ split by rank ─ split by worker ─ read tar ─ group members ─ [shuffle buffer]
+        ─ decode_sample ─ batch ─ (train: cut to the epoch's batch quota)
+
+Batches are formed inside the workers and the DataLoader runs with ``batch_size=None``, so one
+worker sends one ready batch (a single shared-memory transfer) and the number of batches per
+rank is under our control. A batch is::
+
+    {"photo": (B, 3, H, W) float32, linear LDR in [0, 1],
+     "maps": (B, 8, H, W) float32, layout of brdfgan.core.svbrdf,
+     "key": list[str], "meta": list[dict]}
+
+``meta`` stays a list of plain dicts (one per sample): Lightning's device transfer and
+``pin_memory`` leave non-tensors alone, and nothing is lost to a collation of mixed types.
+
+Training is an infinite stream cut into epochs of ``epoch_samples`` (default: the number of valid
+samples in the train split). Every rank yields exactly :attr:`ShardDataModule.train_batches_per_epoch`
+full batches per epoch, so DDP ranks never wait on each other. Each epoch the shard list is
+permuted with a seed from ``(seed, epoch)`` — the same on every rank and worker, so splitting the
+permuted list still partitions it — and each worker keeps a shuffle buffer of ``shuffle_buffer``
+undecoded samples (memory: buffer × compressed sample size, ≈ 4–5 MB per sample at 512² for
+noisy data, per worker). Webdataset's own ``shardshuffle`` is not used: it permutes after the
+split with the same seed every epoch. The epoch counter lives in the dataset object; train
+workers are persistent so that each keeps counting (a fresh worker would restart at epoch 0).
+
+Validation and test read every sample exactly once, in a fixed order (no shuffling), split by
+rank and by worker; ``val_samples`` caps validation at a fixed subset of that size, distributed
+over ranks and workers from the per-shard counts.
+
+Fewer shards than ranks × workers. Webdataset splits whole shards with ``islice(urls, i, None,
+n)``; a worker or rank that gets no shard yields nothing and, with its default
+``empty_check=True``, raises "No samples found in dataset". Here ``empty_check`` is off and:
+- train: if shards < ranks × workers, no splitting happens; every worker streams all shards in its
+  own seeded order (sampling with repetition, like webdataset's ``resampled`` mode) and a
+  :class:`ShardWarning` says so. Epoch lengths stay exact, so nothing hangs.
+- val/test: if shards < ranks, every rank evaluates the whole split (correct metrics, repeated
+  work) instead of leaving ranks with zero batches; if shards < workers, the extra workers idle.
+  Both cases warn. Ranks may still get different numbers of batches when shards hold different
+  counts: log with ``sync_dist`` at epoch end (the default for validation), never call a
+  collective inside ``validation_step``.
+
+Rank and world size are read once in :meth:`ShardDataModule.setup` (from the trainer) and
+stored in the dataset: webdataset's ``split_by_node`` asks ``torch.distributed`` inside the
+worker, which is not initialised in spawned workers and would make every rank read every shard.
+
+Corrupt data. :meth:`setup` verifies every shard's structure (headers only, see
+:func:`~brdfgan.data.shards.verify_shard`); truncated or garbage shards are skipped with a
+:class:`ShardWarning` naming them. Errors while streaming (a sample that does not decode, a read
+error) are warned about and skipped too. :attr:`ShardDataModule.skipped` counts both, across
+worker processes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import multiprocessing
+import random
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from itertools import count, islice
+from pathlib import Path
+from typing import Any
+
+import lightning as L
+import torch
+import webdataset as wds
+from torch.utils.data import DataLoader, IterableDataset, get_worker_info
+
+from brdfgan.data.shards import (
+    MANIFEST_NAME,
+    Sample,
+    ShardError,
+    decode_sample,
+    list_shards,
+    read_manifest,
+    verify_shard,
+)
+
+__all__ = ["ShardDataModule", "ShardStream", "ShardWarning", "SkipStats", "collate_samples"]
+
+log = logging.getLogger(__name__)
+
+# Samples collected before the shuffle buffer starts yielding (webdataset's default is 100).
+SHUFFLE_INITIAL = 100
+_KINDS = ("train", "val", "test")
+
+
+class ShardWarning(UserWarning):
+    """A shard or sample was skipped, or the shard count does not suit the ranks and workers."""
+
+
+@dataclass(frozen=True)
+class SkipStats:
+    """What was skipped so far: ``shards`` excluded by the structural check in ``setup``,
+    ``samples`` that failed to decode while streaming, and other streaming ``errors`` (read
+    failures in shards that passed the check; one damaged shard may report more than one)."""
+
+    shards: int = 0
+    samples: int = 0
+    errors: int = 0
+
+    @property
+    def total(self) -> int:
+        return self.shards + self.samples + self.errors
+
+
+@dataclass(frozen=True)
+class _SplitIndex:
+    """The valid shards of a split (as strings for webdataset) and their sample counts."""
+
+    urls: tuple[str, ...]
+    counts: tuple[int, ...]
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts)
+
+
+class _SkipCounter:
+    """Skip counts shared with DataLoader worker processes.
+
+    Shared memory without a lock: every (loader, worker) pair writes only its own slot, so no
+    increment races; the main process sums the slots.
+    """
+
+    def __init__(self, num_workers: int) -> None:
+        self._slots = num_workers + 1  # slot 0: the main process (num_workers = 0)
+        self._values = multiprocessing.RawArray("q", len(_KINDS) * self._slots * 2)
+
+    def add(self, kind: str, field: int, amount: int = 1) -> None:
+        info = get_worker_info()
+        slot = 0 if info is None else min(1 + info.id, self._slots - 1)
+        self._values[(_KINDS.index(kind) * self._slots + slot) * 2 + field] += amount
+
+    def totals(self) -> tuple[int, int]:
+        return sum(self._values[0::2]), sum(self._values[1::2])
+
+
+_SAMPLES, _ERRORS = 0, 1
+
+
+def collate_samples(samples: Sequence[Sample]) -> dict[str, Any]:
+    """Stack samples into a batch dict; ``meta`` stays a list of dicts.
+
+    Shape:
+        - output["photo"]: ``(B, 3, H, W)`` float32; output["maps"]: ``(B, 8, H, W)`` float32
+        - output["key"]: list of B str; output["meta"]: list of B dict
+    """
+    if not samples:
+        raise ValueError("cannot collate an empty list of samples")
+    sizes = {tuple(sample.photo.shape[1:]) for sample in samples}
+    if len(sizes) != 1:
+        keys = ", ".join(sample.key for sample in samples)
+        raise ShardError(
+            f"samples of different sizes {sorted(sizes)} in one batch ({keys}); regenerate the data"
+        )
+    return {
+        "photo": torch.stack([sample.photo for sample in samples]).float(),
+        "maps": torch.stack([sample.maps for sample in samples]).float(),
+        "key": [sample.key for sample in samples],
+        "meta": [dict(sample.meta) for sample in samples],
+    }
+
+
+class ShardStream(IterableDataset):
+    """Batches of one split for one rank; see the module docstring for the splitting rules.
+
+    ``kind="train"``: infinite shuffled stream cut to ``batches_per_epoch`` full batches per
+    epoch (summed over the DataLoader workers). ``"val"``/``"test"``: one pass in shard order,
+    the last batch of each worker may be partial, at most ``max_samples`` samples over all ranks.
+
+    Shape:
+        - each item: the dict of :func:`collate_samples` with ``B <= batch_size``
+    """
+
+    def __init__(
+        self,
+        index: _SplitIndex,
+        *,
+        kind: str,
+        batch_size: int,
+        rank: int,
+        world_size: int,
+        seed: int,
+        counter: _SkipCounter,
+        shuffle_buffer: int = 0,
+        batches_per_epoch: int | None = None,
+        max_samples: int | None = None,
+    ) -> None:
+        super().__init__()
+        if kind not in _KINDS:
+            raise ValueError(f"kind must be one of {_KINDS}, got {kind!r}")
+        if kind == "train" and batches_per_epoch is None:
+            raise ValueError("a train stream needs batches_per_epoch")
+        self.index = index
+        self.kind = kind
+        self.batch_size = batch_size
+        self.rank = rank
+        self.world_size = world_size
+        self.seed = seed
+        self.counter = counter
+        self.shuffle_buffer = shuffle_buffer
+        self.batches_per_epoch = batches_per_epoch
+        self.max_samples = max_samples
+        # Counts the iterations of this copy of the dataset: in the main process (no workers)
+        # or in a persistent worker, which keeps its copy between epochs.
+        self.epoch = 0
+
+    def __iter__(self) -> Iterator[dict[str, Any]]:
+        info = get_worker_info()
+        worker, num_workers = (0, 1) if info is None else (info.id, info.num_workers)
+        epoch = self.epoch
+        self.epoch += 1
+        if self.kind == "train":
+            return self._train_batches(epoch, worker, num_workers)
+        return self._eval_batches(worker, num_workers)
+
+    # -- train ----------------------------------------------------------------------------
+
+    def _train_batches(self, epoch: int, worker: int, num_workers: int) -> Iterator[dict[str, Any]]:
+        assert self.batches_per_epoch is not None
+        split = len(self.index.urls) >= self.world_size * num_workers
+        if split:
+            # This rank's batches go to its workers in proportion to the samples they hold.
+            order = _permuted(self.index, _mix(self.seed, epoch, 0))
+            held = [
+                sum(_take(order.counts, self.rank, self.world_size, w, num_workers))
+                for w in range(num_workers)
+            ]
+        else:
+            held = [1] * num_workers
+        quota = _apportion(self.batches_per_epoch, held)[worker]
+        samples = self._train_samples(epoch, worker, num_workers, split)
+        return islice(_batches(samples, self.batch_size, partial=False), quota)
+
+    def _train_samples(self, epoch: int, worker: int, num_workers: int, split: bool) -> Iterator[Sample]:
+        for repeat in count():
+            if split:  # same permutation everywhere, so the split stays a partition
+                order = _permuted(self.index, _mix(self.seed, epoch, repeat))
+            else:  # every worker reads everything, each in its own order
+                order = _permuted(self.index, _mix(self.seed, epoch, repeat, self.rank, worker))
+            records = self._records(order.urls, split_ranks=split, split_workers=split)
+            if self.shuffle_buffer > 1:
+                rng = random.Random(_mix(self.seed, epoch, repeat, self.rank, worker, 1))
+                initial = min(SHUFFLE_INITIAL, self.shuffle_buffer)
+                records = wds.shuffle(self.shuffle_buffer, initial, rng=rng)(records)
+            delivered = 0
+            for sample in self._decode(records):
+                delivered += 1
+                yield sample
+            if delivered == 0:
+                warnings.warn(
+                    f"train worker {worker} of rank {self.rank} got no readable sample from its shards; "
+                    "it stops early and this epoch is shorter",
+                    ShardWarning,
+                    stacklevel=1,
+                )
+                return
+
+    # -- val / test -----------------------------------------------------------------------
+
+    def _eval_batches(self, worker: int, num_workers: int) -> Iterator[dict[str, Any]]:
+        split_ranks = len(self.index.urls) >= self.world_size
+        records = self._records(self.index.urls, split_ranks=split_ranks, split_workers=True)
+        samples = self._decode(records)
+        if self.max_samples is not None:
+            # Every worker computes all quotas the same way and takes its own.
+            rank, world_size = (self.rank, self.world_size) if split_ranks else (0, 1)
+            held = [
+                sum(_take(self.index.counts, r, world_size, w, num_workers))
+                for r in range(world_size)
+                for w in range(num_workers)
+            ]
+            quotas = _fill(self.max_samples, held)
+            mine = rank * num_workers + worker
+            samples = islice(samples, quotas[mine])
+        return _batches(samples, self.batch_size, partial=True)
+
+    # -- shared ---------------------------------------------------------------------------
+
+    def _records(self, urls: Sequence[str], *, split_ranks: bool, split_workers: bool) -> Iterator[dict]:
+        dataset = wds.WebDataset(
+            list(urls),
+            handler=self._stream_error,
+            shardshuffle=False,  # the list comes permuted (train) or in order (val/test)
+            nodesplitter=self._split_by_rank if split_ranks else None,
+            workersplitter=wds.split_by_worker if split_workers else None,
+            empty_check=False,  # an idle worker is fine; see the module docstring
+        )
+        return iter(dataset)
+
+    def _split_by_rank(self, source: Iterator[dict]) -> Iterator[dict]:
+        # Like wds.split_by_node, but with the rank stored at setup (see the module docstring).
+        yield from islice(source, self.rank, None, self.world_size)
+
+    def _stream_error(self, error: Exception) -> bool:
+        shard = next((arg for arg in error.args if isinstance(arg, str) and arg.endswith(".tar")), "a shard")
+        detail = error.args[0] if error.args else ""
+        warnings.warn(
+            f"skipping unreadable data in {shard}: {type(error).__name__}: {detail}",
+            ShardWarning,
+            stacklevel=1,
+        )
+        self.counter.add(self.kind, _ERRORS)
+        return True  # continue with the next member or shard
+
+    def _decode(self, records: Iterator[dict]) -> Iterator[Sample]:
+        for record in records:
+            try:
+                sample = decode_sample(record)
+            except ShardError as error:
+                warnings.warn(f"skipping a corrupt sample: {error}", ShardWarning, stacklevel=1)
+                self.counter.add(self.kind, _SAMPLES)
+                continue
+            yield sample
+
+
+def _batches(samples: Iterator[Sample], batch_size: int, *, partial: bool) -> Iterator[dict[str, Any]]:
+    while batch := list(islice(samples, batch_size)):
+        if len(batch) < batch_size and not partial:
+            return
+        yield collate_samples(batch)
+
+
+def _mix(*parts: int) -> int:
+    """A 64-bit seed from integers, stable across processes and Python versions."""
+    return int.from_bytes(hashlib.sha256(repr(parts).encode()).digest()[:8], "little")
+
+
+def _permuted(index: _SplitIndex, seed: int) -> _SplitIndex:
+    order = list(range(len(index.urls)))
+    random.Random(seed).shuffle(order)
+    return _SplitIndex(tuple(index.urls[i] for i in order), tuple(index.counts[i] for i in order))
+
+
+def _take(items: Sequence[int], rank: int, world_size: int, worker: int, num_workers: int) -> Sequence[int]:
+    """The items rank ``rank``'s worker ``worker`` gets: webdataset's two ``islice`` splits."""
+    return items[rank::world_size][worker::num_workers]
+
+
+def _apportion(total: int, weights: Sequence[int]) -> list[int]:
+    """Split ``total`` into integers proportional to ``weights`` (largest remainder)."""
+    weight_sum = sum(weights)
+    if weight_sum == 0:
+        return [0] * len(weights)
+    exact = [total * w / weight_sum for w in weights]
+    shares = [int(x) for x in exact]
+    by_remainder = sorted(range(len(weights)), key=lambda i: (shares[i] - exact[i], i))
+    for i in by_remainder[: total - sum(shares)]:
+        shares[i] += 1
+    return shares
+
+
+def _fill(total: int, capacities: Sequence[int]) -> list[int]:
+    """Spread ``total`` as evenly as possible over bins of the given capacities (water filling)."""
+    quotas = [0] * len(capacities)
+    left = min(total, sum(capacities))
+    open_bins = [i for i, c in enumerate(capacities) if c > 0]
+    while left > 0:
+        share = max(1, left // len(open_bins))
+        for i in list(open_bins):
+            take = min(share, capacities[i] - quotas[i], left)
+            quotas[i] += take
+            left -= take
+            if quotas[i] == capacities[i]:
+                open_bins.remove(i)
+            if left == 0:
+                break
+    return quotas
+
+
+class ShardDataModule(L.LightningDataModule):
+    """Train/val/test loaders streaming ``data_dir/<split>/<split>-NNNNNN.tar`` shards.
+
+    Args:
+        data_dir: dataset root holding one folder per split.
+        batch_size: samples per batch (per rank).
+        num_workers: DataLoader worker processes per rank.
+        shuffle_buffer: undecoded samples each train worker shuffles among (0 or 1: no shuffle).
+        train_split, val_split, test_split: folder names; ``None`` disables that split.
+        val_samples: cap on validation samples (a fixed subset), ``None`` for all.
+        seed: seed of the shard permutations and shuffle buffers (mixed with epoch, rank, worker).
+        pin_memory: DataLoader ``pin_memory``.
+        epoch_samples: samples per training epoch over all ranks; default: the valid samples in
+            the train split (counted in ``setup``).
+        prepare: called by :meth:`prepare_data` (rank 0 only), e.g. to generate a missing dataset.
+
+    After :meth:`setup`, :attr:`skipped` reports skipped shards and samples.
+    """
+
+    def __init__(
+        self,
+        data_dir: str,
+        batch_size: int = 8,
+        num_workers: int = 0,
+        shuffle_buffer: int = 256,
+        train_split: str | None = "train",
+        val_split: str | None = "val",
+        test_split: str | None = "test",
+        val_samples: int | None = None,
+        seed: int = 0,
+        pin_memory: bool = False,
+        epoch_samples: int | None = None,
+        prepare: Callable[[], None] | None = None,
+    ) -> None:
+        super().__init__()
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+        if num_workers < 0:
+            raise ValueError(f"num_workers must be >= 0, got {num_workers}")
+        if shuffle_buffer < 0:
+            raise ValueError(f"shuffle_buffer must be >= 0, got {shuffle_buffer}")
+        for name, value in (("val_samples", val_samples), ("epoch_samples", epoch_samples)):
+            if value is not None and value < 1:
+                raise ValueError(f"{name} must be >= 1 or None, got {value}")
+        self.save_hyperparameters(ignore=["prepare"])
+        self.data_dir = Path(data_dir)
+        self.batch_size = batch_size
+        self.num_workers = num_workers
+        self.shuffle_buffer = shuffle_buffer
+        self.splits = {"train": train_split, "val": val_split, "test": test_split}
+        self.val_samples = val_samples
+        self.seed = seed
+        self.pin_memory = pin_memory
+        self.epoch_samples = epoch_samples
+        self._prepare = prepare
+        self._indices: dict[str, _SplitIndex] = {}
+        self._skipped_shards = 0
+        self._counter: _SkipCounter | None = None
+        self._rank, self._world_size = 0, 1
+        self._train_loader: DataLoader | None = None
+
+    # -- Lightning hooks ------------------------------------------------------------------
+
+    def prepare_data(self) -> None:
+        if self._prepare is not None:
+            self._prepare()
+
+    def setup(self, stage: str | None = None) -> None:
+        kinds = {"fit": ("train", "val"), "validate": ("val",), "test": ("test",), "predict": ("test",)}.get(
+            stage or "", _KINDS
+        )
+        self._rank, self._world_size = self._distributed()
+        if self._counter is None:  # created here, not in __init__, so the module pickles for ddp_spawn
+            self._counter = _SkipCounter(self.num_workers)
+        for kind in kinds:
+            split = self.splits[kind]
+            if kind == "val" and split is not None and self._declared_empty(split):
+                # A dataset generated with val_fraction = 0: validation is off, not an error.
+                log.info("split %r holds no samples (its manifest says so): validation disabled", split)
+                self.splits["val"] = split = None
+            if split is not None and kind not in self._indices:
+                self._indices[kind] = self._scan(split)
+
+    def train_dataloader(self) -> DataLoader:
+        index = self._index("train")
+        workers = max(1, self.num_workers)
+        if len(index.urls) < self._world_size * workers:
+            warnings.warn(
+                f"{len(index.urls)} train shard(s) for {self._world_size} rank(s) × {workers} worker(s): "
+                "every worker streams all shards in its own order (samples repeat within an epoch); "
+                "write at least that many shards for exact epochs",
+                ShardWarning,
+                stacklevel=2,
+            )
+        stream = self._stream("train", index, shuffle_buffer=self.shuffle_buffer)
+        self.teardown("fit")  # a previous train loader's workers are not needed any more
+        self._train_loader = self._loader(stream, persistent=self.num_workers > 0)
+        return self._train_loader
+
+    def val_dataloader(self) -> DataLoader | list:
+        if self.splits["val"] is None:
+            return []
+        index = self._index("val")
+        self._warn_eval_split("val", index)
+        return self._loader(self._stream("val", index, max_samples=self.val_samples), persistent=False)
+
+    def test_dataloader(self) -> DataLoader | list:
+        if self.splits["test"] is None:
+            return []
+        index = self._index("test")
+        self._warn_eval_split("test", index)
+        return self._loader(self._stream("test", index), persistent=False)
+
+    def teardown(self, stage: str | None = None) -> None:
+        """Stop the persistent train workers now (Lightning's fit loop also does at its end).
+
+        Outside Lightning, call it when done with a train loader: a forgotten one is shut down
+        whenever the garbage collector finds it, and a DataLoader forked meanwhile can make
+        that take seconds.
+        """
+        if stage in (None, "fit") and self._train_loader is not None:
+            iterator = getattr(self._train_loader, "_iterator", None)
+            if iterator is not None and hasattr(iterator, "_shutdown_workers"):
+                # What Lightning does too; a later iteration then starts fresh workers.
+                iterator._shutdown_workers()
+                self._train_loader._iterator = None
+            self._train_loader = None
+
+    # -- accessors ------------------------------------------------------------------------
+
+    @property
+    def skipped(self) -> SkipStats:
+        """Shards skipped by the check in :meth:`setup` plus samples/errors skipped while streaming."""
+        samples, errors = self._counter.totals() if self._counter is not None else (0, 0)
+        return SkipStats(shards=self._skipped_shards, samples=samples, errors=errors)
+
+    def num_samples(self, kind: str = "train") -> int:
+        """Valid samples counted in ``setup`` for ``kind`` in ``("train", "val", "test")``."""
+        return self._index(kind).total
+
+    @property
+    def train_batches_per_epoch(self) -> int:
+        """Full batches every rank yields per training epoch (at least 1)."""
+        samples = self.epoch_samples if self.epoch_samples is not None else self._index("train").total
+        return max(1, samples // (self._world_size * self.batch_size))
+
+    # -- internals ------------------------------------------------------------------------
+
+    def _distributed(self) -> tuple[int, int]:
+        if self.trainer is not None:
+            return self.trainer.global_rank, self.trainer.world_size
+        if torch.distributed.is_available() and torch.distributed.is_initialized():
+            return torch.distributed.get_rank(), torch.distributed.get_world_size()
+        return 0, 1
+
+    def _declared_empty(self, split: str) -> bool:
+        if not (self.data_dir / split / MANIFEST_NAME).exists():
+            return False
+        return read_manifest(self.data_dir, split).get("samples") == 0
+
+    def _scan(self, split: str) -> _SplitIndex:
+        directory = self.data_dir / split
+        shards = list_shards(self.data_dir, split)
+        if not shards:
+            raise ShardError(
+                f"no shards in {directory} (expected {split}-000000.tar, …); generate the dataset first"
+            )
+        urls, counts = [], []
+        for path in shards:
+            try:
+                samples = verify_shard(path)
+            except ShardError as error:
+                self._skipped_shards += 1
+                warnings.warn(f"skipping shard: {error}", ShardWarning, stacklevel=3)
+                log.warning("skipping shard: %s", error)
+                continue
+            if samples > 0:
+                urls.append(str(path))
+                counts.append(samples)
+        if not urls:
+            raise ShardError(f"no readable samples in the {len(shards)} shard(s) of {directory}")
+        return _SplitIndex(tuple(urls), tuple(counts))
+
+    def _index(self, kind: str) -> _SplitIndex:
+        if kind not in self._indices:
+            if self.splits[kind] is None:
+                raise ShardError(f"the {kind} split is disabled ({kind}_split=None)")
+            raise RuntimeError(f"call setup() for the {kind} split before asking for its data")
+        return self._indices[kind]
+
+    def _stream(self, kind: str, index: _SplitIndex, **options: Any) -> ShardStream:
+        assert self._counter is not None
+        return ShardStream(
+            index,
+            kind=kind,
+            batch_size=self.batch_size,
+            rank=self._rank,
+            world_size=self._world_size,
+            seed=self.seed,
+            counter=self._counter,
+            batches_per_epoch=self.train_batches_per_epoch if kind == "train" else None,
+            **options,
+        )
+
+    def _loader(self, stream: ShardStream, *, persistent: bool) -> DataLoader:
+        return DataLoader(
+            stream,
+            batch_size=None,  # batches are formed in the workers
+            num_workers=self.num_workers,
+            pin_memory=self.pin_memory,
+            persistent_workers=persistent,
+        )
+
+    def _warn_eval_split(self, kind: str, index: _SplitIndex) -> None:
+        shards = len(index.urls)
+        if self._world_size > 1 and shards < self._world_size:
+            warnings.warn(
+                f"{shards} {kind} shard(s) for {self._world_size} ranks: "
+                "every rank evaluates the whole split",
+                ShardWarning,
+                stacklevel=3,
+            )
+        elif shards < self._world_size * self.num_workers:
+            warnings.warn(
+                f"{shards} {kind} shard(s) for {self._world_size} rank(s) × {self.num_workers} workers: "
+                "some workers stay idle",
+                ShardWarning,
+                stacklevel=3,
+            )

@@ -1,0 +1,500 @@
+"""Synthetic dataset generation (paper §5): procedural materials → crops → Mitsuba captures → shards.
+
+The protocol, and where each step lives:
+
+1. ``materials`` material seeds are drawn from the dataset seed and **split before anything else**
+   (paper: 80:20 on the materials, never on their crops): a seeded permutation puts
+   ``test_fraction`` of the material indices in ``test``, ``val_fraction`` in ``val`` and the rest
+   in ``train``. A material index, its seed and all its crops belong to exactly one split.
+2. Each material is one family of the registry (round-robin over the configured families, so
+   small datasets stay balanced) with every parameter drawn from its clipped normal, painted at
+   ``material_resolution`` (paper: 2048²) — :mod:`brdfgan.data.materials`.
+3. ``crops_per_material`` random crops, rotated and scaled to ``resolution`` (paper: 7 at 512²) —
+   :mod:`brdfgan.data.augment`.
+4. Every crop is photographed ``train_renders`` times in ``train`` (paper: 3) and
+   ``eval_renders`` times in ``val``/``test`` (paper: 1): a random environment of the split's
+   pool (``test`` uses the disjoint test pool; ``val`` holds out materials, not lighting, so it
+   uses the training pool), randomly rotated, balanced against a random flash — rendered with
+   Mitsuba and auto-exposed to linear LDR — :mod:`brdfgan.data.lighting`,
+   :mod:`brdfgan.mitsuba_render.capture`, :mod:`brdfgan.core.exposure`.
+5. Materials are grouped ``materials_per_shard`` at a time into WebDataset shards
+   ``<split>/<split>-NNNNNN.tar`` — :mod:`brdfgan.data.shards`. A shard is the unit of work
+   and a pure function of (spec, split, shard index): re-running skips complete shards, so a
+   killed run resumes without duplicates, and any subset of shards can run in another process or
+   on another machine (``generate.py shard=…``).
+
+Every random draw comes from a generator seeded by a hash of (dataset seed, material index), so
+the bytes of a shard do not depend on which process made it, or in which order.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+import math
+import os
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import Tensor
+
+from brdfgan import __version__
+from brdfgan.core.render import FlashCapture
+from brdfgan.core.svbrdf import InvalidMapsError, validate_maps
+from brdfgan.data.augment import CropSampling, random_crops
+from brdfgan.data.flash import FlashSampling, blackbody_rgb
+from brdfgan.data.lighting import (
+    EnvironmentPools,
+    LightingConfig,
+    LightingDraw,
+    build_environment_pools,
+    draw_lighting,
+    flash_irradiance,
+    realize_lighting,
+)
+from brdfgan.data.materials.families import resolve_families
+from brdfgan.data.shards import (
+    Sample,
+    ShardError,
+    ShardInfo,
+    list_shards,
+    shard_path,
+    verify_shard,
+    write_manifest,
+    write_shard,
+)
+
+log = logging.getLogger(__name__)
+
+SPLITS = ("train", "val", "test")
+SPEC_FILE = "dataset.json"
+
+
+class DatasetConfigError(ValueError):
+    """A dataset spec or output directory is unusable; the message names the key or path."""
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    """Everything that determines the bytes of a dataset. Defaults: a small CPU-sized set; the
+    paper's protocol is ``material_resolution=2048, resolution=512, spp=196`` with the default
+    crop, render and split counts (``conf/dataset/paper.yaml``)."""
+
+    seed: int = 0
+    materials: int = 40
+    families: tuple[str, ...] = ()
+    material_resolution: int = 1024
+    resolution: int = 256
+    crops_per_material: int = 7
+    train_renders: int = 3
+    eval_renders: int = 1
+    test_fraction: float = 0.2
+    val_fraction: float = 0.05
+    materials_per_shard: int = 4
+    spp: int = 64
+    fov_deg: float = 45.0
+    crop: CropSampling = field(default_factory=CropSampling)
+    flash: FlashSampling = field(default_factory=FlashSampling)
+    lighting: LightingConfig = field(default_factory=LightingConfig)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "families", tuple(self.families))
+        positive = (
+            "materials",
+            "material_resolution",
+            "resolution",
+            "crops_per_material",
+            "train_renders",
+            "eval_renders",
+            "materials_per_shard",
+            "spp",
+        )
+        for key in positive:
+            value = getattr(self, key)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise DatasetConfigError(f"dataset.{key} must be a positive integer, got {value!r}")
+        if math.isqrt(self.spp) ** 2 != self.spp:
+            raise DatasetConfigError(
+                f"dataset.spp must be a perfect square (stratified sampler; paper: 196 = 14²), got {self.spp}"
+            )
+        if self.resolution > self.material_resolution:
+            raise DatasetConfigError(
+                f"dataset.resolution ({self.resolution}) must not exceed dataset.material_resolution "
+                f"({self.material_resolution}): crops are cut from the material maps"
+            )
+        for key in ("test_fraction", "val_fraction"):
+            value = getattr(self, key)
+            if not 0.0 <= value < 1.0:
+                raise DatasetConfigError(f"dataset.{key} must lie in [0, 1), got {value!r}")
+        if self.test_fraction + self.val_fraction >= 1.0:
+            raise DatasetConfigError("dataset.test_fraction + dataset.val_fraction must be below 1")
+        if not 1.0 <= self.fov_deg < 170.0:
+            raise DatasetConfigError(f"dataset.fov_deg must lie in [1, 170), got {self.fov_deg!r}")
+        resolve_families(self.families)  # unknown names fail here, before any work
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready description (recorded in ``dataset.json`` and the manifests)."""
+        return json.loads(json.dumps(dataclasses.asdict(self)))
+
+    def renders_per_crop(self, split: str) -> int:
+        return self.train_renders if split == "train" else self.eval_renders
+
+
+@dataclass(frozen=True)
+class ShardJob:
+    """One unit of work: the materials of shard ``index`` of ``split``."""
+
+    split: str
+    index: int
+    materials: tuple[int, ...]
+
+    def sample_count(self, spec: DatasetSpec) -> int:
+        return len(self.materials) * spec.crops_per_material * spec.renders_per_crop(self.split)
+
+
+def derive_seed(*parts: int | str) -> int:
+    """A 63-bit seed from a hash of ``parts``: independent streams per (dataset, material, …)
+    that do not shift when the dataset grows or a shard runs elsewhere."""
+    digest = hashlib.blake2b(":".join(map(str, parts)).encode(), digest_size=8).digest()
+    return int.from_bytes(digest, "little") & (2**63 - 1)
+
+
+def split_materials(spec: DatasetSpec) -> dict[str, tuple[int, ...]]:
+    """Material indices per split, each sorted. Disjoint and covering ``range(materials)``."""
+    order = torch.randperm(
+        spec.materials, generator=torch.Generator().manual_seed(derive_seed(spec.seed, "split"))
+    )
+    counts = {
+        name: (max(1, round(spec.materials * fraction)) if fraction > 0 else 0)
+        for name, fraction in (("test", spec.test_fraction), ("val", spec.val_fraction))
+    }
+    if counts["test"] + counts["val"] >= spec.materials:
+        raise DatasetConfigError(
+            f"dataset.materials={spec.materials} leaves no training material after the "
+            f"{counts['test']} test and {counts['val']} validation ones"
+        )
+    test = order[: counts["test"]]
+    val = order[counts["test"] : counts["test"] + counts["val"]]
+    train = order[counts["test"] + counts["val"] :]
+    return {name: tuple(sorted(t.tolist())) for name, t in (("train", train), ("val", val), ("test", test))}
+
+
+def plan_shards(spec: DatasetSpec) -> list[ShardJob]:
+    """All shard jobs of the dataset in a fixed order (train, val, test; by index)."""
+    jobs: list[ShardJob] = []
+    for split, materials in split_materials(spec).items():
+        step = spec.materials_per_shard
+        for index, start in enumerate(range(0, len(materials), step)):
+            jobs.append(ShardJob(split, index, materials[start : start + step]))
+    return jobs
+
+
+def material_seed(dataset_seed: int, material_index: int) -> int:
+    """The seed of one material: every draw for it (family parameters, crops, lighting, flash,
+    Mitsuba's sampler) comes from a generator seeded with this."""
+    return derive_seed(dataset_seed, "material", material_index)
+
+
+# (maps (8, R, R), lighting, flash radiant intensity W/sr, flash temperature K, render seed)
+#   -> (linear LDR photo (3, R, R), exposure scale)
+PhotographFn = Callable[[Tensor, LightingDraw, float, float, int], tuple[Tensor, float]]
+
+
+class MitsubaPhotographer:
+    """The capture simulation: flash colour from its temperature, the drawn environment rotated
+    and balanced against the flash, a Mitsuba render, auto exposure to linear LDR.
+
+    Keeps one :class:`~brdfgan.mitsuba_render.capture.CaptureRenderer` (scene reuse) and adds up
+    the time spent inside ``mi.render`` (``mitsuba_seconds``) for the benchmark.
+    """
+
+    def __init__(self, spec: DatasetSpec) -> None:
+        from brdfgan.mitsuba_render.capture import CaptureRenderer
+
+        self.capture = FlashCapture(fov_deg=spec.fov_deg)
+        self.environment_resolution = spec.lighting.resolution
+        self.renderer = CaptureRenderer(spec.resolution, spec.spp, self.capture, spec.lighting.resolution)
+        self.mitsuba_seconds = 0.0
+
+    def __call__(
+        self, maps: Tensor, lighting: LightingDraw, flash_intensity: float, temperature_k: float, seed: int
+    ) -> tuple[Tensor, float]:
+        from brdfgan.mitsuba_render.capture import render_capture
+
+        r, g, b = blackbody_rgb(temperature_k)
+        flash = (flash_intensity * r, flash_intensity * g, flash_intensity * b)
+        environment = realize_lighting(
+            lighting, flash_irradiance(flash, self.capture.camera_height), self.environment_resolution
+        )
+        result = render_capture(self.renderer, maps, environment, flash, seed=seed)
+        if self.renderer.last_timing is not None:
+            self.mitsuba_seconds += self.renderer.last_timing.mi_render_s
+        return result.ldr, result.exposure_scale
+
+
+def material_samples(
+    spec: DatasetSpec,
+    split: str,
+    material_index: int,
+    pools: EnvironmentPools,
+    photograph: PhotographFn,
+) -> Iterator[Sample]:
+    """The samples of one material: its crops, each photographed ``renders_per_crop(split)`` times.
+
+    Keys are ``<split>-m<material>-c<crop>-r<render>``; metadata records everything needed to
+    reproduce or filter a sample (family, parameters, seeds, crop transform, environment id,
+    rotation and balance ratio, flash intensity and temperature, exposure scale).
+    """
+    seed = material_seed(spec.seed, material_index)
+    generator = torch.Generator().manual_seed(seed)
+    families = resolve_families(spec.families)
+    family = families[material_index % len(families)]
+    params = family.sample_parameters(generator)
+    maps = family.make_maps(params, spec.material_resolution, generator)
+    try:
+        validate_maps(maps)
+    except InvalidMapsError as error:  # a family bug, not a user error: keep the traceback
+        where = f"material {material_index} ({family.name}, parameters {params})"
+        raise RuntimeError(f"{where}: {error}") from error
+    crops, transforms = random_crops(maps, spec.crops_per_material, spec.resolution, generator, spec.crop)
+    pool = pools.test if split == "test" else pools.train
+    for c, (crop, transform) in enumerate(zip(crops, transforms, strict=True)):
+        for r in range(spec.renders_per_crop(split)):
+            lighting = draw_lighting(pool, spec.lighting, generator)
+            flash_intensity, temperature = spec.flash.sample(generator)
+            render_seed = derive_seed(seed, "render", c, r) & 0xFFFFFFFF
+            photo, exposure = photograph(crop, lighting, flash_intensity, temperature, render_seed)
+            yield Sample(
+                key=f"{split}-m{material_index:06d}-c{c}-r{r}",
+                photo=photo,
+                maps=crop,
+                meta={
+                    "split": split,
+                    "material_index": material_index,
+                    "material_seed": seed,
+                    "family": family.name,
+                    "parameters": params,
+                    "crop": {"index": c, **dataclasses.asdict(transform)},
+                    "render": {"index": r, "seed": render_seed, "spp": spec.spp},
+                    "lighting": lighting.to_json(),
+                    "flash": {"intensity_w_sr": flash_intensity, "temperature_k": temperature},
+                    "exposure_scale": exposure,
+                },
+            )
+
+
+@dataclass
+class GenerationSummary:
+    """What a run did: shards written and skipped (already complete), samples, wall time."""
+
+    out_dir: Path
+    written: list[Path] = field(default_factory=list)
+    skipped: list[Path] = field(default_factory=list)
+    samples: int = 0
+    seconds: float = 0.0
+    manifests: list[Path] = field(default_factory=list)
+
+    def describe(self) -> str:
+        rate = self.samples / self.seconds * 3600.0 if self.seconds > 0 and self.samples else 0.0
+        return (
+            f"{len(self.written)} shard(s) written, {len(self.skipped)} already complete, "
+            f"{self.samples} samples in {self.seconds:.1f} s ({rate:.0f} samples/h) -> {self.out_dir}"
+            + (f"; manifests: {', '.join(p.parent.name for p in self.manifests)}" if self.manifests else "")
+        )
+
+
+def code_version() -> dict[str, str]:
+    """Package version and, from a source checkout, the git commit (recorded in manifests)."""
+    version = {"brdfgan": __version__, "torch": torch.__version__}
+    head = Path(__file__).resolve().parents[3] / ".git" / "HEAD"
+    try:
+        ref = head.read_text().strip()
+        if ref.startswith("ref: "):
+            ref = (head.parent / ref[5:]).read_text().strip()
+        version["git_commit"] = ref
+    except OSError:
+        pass  # an installed wheel has no checkout
+    return version
+
+
+def prepare_output_dir(spec: DatasetSpec, out_dir: str | os.PathLike[str]) -> Path:
+    """Create ``out_dir`` (and the split folders), check it is writable, and record the spec.
+
+    A directory that already holds a dataset made from a different spec is refused, naming the
+    first differing key: mixing shards of two specs would silently corrupt both.
+    """
+    root = Path(out_dir)
+    if root.exists() and not root.is_dir():
+        raise DatasetConfigError(f"{root}: output path exists and is not a directory")
+    try:
+        for split in SPLITS:
+            (root / split).mkdir(parents=True, exist_ok=True)
+        probe = root / f".write-probe-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as error:
+        raise DatasetConfigError(
+            f"{root}: output directory is not writable ({error.strerror or error})"
+        ) from None
+    wanted = spec.to_json()
+    spec_file = root / SPEC_FILE
+    if spec_file.exists():
+        try:
+            existing = json.loads(spec_file.read_text())
+        except (OSError, ValueError) as error:
+            raise DatasetConfigError(f"{spec_file}: unreadable dataset spec ({error})") from None
+        if existing != wanted:
+            key = _first_difference(existing, wanted)
+            raise DatasetConfigError(
+                f"{root} holds a dataset made with a different config ({key} differs); "
+                "use another output directory or delete this one"
+            )
+    else:
+        _write_json_atomic(spec_file, wanted)
+    return root
+
+
+def _first_difference(a: Any, b: Any, prefix: str = "dataset") -> str:
+    if isinstance(a, dict) and isinstance(b, dict):
+        for key in sorted(set(a) | set(b)):
+            if a.get(key) != b.get(key):
+                return _first_difference(a.get(key), b.get(key), f"{prefix}.{key}")
+    return prefix
+
+
+def _write_json_atomic(path: Path, content: Mapping[str, Any]) -> None:
+    temp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        temp.write_text(json.dumps(content, indent=2, sort_keys=True) + "\n")
+        os.replace(temp, path)
+    finally:
+        temp.unlink(missing_ok=True)
+
+
+def _shard_complete(path: Path, expected: int) -> bool:
+    if not path.exists():
+        return False
+    try:
+        count = verify_shard(path)
+    except ShardError as error:
+        log.warning("%s", error)
+        return False
+    if count != expected:
+        log.warning("%s: holds %d samples, expected %d; it will be rewritten", path, count, expected)
+    return count == expected
+
+
+def select_jobs(jobs: Sequence[ShardJob], shards: int | Sequence[int] | None) -> list[ShardJob]:
+    """The jobs with the given positions in :func:`plan_shards`'s order (all for ``None``)."""
+    if shards is None:
+        return list(jobs)
+    wanted = [shards] if isinstance(shards, int) else list(shards)
+    bad = [s for s in wanted if not 0 <= s < len(jobs)]
+    if bad:
+        raise DatasetConfigError(f"shard {bad[0]} out of range: this dataset has shards 0..{len(jobs) - 1}")
+    return [jobs[s] for s in sorted(set(wanted))]
+
+
+def run_generation(
+    spec: DatasetSpec,
+    out_dir: str | os.PathLike[str],
+    *,
+    shards: int | Sequence[int] | None = None,
+    progress: bool = True,
+    photographer: Callable[[DatasetSpec], PhotographFn] | None = None,
+) -> GenerationSummary:
+    """Generate (or finish) the dataset, or the given subset of its shards; write the manifest of
+    every split whose shards are all present."""
+    from tqdm import tqdm
+
+    start = time.perf_counter()
+    # Environment sources are checked before anything is written (an empty folder is an error).
+    pools = build_environment_pools(spec.lighting, derive_seed(spec.seed, "lighting"))
+    root = prepare_output_dir(spec, out_dir)
+    jobs = plan_shards(spec)
+    summary = GenerationSummary(out_dir=root)
+    todo = []
+    for job in select_jobs(jobs, shards):
+        path = shard_path(root, job.split, job.index)
+        if _shard_complete(path, job.sample_count(spec)):
+            summary.skipped.append(path)
+        else:
+            todo.append(job)
+    if todo:
+        photograph = (photographer or MitsubaPhotographer)(spec)
+        with tqdm(
+            total=sum(job.sample_count(spec) for job in todo), unit="sample", disable=not progress
+        ) as bar:
+            for job in todo:
+                path = shard_path(root, job.split, job.index)
+                bar.set_description(path.name)
+
+                def samples(job: ShardJob = job) -> Iterator[Sample]:
+                    for material in job.materials:
+                        for sample in material_samples(spec, job.split, material, pools, photograph):
+                            bar.update(1)
+                            yield sample
+
+                for stale in path.parent.glob(f".{path.name}.*.tmp"):
+                    stale.unlink(missing_ok=True)  # left by a killed run
+                info: ShardInfo = write_shard(path, samples())
+                summary.written.append(info.path)
+                summary.samples += job.sample_count(spec)
+    summary.manifests = finalize_manifests(spec, root, jobs)
+    summary.seconds = time.perf_counter() - start
+    return summary
+
+
+def finalize_manifests(spec: DatasetSpec, root: Path, jobs: Sequence[ShardJob]) -> list[Path]:
+    """Write ``<split>/manifest.json`` for each split whose shards all exist (idempotent)."""
+    written = []
+    for split in SPLITS:
+        split_jobs = [job for job in jobs if job.split == split]
+        paths = [shard_path(root, split, job.index) for job in split_jobs]
+        if not all(p.exists() for p in paths):
+            continue
+        extra = sorted(set(list_shards(root, split)) - set(paths))
+        if extra:
+            raise DatasetConfigError(f"{extra[0]}: shard does not belong to this dataset's plan")
+        manifest = {
+            "split": split,
+            "samples": sum(job.sample_count(spec) for job in split_jobs),
+            "materials": sum(len(job.materials) for job in split_jobs),
+            "renders_per_crop": spec.renders_per_crop(split),
+            "shards": [
+                {"name": p.name, "samples": job.sample_count(spec), "bytes": p.stat().st_size}
+                for p, job in zip(paths, split_jobs, strict=True)
+            ],
+            "material_indices": [m for job in split_jobs for m in job.materials],
+            "spec": spec.to_json(),
+            "code_version": code_version(),
+        }
+        written.append(write_manifest(root, split, manifest))
+    return written
+
+
+def dataset_ready(spec: DatasetSpec, out_dir: str | os.PathLike[str]) -> bool:
+    """Whether ``out_dir`` holds the complete dataset of ``spec`` (spec file and all manifests)."""
+    root = Path(out_dir)
+    spec_file = root / SPEC_FILE
+    if not spec_file.exists() or not all((root / s / "manifest.json").exists() for s in SPLITS):
+        return False
+    try:
+        return json.loads(spec_file.read_text()) == spec.to_json()
+    except (OSError, ValueError):
+        return False
+
+
+def ensure_dataset(spec: DatasetSpec, out_dir: str | os.PathLike[str], *, progress: bool = True) -> Path:
+    """Generate the dataset into ``out_dir`` unless it is already complete (used to create the
+    embedded default dataset on a fresh clone's first ``train.py``/``evaluate.py``)."""
+    if not dataset_ready(spec, out_dir):
+        log.info("dataset %s is missing or incomplete: generating it", out_dir)
+        log.info("%s", run_generation(spec, out_dir, progress=progress).describe())
+    return Path(out_dir)

@@ -1,0 +1,786 @@
+"""Environment lighting for synthetic captures: sun/sky, procedural rooms and user HDR files.
+
+Every environment becomes an equirectangular linear-RGB HDR array ``(H, 2H, 3)`` float32 in
+Mitsuba's ``envmap`` convention, so one scene renders every kind by swapping data:
+
+- local frame +Y up; texel column j is at ``φ = 2π(j + ½)/W`` and row i at ``θ = iπ/(H − 1)``
+  (measured here on Mitsuba 3.9: rows are point samples that include both poles, columns are
+  cell centres; the emitter interpolates bilinearly between them);
+- :data:`ENVMAP_TO_WORLD` (+90° about X) takes that frame to ours (+Z up, DESIGN.md §2), so a
+  texel's world direction is ``(sinθ sinφ, sinθ cosφ, cosθ)``: φ runs from +Y towards +X and
+  row 0 is the zenith.
+
+Kinds:
+
+- ``sunsky``: Mitsuba's Hosek–Wilkie ``sunsky`` emitter evaluated on the texel directions with
+  ``sun_scale = 0``. The sun disc (0.53° across) covers about half a texel of a 256×512 map
+  (0.7° texels) and far less of the small maps of tests: a texel's point sample either misses
+  it, and the sun — most of the daylight — vanishes, or hits it, and bilinear interpolation
+  spreads the disc radiance over ~2×2 texels, a ~1.4° sun with several times its power. The
+  sun is instead a separate :class:`SunLight`, a ``directional`` emitter whose irradiance is
+  the sun radiance integrated over the disc (a delta direction instead of a 0.53° disc only
+  matters for near-mirror surfaces).
+- ``room``: a box room around the sample with painted walls, ceiling light panels and/or a
+  window onto an overcast sky, radiance computed analytically per texel direction (numpy).
+- ``file``: ``.hdr``/``.exr`` lat-long files from a folder, area-resized to the resolution.
+
+Radiometric balance (paper: photos "predominantly flash lit" with other lights present): each
+render scales its environment so the irradiance it puts on the upward-facing sample
+(:func:`upper_hemisphere_irradiance`, sun included) equals ``ratio · E_flash`` with
+``E_flash = I / d²`` the flash irradiance at the sample centre and ``ratio`` log-uniform in
+``[env_to_flash_min, env_to_flash_max]``.
+
+Random rotation about the up axis is a circular shift of the columns
+(:func:`rotate_environment`); the sun direction turns with it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import torch
+
+from brdfgan.core.exposure import LUMINANCE_WEIGHTS
+from brdfgan.data.flash import blackbody_rgb
+
+EnvironmentKind = Literal["sunsky", "room", "file"]
+ParamValue = float | str
+
+ENVIRONMENT_EXTENSIONS = frozenset({".exr", ".hdr"})
+# Mitsuba envmap local frame (+Y up, φ = 0 at −Z) → our world (+Z up): +90° about X maps
+# local +Y to world +Z and local −Z to world +Y.
+ENVMAP_TO_WORLD: tuple[tuple[float, ...], ...] = (
+    (1.0, 0.0, 0.0, 0.0),
+    (0.0, 0.0, -1.0, 0.0),
+    (0.0, 1.0, 0.0, 0.0),
+    (0.0, 0.0, 0.0, 1.0),
+)
+# Angular diameter of the sun used by Mitsuba's sunsky (its default, degrees).
+SUN_APERTURE_DEG = 0.5358
+# Texel supersampling (per axis) of the analytic room: antialiases panel and window edges.
+ROOM_SUPERSAMPLE = 3
+# Sub-intervals per texel row of the quadrature behind the irradiance weights (error ~1e-6).
+_QUADRATURE_PER_ROW = 64
+
+
+class LightingError(ValueError):
+    """An environment source cannot be used; the one-line message names the path."""
+
+
+@dataclass(frozen=True)
+class EnvironmentSpec:
+    """One environment of a pool: a stable id, its kind and the parameters that rebuild it.
+
+    ``params`` are sorted ``(name, value)`` pairs, so specs are hashable and
+    :func:`load_environment` is a pure (and cached) function of ``(spec, resolution)``.
+    """
+
+    env_id: str
+    kind: EnvironmentKind
+    params: tuple[tuple[str, ParamValue], ...]
+
+    def param(self, name: str) -> ParamValue:
+        return dict(self.params)[name]
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-ready form for per-sample metadata."""
+        return {"env_id": self.env_id, "kind": self.kind, "params": dict(self.params)}
+
+
+def make_spec(env_id: str, kind: EnvironmentKind, params: dict[str, ParamValue]) -> EnvironmentSpec:
+    """Spec with its parameters sorted (floats as Python floats, so JSON and hashing are stable)."""
+    clean = {k: (v if isinstance(v, str) else float(v)) for k, v in params.items()}
+    return EnvironmentSpec(env_id, kind, tuple(sorted(clean.items())))
+
+
+@dataclass(frozen=True)
+class SunLight:
+    """The sun as a directional light: unit ``direction`` towards the sun (world frame, +Z up)
+    and RGB ``irradiance`` on a surface facing it (W/m², or the environment's relative units)."""
+
+    direction: tuple[float, float, float]
+    irradiance: tuple[float, float, float]
+
+    def rotated(self, angle_rad: float) -> SunLight:
+        """Turned by ``angle_rad`` about +Z (right-handed: +X towards +Y)."""
+        c, s = math.cos(angle_rad), math.sin(angle_rad)
+        x, y, z = self.direction
+        return replace(self, direction=(c * x - s * y, s * x + c * y, z))
+
+    def scaled(self, factor: float) -> SunLight:
+        r, g, b = self.irradiance
+        f = float(factor)
+        return replace(self, irradiance=(f * r, f * g, f * b))
+
+    def plane_irradiance(self) -> float:
+        """Luminance of the irradiance it puts on the upward-facing plane z = 0."""
+        return _luminance(self.irradiance) * max(self.direction[2], 0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class Environment:
+    """Environment radiance ``(H, 2H, 3)`` (Mitsuba envmap convention) plus an optional sun."""
+
+    radiance: np.ndarray
+    sun: SunLight | None = None
+
+    def rotated(self, angle_rad: float) -> Environment:
+        """Turned by ``angle_rad`` about the up axis (+Z), sun included."""
+        sun = self.sun.rotated(angle_rad) if self.sun else None
+        return Environment(rotate_environment(self.radiance, angle_rad), sun)
+
+    def scaled(self, factor: float) -> Environment:
+        sun = self.sun.scaled(factor) if self.sun else None
+        return Environment((self.radiance * np.float32(factor)).astype(np.float32), sun)
+
+    def plane_irradiance(self) -> float:
+        """Luminance of the irradiance on the upward-facing plane, sun included."""
+        sun = self.sun.plane_irradiance() if self.sun else 0.0
+        return upper_hemisphere_irradiance(self.radiance) + sun
+
+
+# ----------------------------------------------------------------------------- geometry
+
+
+def _luminance(rgb: Sequence[float] | np.ndarray) -> float:
+    return float(sum(w * float(c) for w, c in zip(LUMINANCE_WEIGHTS, rgb, strict=True)))
+
+
+def _check_equirect(array: np.ndarray) -> None:
+    if array.ndim != 3 or array.shape[2] != 3 or array.shape[1] != 2 * array.shape[0] or array.shape[0] < 3:
+        raise ValueError(f"expected an equirect array of shape (H, 2H, 3) with H >= 3, got {array.shape}")
+
+
+def equirect_directions(height: int, supersample: int = 1) -> np.ndarray:
+    """World directions (+Z up) of the texels of an ``(height, 2·height)`` map.
+
+    With ``supersample = s > 1``, ``s²`` directions spread evenly over each texel's cell
+    (``Δθ = π/(H − 1)`` by ``Δφ = 2π/W`` around the texel's sample point), for box filtering.
+
+    Shape:
+        - output: ``(H, 2H, 3)``, or ``(H, 2H, s², 3)`` with supersampling
+    """
+    if height < 3:
+        raise ValueError(f"equirect height must be >= 3, got {height}")
+    width = 2 * height
+    offsets = (np.arange(supersample) + 0.5) / supersample - 0.5  # (s,) in (−½, ½)
+    rows = np.arange(height)[:, None] + offsets[None, :]  # (H, s)
+    cols = np.arange(width)[:, None] + 0.5 + offsets[None, :]  # (W, s)
+    theta = np.clip(rows * (math.pi / (height - 1)), 0.0, math.pi)
+    phi = cols * (2.0 * math.pi / width)
+    # (H, W, s_theta, s_phi)
+    theta = theta[:, None, :, None]
+    phi = phi[None, :, None, :]
+    sin_theta = np.sin(theta)
+    directions = np.stack(
+        np.broadcast_arrays(sin_theta * np.sin(phi), sin_theta * np.cos(phi), np.cos(theta)), axis=-1
+    )
+    directions = directions.reshape(height, width, supersample * supersample, 3)
+    return directions[:, :, 0] if supersample == 1 else directions
+
+
+@lru_cache(maxsize=16)
+def _row_irradiance_weights(height: int) -> np.ndarray:
+    # Mitsuba interpolates rows linearly in θ between samples at θ_i = iπ/(H − 1), so texel row i
+    # carries the hat function around θ_i; its weight is ∫ hat_i(θ) cosθ sinθ dθ over the upper
+    # hemisphere (θ ≤ π/2), times the column width Δφ (each column's hat integrates to Δφ in φ).
+    delta = math.pi / (height - 1)
+    count = max(_QUADRATURE_PER_ROW * (height - 1), 8192)
+    theta = (np.arange(count) + 0.5) * (math.pi / count)  # midpoints over [0, π]
+    integrand = np.where(theta <= math.pi / 2, np.cos(theta) * np.sin(theta), 0.0) * (math.pi / count)
+    position = theta / delta
+    lower = np.minimum(np.floor(position).astype(np.int64), height - 2)
+    frac = position - lower
+    weights = np.bincount(lower, integrand * (1.0 - frac), minlength=height)
+    weights += np.bincount(lower + 1, integrand * frac, minlength=height)
+    weights *= 2.0 * math.pi / (2 * height)
+    weights.setflags(write=False)
+    return weights
+
+
+def upper_hemisphere_irradiance_rgb(array: np.ndarray) -> np.ndarray:
+    """RGB irradiance on the upward-facing plane (cosine-weighted over θ ≤ 90°).
+
+    Shape:
+        - array: ``(H, 2H, 3)``
+        - output: ``(3,)`` float64
+    """
+    _check_equirect(array)
+    weights = _row_irradiance_weights(array.shape[0])
+    return np.einsum("h,hwc->c", weights, array.astype(np.float64))
+
+
+def upper_hemisphere_irradiance(array: np.ndarray) -> float:
+    """Luminance of the irradiance the environment puts on the upward-facing plane.
+
+    A constant environment of radiance L gives π·L.
+
+    Shape:
+        - array: ``(H, 2H, 3)``
+    """
+    return _luminance(upper_hemisphere_irradiance_rgb(array))
+
+
+def rotate_environment(array: np.ndarray, angle_rad: float) -> np.ndarray:
+    """Rotate an environment about the up axis (+Z) by ``angle_rad`` (right-handed, +X → +Y).
+
+    A light at azimuth φ (from +Y towards +X) moves to φ − angle, i.e. the columns shift by
+    ``angle·W/2π``. Fractional shifts interpolate linearly between the two neighbouring integer
+    shifts (exact for multiples of 2π/W; otherwise a blur of under one texel). Column sums are
+    preserved, so the plane irradiance does not change.
+
+    Shape:
+        - array: ``(H, 2H, C)``
+        - output: same
+    """
+    width = array.shape[1]
+    shift = (angle_rad * width / (2.0 * math.pi)) % width
+    whole = math.floor(shift)
+    frac = shift - whole
+    base = np.roll(array, -whole, axis=1)
+    if frac < 1e-9:
+        return base.astype(np.float32, copy=True)
+    nxt = np.roll(base, -1, axis=1)
+    return ((1.0 - frac) * base + frac * nxt).astype(np.float32)
+
+
+def flash_irradiance(radiant_intensity: Sequence[float], distance: float) -> float:
+    """Luminance of the flash irradiance ``I / d²`` at the sample centre (flash at the camera)."""
+    if distance <= 0:
+        raise ValueError(f"flash distance must be positive, got {distance}")
+    return _luminance(radiant_intensity) / (distance * distance)
+
+
+def normalize_environment(environment: Environment, target_irradiance: float) -> Environment:
+    """Scale radiance and sun together so the plane irradiance equals ``target_irradiance``."""
+    current = environment.plane_irradiance()
+    if not current > 0.0:
+        raise ValueError("cannot normalise an environment that puts no light on the sample plane")
+    return environment.scaled(target_irradiance / current)
+
+
+# ----------------------------------------------------------------------------- sun and sky
+
+
+def _sun_vector(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
+    """Unit vector towards the sun; azimuth from +X towards +Y, elevation above the plane."""
+    el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
+    return np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+
+
+def _eval_emitter(emitter: Any, directions: np.ndarray) -> np.ndarray:
+    """Radiance an emitter sends towards the origin from world ``directions``; ``(N, 3)`` → ``(N, 3)``."""
+    from brdfgan.mitsuba_render.variant import mitsuba
+
+    mi = mitsuba()
+    import drjit as dr
+
+    wi = -np.ascontiguousarray(directions, dtype=np.float32)
+    if mi.variant().startswith("scalar"):  # no vectorised evaluation: one direction at a time
+        out = np.empty_like(wi)
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        for n, w in enumerate(wi):
+            si.wi = mi.Vector3f(*map(float, w))
+            out[n] = np.array(emitter.eval(si))
+        return out
+    si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
+    si.wi = mi.Vector3f(wi[:, 0], wi[:, 1], wi[:, 2])
+    return np.array(emitter.eval(si), dtype=np.float32).T.copy()
+
+
+def _sunsky_environment(spec: EnvironmentSpec, resolution: int) -> Environment:
+    from brdfgan.mitsuba_render.variant import mitsuba
+
+    mi = mitsuba()
+    sun = _sun_vector(float(spec.param("elevation_deg")), float(spec.param("azimuth_deg")))
+    ground_albedo = float(spec.param("ground_albedo"))
+    base = {
+        "type": "sunsky",
+        "sun_direction": [float(c) for c in sun],
+        "turbidity": float(spec.param("turbidity")),
+        "albedo": ground_albedo,
+        "sun_aperture": SUN_APERTURE_DEG,
+    }
+    # The emitter's own frame is the world frame (+Z up; the tests check the sky is above).
+    sky = mi.load_dict({**base, "sun_scale": 0.0})
+    directions = equirect_directions(resolution).reshape(-1, 3)
+    radiance = np.maximum(_eval_emitter(sky, directions), 0.0).reshape(resolution, 2 * resolution, 3)
+
+    # Sun irradiance: integrate the disc radiance (limb darkening included) on a polar grid
+    # uniform in solid angle; the sky alone is evaluated from the sun-less emitter.
+    sun_only = mi.load_dict({**base, "sky_scale": 0.0})
+    half = math.radians(SUN_APERTURE_DEG) / 2.0
+    n_r, n_phi = 16, 32
+    u = (np.arange(n_r) + 0.5) / n_r
+    cos_a = 1.0 - u * (1.0 - math.cos(half))  # uniform in cos(angle) = uniform in solid angle
+    sin_a = np.sqrt(1.0 - cos_a**2)
+    psi = (np.arange(n_phi) + 0.5) * (2.0 * math.pi / n_phi)
+    tangent = np.cross(sun, [0.0, 0.0, 1.0] if abs(sun[2]) < 0.9 else [1.0, 0.0, 0.0])
+    tangent /= np.linalg.norm(tangent)
+    bitangent = np.cross(sun, tangent)
+    disc = (
+        cos_a[:, None, None] * sun
+        + (sin_a[:, None] * np.cos(psi)[None, :])[..., None] * tangent
+        + (sin_a[:, None] * np.sin(psi)[None, :])[..., None] * bitangent
+    ).reshape(-1, 3)
+    solid_angle = 2.0 * math.pi * (1.0 - math.cos(half))
+    sun_radiance = np.maximum(_eval_emitter(sun_only, disc), 0.0).astype(np.float64)
+    sun_irradiance = sun_radiance.mean(axis=0) * solid_angle
+
+    # Ground below the horizon: a Lambertian plain of the model's ground albedo lit by sky + sun.
+    # The sample plane hides it, but reflections off tilted normals near grazing may see it.
+    ground_e = upper_hemisphere_irradiance_rgb(radiance) + sun_irradiance * sun[2]
+    below = equirect_directions(resolution)[..., 2] < 0.0
+    radiance[below] = (ground_albedo * ground_e / math.pi).astype(np.float32)
+    light = SunLight(
+        (float(sun[0]), float(sun[1]), float(sun[2])),
+        (float(sun_irradiance[0]), float(sun_irradiance[1]), float(sun_irradiance[2])),
+    )
+    return Environment(radiance.astype(np.float32), light)
+
+
+# ----------------------------------------------------------------------------- rooms
+
+# Plausible interior paints and floors as linear RGB albedo (light reflectance values of real
+# paints span ~0.1 for charcoal to ~0.85 for bright white).
+_WALL_PAINTS = (
+    (0.85, 0.85, 0.83),  # white
+    (0.83, 0.78, 0.68),  # warm white
+    (0.55, 0.56, 0.57),  # light grey
+    (0.62, 0.53, 0.40),  # beige
+    (0.50, 0.60, 0.68),  # pale blue
+    (0.40, 0.46, 0.36),  # sage green
+    (0.45, 0.22, 0.14),  # terracotta
+    (0.12, 0.12, 0.13),  # charcoal
+)
+_FLOORS = (
+    (0.35, 0.22, 0.12),  # oak
+    (0.12, 0.07, 0.04),  # dark wood
+    (0.20, 0.20, 0.20),  # grey carpet
+    (0.60, 0.58, 0.55),  # light tiles
+    (0.30, 0.30, 0.28),  # concrete
+)
+_WALLS = ("+x", "-x", "+y", "-y")
+
+
+def _jitter_colour(rng: np.random.Generator, base: Sequence[float]) -> np.ndarray:
+    return np.clip(np.asarray(base) * rng.uniform(0.85, 1.1), 0.02, 0.9)
+
+
+def _sample_room_params(rng: np.random.Generator) -> dict[str, ParamValue]:
+    p: dict[str, ParamValue] = {}
+    p["size_x"], p["size_y"] = rng.uniform(3.0, 8.0), rng.uniform(3.0, 8.0)
+    p["height"] = rng.uniform(2.4, 3.5)
+    # The sample lies on the floor or on a table/desk, away from the walls.
+    p["sample_x"] = float(p["size_x"]) * rng.uniform(0.2, 0.8)
+    p["sample_y"] = float(p["size_y"]) * rng.uniform(0.2, 0.8)
+    p["sample_height"] = 0.0 if rng.random() < 0.3 else rng.uniform(0.45, 1.0)
+    for name, palette in (("wall", _WALL_PAINTS), ("floor", _FLOORS)):
+        colour = _jitter_colour(rng, palette[rng.integers(len(palette))])
+        p.update({f"{name}_r": colour[0], f"{name}_g": colour[1], f"{name}_b": colour[2]})
+    ceiling = rng.uniform(0.75, 0.88)
+    p.update({"ceiling_r": ceiling, "ceiling_g": ceiling, "ceiling_b": ceiling * rng.uniform(0.95, 1.0)})
+
+    has_window = rng.random() < 0.6
+    panels = int(rng.integers(0, 4)) if has_window else int(rng.integers(1, 5))
+    p["panel_count"] = float(panels)
+    p["panel_temperature_k"] = rng.uniform(2700.0, 6500.0)
+    for k in range(panels):
+        w, d = rng.uniform(0.3, 1.2), rng.uniform(0.3, 1.2)
+        p[f"panel{k}_w"], p[f"panel{k}_d"] = w, d
+        p[f"panel{k}_x"] = rng.uniform(w / 2, float(p["size_x"]) - w / 2)
+        p[f"panel{k}_y"] = rng.uniform(d / 2, float(p["size_y"]) - d / 2)
+    p["window_wall"] = _WALLS[rng.integers(4)] if has_window else "none"
+    if has_window:
+        wall_length = float(p["size_x"] if p["window_wall"] in ("+y", "-y") else p["size_y"])
+        width = min(rng.uniform(0.8, 2.5), wall_length - 0.4)
+        p["window_width"] = width
+        p["window_center"] = rng.uniform(width / 2 + 0.2, wall_length - width / 2 - 0.2)
+        p["window_sill"] = rng.uniform(0.5, 1.0)
+        p["window_height"] = min(rng.uniform(0.8, 1.6), float(p["height"]) - float(p["window_sill"]) - 0.1)
+        # Zenith radiance of the overcast sky outside, relative to the panels' radiance of 1.
+        p["window_radiance"] = math.exp(rng.uniform(math.log(0.5), math.log(5.0)))
+        p["window_temperature_k"] = rng.uniform(5500.0, 9000.0)
+        p["outside_ground_albedo"] = rng.uniform(0.1, 0.3)
+    return p
+
+
+def _rgb(spec: EnvironmentSpec, name: str) -> np.ndarray:
+    return np.array([float(spec.param(f"{name}_{c}")) for c in "rgb"])
+
+
+def room_radiance(spec: EnvironmentSpec, directions: np.ndarray) -> np.ndarray:
+    """Radiance arriving at the sample from ``directions`` in a box room (analytic, no loops
+    over pixels).
+
+    The sample sits at the origin; the room spans ``[−sample_x, size_x − sample_x]`` ×
+    ``[−sample_y, size_y − sample_y]`` × ``[−sample_height, height − sample_height]``. Each
+    direction hits the nearest box face. Light panels on the ceiling have radiance 1 (times the
+    black-body colour of their temperature); a window shows a CIE overcast sky,
+    ``L(θ) = L_z (1 + 2 cosθ)/3``, above the horizon and a Lambertian ground below. Walls, floor
+    and ceiling reflect a constant bounce term from the integrating-sphere approximation:
+    total irradiance ``E = Φ / (A (1 − ρ̄))`` (emitted flux Φ, room area A, mean albedo ρ̄);
+    the ceiling, which sees no direct light from its own panels, gets only the indirect part
+    ``ρ̄ E``. Radiance of a diffuse surface is ``ρ E / π``.
+
+    Shape:
+        - directions: ``(*, 3)`` unit vectors, world frame (+Z up)
+        - output: ``(*, 3)``
+    """
+    p = dict(spec.params)
+    sx, sy, height = float(p["size_x"]), float(p["size_y"]), float(p["height"])
+    ox, oy, oz = float(p["sample_x"]), float(p["sample_y"]), float(p["sample_height"])
+    lo = np.array([-ox, -oy, -oz])
+    hi = np.array([sx - ox, sy - oy, height - oz])
+    d = directions
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_axis = np.where(d > 0, hi / d, np.where(d < 0, lo / d, np.inf))
+    axis = np.argmin(t_axis, axis=-1)
+    t = np.take_along_axis(t_axis, axis[..., None], axis=-1)
+    hit = d * t  # (*, 3) hit point relative to the sample
+    room_x, room_y, room_z = hit[..., 0] + ox, hit[..., 1] + oy, hit[..., 2] + oz
+    ceiling_hit = (axis == 2) & (d[..., 2] > 0)
+    floor_hit = (axis == 2) & (d[..., 2] <= 0)
+
+    wall, ceiling, floor = _rgb(spec, "wall"), _rgb(spec, "ceiling"), _rgb(spec, "floor")
+    panel_colour = np.array(blackbody_rgb(float(p["panel_temperature_k"])))
+    panels = int(float(p["panel_count"]))
+    in_panel = np.zeros(d.shape[:-1], dtype=bool)
+    panel_area = 0.0
+    for k in range(panels):
+        cx, cy = float(p[f"panel{k}_x"]), float(p[f"panel{k}_y"])
+        hw, hd = float(p[f"panel{k}_w"]) / 2, float(p[f"panel{k}_d"]) / 2
+        in_panel |= ceiling_hit & (np.abs(room_x - cx) <= hw) & (np.abs(room_y - cy) <= hd)
+        panel_area += 4 * hw * hd
+    flux = math.pi * panel_area * panel_colour  # Lambertian panels of radiance 1·colour
+
+    in_window = np.zeros(d.shape[:-1], dtype=bool)
+    outside = np.zeros((*d.shape[:-1], 3))
+    window_wall = str(p["window_wall"])
+    if window_wall != "none":
+        wall_axis = 0 if window_wall in ("+x", "-x") else 1
+        sign = 1.0 if window_wall.startswith("+") else -1.0
+        along = room_y if wall_axis == 0 else room_x
+        centre, half_width = float(p["window_center"]), float(p["window_width"]) / 2
+        sill, win_h = float(p["window_sill"]), float(p["window_height"])
+        in_window = (
+            (axis == wall_axis)
+            & (np.sign(d[..., wall_axis]) == sign)
+            & (np.abs(along - centre) <= half_width)
+            & (room_z >= sill)
+            & (room_z <= sill + win_h)
+        )
+        sky_colour = np.array(blackbody_rgb(float(p["window_temperature_k"]))) * float(p["window_radiance"])
+        up = np.clip(d[..., 2], 0.0, 1.0)[..., None]
+        sky = sky_colour * (1.0 + 2.0 * up) / 3.0
+        # Overcast sky irradiance on the horizontal ground: ∫ L_z (1+2cosθ)/3 cosθ dω = 7π/9 L_z.
+        ground = float(p["outside_ground_albedo"]) * (7.0 / 9.0) * sky_colour
+        outside = np.where(d[..., 2:3] >= 0.0, sky, ground)
+        # Flux through the window: π × area × the mean radiance of the half sky + ground it shows
+        # (sky at the horizon L_z/3 up to the zenith; ground dimmer), an approximation.
+        mean_outside = 0.5 * (sky_colour * (1.0 / 3.0 + 2.0 / 3.0 * 0.5) + ground)
+        flux = flux + math.pi * 2 * half_width * win_h * mean_outside
+
+    area_floor = sx * sy
+    area_walls = 2 * height * (sx + sy)
+    area = 2 * area_floor + area_walls
+    mean_albedo = (area_floor * (floor + ceiling) + area_walls * wall) / area
+    total_e = flux / (area * (1.0 - mean_albedo))
+    surface = (
+        np.where(
+            ceiling_hit[..., None],
+            ceiling * mean_albedo * total_e,
+            np.where(floor_hit[..., None], floor * total_e, wall * total_e),
+        )
+        / math.pi
+    )
+    radiance = np.where(in_panel[..., None], panel_colour, surface)
+    radiance = np.where(in_window[..., None], outside, radiance)
+    return radiance
+
+
+def _room_environment(spec: EnvironmentSpec, resolution: int) -> Environment:
+    directions = equirect_directions(resolution, supersample=ROOM_SUPERSAMPLE)
+    radiance = room_radiance(spec, directions).mean(axis=-2)
+    return Environment(radiance.astype(np.float32), None)
+
+
+# ----------------------------------------------------------------------------- files
+
+
+def scan_environment_folder(path: str | Path) -> list[Path]:
+    """The ``.exr``/``.hdr`` files directly in ``path``, sorted by name.
+
+    Raises:
+        LightingError: the folder is missing, not a folder or holds no such file.
+    """
+    folder = Path(path)
+    if not folder.exists():
+        raise LightingError(f"{folder}: environment folder not found")
+    if not folder.is_dir():
+        raise LightingError(f"{folder}: not a folder")
+    files = sorted(
+        (f for f in folder.iterdir() if f.is_file() and f.suffix.lower() in ENVIRONMENT_EXTENSIONS),
+        key=lambda f: f.name,
+    )
+    if not files:
+        raise LightingError(f"{folder}: no .exr or .hdr environment maps in this folder")
+    return files
+
+
+def read_environment_file(path: str | Path, resolution: int) -> np.ndarray:
+    """Load a lat-long HDR file and area-resize it to ``(resolution, 2·resolution, 3)``.
+
+    Raises:
+        LightingError: unreadable file, not about 2:1, or non-finite values.
+    """
+    import cv2
+
+    from brdfgan.io.images import ImageIOError, read_image
+
+    file = Path(path)
+    if file.suffix.lower() == ".hdr":
+        if not file.is_file():
+            raise LightingError(f"{file}: file not found")
+        image = cv2.imread(str(file), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_COLOR)
+        if image is None:
+            raise LightingError(f"{file}: corrupt or unreadable .hdr file")
+        image = cv2.cvtColor(image.astype(np.float32), cv2.COLOR_BGR2RGB)
+    elif file.suffix.lower() == ".exr":
+        try:
+            image = read_image(file)
+        except ImageIOError as error:
+            raise LightingError(str(error)) from error
+        image = np.repeat(image, 3, axis=2) if image.shape[2] == 1 else image[:, :, :3]
+    else:
+        raise LightingError(f"{file}: unsupported environment format, expected .exr or .hdr")
+    height, width = image.shape[:2]
+    if abs(width / height - 2.0) > 0.02:
+        raise LightingError(f"{file}: a lat-long map must be 2:1, got {width}x{height}")
+    if not np.isfinite(image).all():
+        raise LightingError(f"{file}: contains NaN or infinite values")
+    resized = cv2.resize(
+        np.ascontiguousarray(image, dtype=np.float32),
+        (2 * resolution, resolution),
+        interpolation=cv2.INTER_AREA,
+    )
+    return np.maximum(resized, 0.0).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------- specs and pools
+
+
+@dataclass(frozen=True)
+class LightingConfig:
+    """Environment pools and per-render balance.
+
+    Attributes:
+        train_count: procedural environments in the training pool (paper: 20).
+        test_count: procedural environments in the disjoint test pool (paper: 6).
+        sunsky_fraction: share of sun/sky environments among the procedural ones ...
+        room_fraction: ... and of indoor rooms (relative weights, normalised; both 0 means
+            user files only).
+        folder: user ``.exr``/``.hdr`` lat-long maps; they are added to the pools, shuffled by
+            the seed and split disjointly (``file_test_fraction`` of them, at least one, to
+            test; at least one to train), so the folder needs at least 2 files.
+        file_test_fraction: share of user files that go to the test pool.
+        resolution: equirect height (width is twice that).
+        env_to_flash_min / env_to_flash_max: range of the log-uniform ratio of environment to
+            flash irradiance on the sample. At ≤ 1 the flash stays the main light, as in the
+            paper's "predominantly flash lit" photos; at 0.05 the environment is a faint fill
+            (a phone flash at ~50 cm typically outshines room light by 1–20× for the short
+            exposure it forces). Log-uniform covers each factor of ten equally.
+    """
+
+    train_count: int = 20
+    test_count: int = 6
+    sunsky_fraction: float = 0.5
+    room_fraction: float = 0.5
+    folder: str | None = None
+    file_test_fraction: float = 0.25
+    resolution: int = 256
+    env_to_flash_min: float = 0.05
+    env_to_flash_max: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.train_count < 0 or self.test_count < 0:
+            raise ValueError(f"pool sizes must be >= 0, got {self.train_count}/{self.test_count}")
+        if self.sunsky_fraction < 0 or self.room_fraction < 0:
+            raise ValueError("sunsky_fraction and room_fraction must be >= 0")
+        if self.sunsky_fraction + self.room_fraction == 0 and self.folder is None:
+            raise ValueError("no environment source: both fractions are 0 and no folder is given")
+        if not 0.0 < self.file_test_fraction < 1.0:
+            raise ValueError(f"file_test_fraction must lie in (0, 1), got {self.file_test_fraction}")
+        if self.resolution < 4:
+            raise ValueError(f"resolution must be >= 4, got {self.resolution}")
+        if not 0.0 < self.env_to_flash_min <= self.env_to_flash_max:
+            raise ValueError(
+                f"need 0 < env_to_flash_min <= env_to_flash_max, got {self.env_to_flash_min}, "
+                f"{self.env_to_flash_max}"
+            )
+
+
+@dataclass(frozen=True)
+class EnvironmentPools:
+    """Disjoint training and test environments."""
+
+    train: tuple[EnvironmentSpec, ...]
+    test: tuple[EnvironmentSpec, ...]
+
+
+_KIND_CODES: dict[str, int] = {"sunsky": 1, "room": 2, "file": 3}
+
+
+def _kind_rng(seed: int, kind: str, index: int) -> np.random.Generator:
+    # One independent stream per (seed, kind, index): adding environments of one kind never
+    # changes the others.
+    return np.random.default_rng([int(seed) & 0xFFFFFFFF, _KIND_CODES[kind], index])
+
+
+def sunsky_spec(index: int, seed: int) -> EnvironmentSpec:
+    """The ``index``-th random sun/sky environment of ``seed``."""
+    rng = _kind_rng(seed, "sunsky", index)
+    params = {
+        "elevation_deg": rng.uniform(10.0, 80.0),
+        "azimuth_deg": rng.uniform(0.0, 360.0),
+        "turbidity": rng.uniform(2.0, 8.0),
+        "ground_albedo": rng.uniform(0.1, 0.4),
+    }
+    return make_spec(f"sunsky-{index:04d}", "sunsky", params)
+
+
+def room_spec(index: int, seed: int) -> EnvironmentSpec:
+    """The ``index``-th random room of ``seed``."""
+    return make_spec(f"room-{index:04d}", "room", _sample_room_params(_kind_rng(seed, "room", index)))
+
+
+def file_specs(folder: str | Path) -> list[EnvironmentSpec]:
+    """One spec per file of :func:`scan_environment_folder` (id ``file-<stem>``, or
+    ``file-<name>`` when two files share a stem)."""
+    files = scan_environment_folder(folder)
+    stems = [f.stem for f in files]
+    return [
+        make_spec(
+            f"file-{f.stem if stems.count(f.stem) == 1 else f.name}", "file", {"path": str(f.resolve())}
+        )
+        for f in files
+    ]
+
+
+def _split_counts(count: int, config: LightingConfig) -> tuple[int, int]:
+    total = config.sunsky_fraction + config.room_fraction
+    sunsky = round(count * config.sunsky_fraction / total) if total > 0 else 0
+    return sunsky, (count - sunsky if total > 0 else 0)
+
+
+def build_environment_pools(config: LightingConfig, seed: int) -> EnvironmentPools:
+    """Training and test pools, deterministic in ``seed``, with disjoint ids.
+
+    Procedural environments are numbered per kind across both pools (training first), so a test
+    environment is never a training one. User files are shuffled by the seed and split.
+
+    Raises:
+        LightingError: the folder is unusable or holds fewer than 2 files.
+    """
+    train: list[EnvironmentSpec] = []
+    test: list[EnvironmentSpec] = []
+    counters = {"sunsky": 0, "room": 0}
+    for pool, count in ((train, config.train_count), (test, config.test_count)):
+        n_sunsky, n_room = _split_counts(count, config)
+        for kind, n, make in (("sunsky", n_sunsky, sunsky_spec), ("room", n_room, room_spec)):
+            for _ in range(n):
+                pool.append(make(counters[kind], seed))
+                counters[kind] += 1
+    if config.folder is not None:
+        files = file_specs(config.folder)
+        if len(files) < 2:
+            raise LightingError(
+                f"{config.folder}: needs at least 2 environment maps to split into train and test, "
+                f"found {len(files)}"
+            )
+        order = _kind_rng(seed, "file", 0).permutation(len(files))
+        n_test = min(max(1, round(len(files) * config.file_test_fraction)), len(files) - 1)
+        test += [files[i] for i in order[:n_test]]
+        train += [files[i] for i in order[n_test:]]
+    if not train or not test:
+        raise ValueError(f"empty environment pool: {len(train)} train, {len(test)} test")
+    return EnvironmentPools(tuple(train), tuple(test))
+
+
+@lru_cache(maxsize=32)
+def load_environment(spec: EnvironmentSpec, resolution: int) -> Environment:
+    """Build the environment of a spec at equirect height ``resolution`` (cached; the array is
+    read-only, :meth:`Environment.rotated`/:meth:`Environment.scaled` return new ones).
+
+    Sun/sky needs Mitsuba (imported lazily); rooms and files do not.
+    """
+    if spec.kind == "sunsky":
+        environment = _sunsky_environment(spec, resolution)
+    elif spec.kind == "room":
+        environment = _room_environment(spec, resolution)
+    elif spec.kind == "file":
+        environment = Environment(read_environment_file(str(spec.param("path")), resolution), None)
+    else:
+        raise ValueError(f"unknown environment kind {spec.kind!r}")
+    environment.radiance.setflags(write=False)
+    return environment
+
+
+def environment_map(spec: EnvironmentSpec, resolution: int) -> np.ndarray:
+    """The equirect radiance array of a spec (sun not included; see :func:`load_environment`).
+
+    Shape:
+        - output: ``(resolution, 2·resolution, 3)`` float32, read-only
+    """
+    return load_environment(spec, resolution).radiance
+
+
+# ----------------------------------------------------------------------------- per-render draws
+
+
+@dataclass(frozen=True)
+class LightingDraw:
+    """The random lighting of one render: which environment, its rotation about the up axis and
+    the environment-to-flash irradiance ratio."""
+
+    spec: EnvironmentSpec
+    rotation_rad: float
+    env_to_flash_ratio: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "environment": self.spec.to_json(),
+            "rotation_deg": math.degrees(self.rotation_rad),
+            "env_to_flash_ratio": self.env_to_flash_ratio,
+        }
+
+
+def sample_env_to_flash_ratio(config: LightingConfig, generator: torch.Generator) -> float:
+    """Log-uniform ratio in ``[env_to_flash_min, env_to_flash_max]``."""
+    u = float(torch.rand((), generator=generator, dtype=torch.float64))
+    lo, hi = math.log(config.env_to_flash_min), math.log(config.env_to_flash_max)
+    return math.exp(lo + u * (hi - lo))
+
+
+def draw_lighting(
+    pool: Sequence[EnvironmentSpec], config: LightingConfig, generator: torch.Generator
+) -> LightingDraw:
+    """Pick an environment uniformly from ``pool``, a uniform rotation and a balance ratio."""
+    if not pool:
+        raise ValueError("empty environment pool")
+    index = int(torch.randint(len(pool), (), generator=generator))
+    angle = float(torch.rand((), generator=generator, dtype=torch.float64)) * 2.0 * math.pi
+    return LightingDraw(pool[index], angle, sample_env_to_flash_ratio(config, generator))
+
+
+def realize_lighting(draw: LightingDraw, flash_irradiance_value: float, resolution: int) -> Environment:
+    """The drawn environment, rotated and scaled so its plane irradiance is
+    ``ratio · flash_irradiance_value``."""
+    environment = load_environment(draw.spec, resolution).rotated(draw.rotation_rad)
+    return normalize_environment(environment, draw.env_to_flash_ratio * flash_irradiance_value)

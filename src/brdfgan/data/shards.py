@@ -1,0 +1,493 @@
+"""The on-disk dataset format: WebDataset tar shards of (flash photo, ground-truth maps, metadata).
+
+Layout::
+
+    dataset_dir/
+        train/
+            manifest.json            written by the generator (content is the caller's)
+            train-000000.tar
+            train-000001.tar
+            ...
+        test/
+            test-000000.tar
+            ...
+
+A shard is a plain (uncompressed) tar in WebDataset layout: the members of one sample are
+``<key>.<member>`` and lie next to each other, always in the order of :data:`SAMPLE_MEMBERS`.
+
+============== ======================================================================
+member         content
+============== ======================================================================
+input.png      the flash photo, **linear** LDR in [0, 1], 16-bit RGB
+basecolor.png  base color, sRGB-encoded values as stored in the maps, 16-bit RGB
+normal.png     tangent-space normal encoded as ``(n + 1) / 2``, 16-bit RGB
+roughness.png  perceptual roughness, 16-bit grayscale
+metallic.png   metallic, 16-bit grayscale
+meta.json      JSON metadata (family, parameters, seed, environment, flash, exposure…)
+============== ======================================================================
+
+Writing is byte-deterministic: the same samples give the same file, byte for byte, with the same
+OpenCV/zlib versions (fixed PNG compression level, sorted compact JSON, tar headers with zero
+times and owners). A shard is written to a hidden temporary file next to its target and moved
+into place with :func:`os.replace`, so a reader (or ``glob("*.tar")``) never sees a partial shard.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import re
+import tarfile
+import uuid
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import InitVar, dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+from torch import Tensor
+
+from brdfgan.core.svbrdf import (
+    NORMAL_UNIT_TOLERANCE,
+    NUM_CHANNELS,
+    InvalidMapsError,
+    decode_normal,
+    encode_normal,
+    join_maps,
+    split_maps,
+    validate_maps,
+)
+
+__all__ = [
+    "MANIFEST_NAME",
+    "PNG_COMPRESSION",
+    "SAMPLE_MEMBERS",
+    "Sample",
+    "ShardError",
+    "ShardInfo",
+    "decode_sample",
+    "encode_sample",
+    "list_shards",
+    "read_manifest",
+    "shard_path",
+    "verify_shard",
+    "write_manifest",
+    "write_shard",
+]
+
+# The one definition of a sample's files, in their order inside a shard.
+SAMPLE_MEMBERS: tuple[str, ...] = (
+    "input.png",
+    "basecolor.png",
+    "normal.png",
+    "roughness.png",
+    "metallic.png",
+    "meta.json",
+)
+MANIFEST_NAME = "manifest.json"
+# zlib level 1: noisy 16-bit renders barely compress further (< 2 % smaller at level 9, measured
+# at 512²) while encoding takes up to 2× longer; decoding costs the same for every level ≥ 1.
+PNG_COMPRESSION = 1
+# Keys become tar member names; USTAR allows 100 bytes without a directory prefix, and a dot or
+# slash would confuse WebDataset's key/extension split.
+KEY_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,80}")
+_SCALE16 = 65535.0
+_TAR_BLOCK = 512
+
+
+class ShardError(ValueError):
+    """A sample or shard is malformed or corrupt; the message names the sample key or file."""
+
+
+@dataclass(frozen=True, eq=False)  # eq=False: tensors have no boolean equality
+class Sample:
+    """One training sample: a flash photo of a material crop and its ground-truth maps.
+
+    ``key`` is the WebDataset ``__key__`` (letters, digits, ``_`` and ``-``; no dots).
+    ``meta`` must be JSON-serialisable (family, parameters, seed, environment id, flash
+    intensity/temperature, exposure, …). The constructor validates everything; ``check=False``
+    skips the tensor checks (:func:`decode_sample` uses it: decoded 16-bit values are finite and
+    in [0, 1] by construction, and it checks the rest itself, at a fraction of the cost).
+
+    Shape:
+        - photo: ``(3, H, W)`` floating point, linear LDR in [0, 1]
+        - maps: ``(8, H, W)`` floating point, the layout of :mod:`brdfgan.core.svbrdf`
+    """
+
+    key: str
+    photo: Tensor
+    maps: Tensor
+    meta: Mapping[str, Any]
+    check: InitVar[bool] = True
+
+    def __post_init__(self, check: bool) -> None:
+        if not isinstance(self.key, str) or not KEY_PATTERN.fullmatch(self.key):
+            raise ShardError(
+                f"invalid sample key {self.key!r}: use 1-80 letters, digits, '_' or '-' (no dots or slashes)"
+            )
+        where = f"sample {self.key!r}"
+        if not isinstance(self.meta, Mapping):
+            raise ShardError(f"{where}: meta must be a mapping, got {type(self.meta).__name__}")
+        if not check:
+            return
+        if not isinstance(self.photo, Tensor) or self.photo.ndim != 3 or self.photo.shape[0] != 3:
+            shape = tuple(self.photo.shape) if isinstance(self.photo, Tensor) else type(self.photo).__name__
+            raise ShardError(f"{where}: photo must be a (3, H, W) tensor, got {shape}")
+        if not self.photo.is_floating_point():
+            raise ShardError(f"{where}: photo must be floating point, got {self.photo.dtype}")
+        if not isinstance(self.maps, Tensor) or self.maps.ndim != 3 or self.maps.shape[0] != NUM_CHANNELS:
+            shape = tuple(self.maps.shape) if isinstance(self.maps, Tensor) else type(self.maps).__name__
+            raise ShardError(f"{where}: maps must be an ({NUM_CHANNELS}, H, W) tensor, got {shape}")
+        if self.photo.shape[1:] != self.maps.shape[1:]:
+            raise ShardError(
+                f"{where}: photo {tuple(self.photo.shape)} and maps {tuple(self.maps.shape)} differ in size"
+            )
+        if not torch.isfinite(self.photo).all() or self.photo.min() < 0.0 or self.photo.max() > 1.0:
+            raise ShardError(f"{where}: photo must be finite linear LDR in [0, 1] (clip after exposure)")
+        try:
+            validate_maps(self.maps)
+        except InvalidMapsError as error:
+            raise ShardError(f"{where}: {error}") from error
+
+
+@dataclass(frozen=True)
+class ShardInfo:
+    """What :func:`write_shard` wrote: the final path, sample count, file size and SHA-256 (hex)."""
+
+    path: Path
+    count: int
+    bytes: int
+    sha256: str
+
+
+# --------------------------------------------------------------------------------------------
+# One sample <-> its member files
+
+
+def encode_sample(sample: Sample) -> dict[str, bytes]:
+    """Encode a sample into its member files, keyed by the names of :data:`SAMPLE_MEMBERS`.
+
+    Images are 16-bit PNGs (values rounded to the nearest of 65536 levels); the JSON has sorted
+    keys and no whitespace so that equal metadata gives equal bytes.
+
+    Shape:
+        - sample.photo: ``(3, H, W)``; sample.maps: ``(8, H, W)``
+    """
+    parts = split_maps(sample.maps)
+    try:
+        meta = json.dumps(
+            sample.meta, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False
+        ).encode("ascii")
+    except (TypeError, ValueError) as error:
+        raise ShardError(f"sample {sample.key!r}: meta is not JSON-serialisable ({error})") from error
+    return {
+        "input.png": _encode_png(sample.photo),
+        "basecolor.png": _encode_png(parts.basecolor),
+        "normal.png": _encode_png(encode_normal(parts.normal)),
+        "roughness.png": _encode_png(parts.roughness),
+        "metallic.png": _encode_png(parts.metallic),
+        "meta.json": meta,
+    }
+
+
+def decode_sample(record: Mapping[str, Any]) -> Sample:
+    """Decode a sample from its member files: the inverse of :func:`encode_sample`.
+
+    ``record`` maps member names to bytes and ``"__key__"`` to the key, as WebDataset groups a
+    sample (``"__url__"``, when present, is only used to name the shard in errors). Normals are
+    renormalised after quantisation; what decoding cannot guarantee (images of one size, normals
+    pointing out of the surface, the key) is validated again, the rest holds by construction.
+
+    Shape:
+        - output.photo: ``(3, H, W)`` float32; output.maps: ``(8, H, W)`` float32
+    """
+    key = record.get("__key__")
+    where = f"sample {key!r}" + (f" in {record['__url__']}" if "__url__" in record else "")
+    missing = [name for name in SAMPLE_MEMBERS if not isinstance(record.get(name), bytes | bytearray)]
+    if missing:
+        raise ShardError(f"{where}: missing member(s) {', '.join(missing)}")
+    photo = _decode_png(record["input.png"], 3, f"{where} input.png")
+    channels = {
+        name: _decode_png(record[f"{name}.png"], count, f"{where} {name}.png")
+        for name, count in (("basecolor", 3), ("normal", 3), ("roughness", 1), ("metallic", 1))
+    }
+    sizes = {tuple(image.shape[1:]) for image in (photo, *channels.values())}
+    if len(sizes) != 1:
+        raise ShardError(f"{where}: member images differ in size {sorted(sizes)}")
+    try:
+        meta = json.loads(record["meta.json"])
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise ShardError(f"{where} meta.json: invalid JSON ({error})") from error
+    if not isinstance(meta, dict):
+        raise ShardError(f"{where} meta.json: expected a JSON object, got {type(meta).__name__}")
+    normal = decode_normal(channels["normal"])
+    if (normal[2] < -NORMAL_UNIT_TOLERANCE).any():
+        raise ShardError(
+            f"{where} normal.png: normals point into the surface (z < 0); not a (n + 1) / 2 map?"
+        )
+    maps = join_maps(channels["basecolor"], normal, channels["roughness"], channels["metallic"])
+    try:
+        return Sample(key=str(key), photo=photo, maps=maps, meta=meta, check=False)
+    except ShardError as error:
+        raise ShardError(f"{where}: {error}") from error
+
+
+def _encode_png(image: Tensor) -> bytes:
+    # float64 before scaling so that rounding to the nearest 16-bit level is exact.
+    array = image.detach().to("cpu", torch.float64).numpy()
+    quantised = np.rint(np.clip(array, 0.0, 1.0) * _SCALE16).astype(np.uint16)
+    if quantised.shape[0] == 1:
+        quantised = quantised[0]
+    else:  # CHW RGB -> HWC BGR, OpenCV's channel order
+        quantised = np.ascontiguousarray(quantised.transpose(1, 2, 0)[:, :, ::-1])
+    ok, encoded = cv2.imencode(".png", quantised, [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION])
+    if not ok:
+        raise ShardError(f"PNG encoding failed for an image of shape {tuple(image.shape)}")
+    return encoded.tobytes()
+
+
+def _decode_png(data: bytes, channels: int, where: str) -> Tensor:
+    try:
+        image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if data else None
+    except cv2.error as error:
+        raise ShardError(f"{where}: corrupt PNG") from error
+    if image is None:
+        raise ShardError(f"{where}: corrupt PNG")
+    if image.dtype != np.uint16:
+        raise ShardError(f"{where}: expected a 16-bit PNG, got {image.dtype}")
+    found = 1 if image.ndim == 2 else image.shape[2]
+    if found != channels:
+        raise ShardError(f"{where}: expected {channels} channel(s), got {found}")
+    # cv2.split gives contiguous planes; reversed, BGR becomes RGB. One conversion pass, one in-place scale.
+    chw = image[None] if image.ndim == 2 else np.stack(cv2.split(image)[::-1])
+    return torch.from_numpy(chw.astype(np.float32)).div_(_SCALE16)
+
+
+# --------------------------------------------------------------------------------------------
+# Shards
+
+
+def shard_path(root: str | os.PathLike[str], split: str, index: int) -> Path:
+    """``root/<split>/<split>-<index:06d>.tar``."""
+    if index < 0:
+        raise ValueError(f"shard index must be >= 0, got {index}")
+    return Path(root) / split / f"{split}-{index:06d}.tar"
+
+
+def list_shards(root: str | os.PathLike[str], split: str) -> list[Path]:
+    """The shards of a split, sorted by name (temporary files are hidden and never listed)."""
+    return sorted((Path(root) / split).glob(f"{split}-[0-9][0-9][0-9][0-9][0-9][0-9].tar"))
+
+
+def write_shard(path: str | os.PathLike[str], samples: Iterable[Sample]) -> ShardInfo:
+    """Write ``samples`` to a WebDataset tar shard at ``path``, atomically and byte-deterministically.
+
+    The samples are encoded one at a time, so the iterable may be a generator that renders them.
+    If it raises, nothing is left behind (an existing shard at ``path`` is kept). The parent
+    directory is created if needed. Duplicate keys raise :class:`ShardError`.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    keys: set[str] = set()
+    try:
+        # O_EXCL never clobbers; 0o666 lets the umask decide (mkstemp would force 0o600).
+        fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        with os.fdopen(fd, "wb") as handle:
+            with tarfile.open(fileobj=handle, mode="w", format=tarfile.USTAR_FORMAT) as tar:
+                for sample in samples:
+                    if not isinstance(sample, Sample):
+                        raise ShardError(f"{path}: expected Sample objects, got {type(sample).__name__}")
+                    if sample.key in keys:
+                        raise ShardError(f"{path}: duplicate sample key {sample.key!r}")
+                    keys.add(sample.key)
+                    files = encode_sample(sample)
+                    for member in SAMPLE_MEMBERS:
+                        _add_member(tar, f"{sample.key}.{member}", files[member])
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temp, path)
+    except BaseException:
+        temp.unlink(missing_ok=True)
+        raise
+    _fsync_directory(path.parent)
+    return ShardInfo(path=path, count=len(keys), bytes=path.stat().st_size, sha256=_sha256(path))
+
+
+def _add_member(tar: tarfile.TarFile, name: str, data: bytes) -> None:
+    # Every header field that could vary between runs or machines is pinned.
+    info = tarfile.TarInfo(name)
+    info.size = len(data)
+    info.mtime = 0
+    info.mode = 0o644
+    info.uid = info.gid = 0
+    info.uname = info.gname = ""
+    info.type = tarfile.REGTYPE
+    tar.addfile(info, io.BytesIO(data))  # BytesIO shares the bytes, no copy
+
+
+def _fsync_directory(directory: Path) -> None:
+    # Makes the rename itself durable; not every platform/filesystem allows it, hence best effort.
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        while chunk := handle.read(1 << 20):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def verify_shard(path: str | os.PathLike[str], *, decode: bool = False) -> int:
+    """Check that a shard is complete and well formed; return its sample count.
+
+    By default only the tar headers are read (seeking over the data, so it is cheap even for
+    large shards): every member must be a regular file named ``<key>.<member>`` with a known
+    member name, the members of a sample must be contiguous and complete, every member's data
+    must lie inside the file, and the archive must end with its end-of-archive marker (so a
+    shard cut at a member boundary is caught too). With ``decode=True`` every sample is also
+    read and decoded with :func:`decode_sample` (slow; for a one-off integrity check).
+
+    Raises:
+        ShardError: naming the file, on truncation, corruption or a malformed layout.
+    """
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        with tarfile.open(path, mode="r:") as tar:
+            return _scan_members(tar, path, size, decode)
+    except (tarfile.TarError, OSError, EOFError) as error:
+        raise ShardError(f"{path}: unreadable or corrupt tar ({error})") from error
+
+
+def iter_shard(path: str | os.PathLike[str]) -> Iterator[Sample]:
+    """The decoded samples of one shard, in file order (for tools: contact sheets, converters,
+    tests; training streams through :mod:`brdfgan.data.datamodule`).
+
+    Raises:
+        ShardError: naming the file, when it is unreadable or a sample is malformed.
+    """
+    path = Path(path)
+    try:
+        with tarfile.open(path, mode="r:") as tar:
+            key: str | None = None
+            record: dict[str, Any] = {}
+            for info in tar:
+                stem, _, member = info.name.partition(".")
+                if stem != key and key is not None:
+                    yield decode_sample({"__key__": key, "__url__": str(path), **record})
+                    record = {}
+                key = stem
+                record[member] = _read_member(tar, info, path)
+            if key is not None:
+                yield decode_sample({"__key__": key, "__url__": str(path), **record})
+    except (tarfile.TarError, OSError, EOFError) as error:
+        raise ShardError(f"{path}: unreadable or corrupt tar ({error})") from error
+
+
+def _scan_members(tar: tarfile.TarFile, path: Path, size: int, decode: bool) -> int:
+    seen: set[str] = set()
+    key: str | None = None
+    record: dict[str, Any] = {}
+    count = 0
+
+    def finish() -> None:
+        missing = [name for name in SAMPLE_MEMBERS if name not in record]
+        if missing:
+            raise ShardError(f"{path}: sample {key!r} lacks member(s) {', '.join(missing)}")
+        if decode:
+            decode_sample({"__key__": key, "__url__": str(path), **record})
+
+    for info in tar:
+        stem, dot, member = info.name.partition(".")
+        if not info.isreg() or not dot or member not in SAMPLE_MEMBERS:
+            raise ShardError(f"{path}: unexpected member {info.name!r}")
+        if info.offset_data + info.size > size:
+            raise ShardError(f"{path}: truncated shard (member {info.name!r} extends past the end of file)")
+        if stem != key:
+            if key is not None:
+                finish()
+                count += 1
+            if stem in seen:
+                raise ShardError(f"{path}: members of sample {stem!r} are not contiguous")
+            seen.add(stem)
+            key, record = stem, {}
+        if member in record:
+            raise ShardError(f"{path}: duplicate member {info.name!r}")
+        record[member] = _read_member(tar, info, path) if decode else b""
+    # tarfile stops quietly at a damaged header past the first one and at a file cut between
+    # members; both leave no end-of-archive marker (two zero blocks) where iteration stopped.
+    assert tar.fileobj is not None
+    tar.fileobj.seek(tar.offset)
+    trailer = tar.fileobj.read(2 * _TAR_BLOCK)
+    if len(trailer) < 2 * _TAR_BLOCK or trailer.count(0) != len(trailer):
+        raise ShardError(f"{path}: truncated or corrupt shard (no end-of-archive marker after member data)")
+    if key is not None:
+        finish()
+        count += 1
+    return count
+
+
+def _read_member(tar: tarfile.TarFile, info: tarfile.TarInfo, path: Path) -> bytes:
+    handle = tar.extractfile(info)
+    if handle is None:
+        raise ShardError(f"{path}: cannot read member {info.name!r}")
+    return handle.read()
+
+
+# --------------------------------------------------------------------------------------------
+# Manifest
+
+
+def write_manifest(root: str | os.PathLike[str], split: str, manifest: Mapping[str, Any]) -> Path:
+    """Write ``root/<split>/manifest.json`` atomically (sorted keys, indent 2); return its path.
+
+    The content is the caller's (counts, configuration, code version, shard checksums…).
+    """
+    path = Path(root) / split / MANIFEST_NAME
+    try:
+        text = json.dumps(manifest, sort_keys=True, indent=2, ensure_ascii=False, allow_nan=False) + "\n"
+    except (TypeError, ValueError) as error:
+        raise ShardError(f"{path}: manifest is not JSON-serialisable ({error})") from error
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    try:
+        fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temp, path)
+    except BaseException:
+        temp.unlink(missing_ok=True)
+        raise
+    _fsync_directory(path.parent)
+    return path
+
+
+def read_manifest(root: str | os.PathLike[str], split: str) -> dict[str, Any]:
+    """Read ``root/<split>/manifest.json``; :class:`ShardError` if it is missing or not a JSON object."""
+    path = Path(root) / split / MANIFEST_NAME
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError as error:
+        raise ShardError(f"{path}: manifest not found") from error
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise ShardError(f"{path}: unreadable manifest ({error})") from error
+    if not isinstance(manifest, dict):
+        raise ShardError(f"{path}: manifest must be a JSON object, got {type(manifest).__name__}")
+    return manifest

@@ -1,0 +1,282 @@
+"""Dataset generation: split before augmentation, determinism, resume, manifests, the CLI."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import pytest
+import torch
+
+from brdfgan.core.exposure import auto_expose
+from brdfgan.core.render import FlashCapture, render_flash
+from brdfgan.data.augment import CropSampling
+from brdfgan.data.flash import blackbody_rgb
+from brdfgan.data.generation import (
+    SPLITS,
+    DatasetConfigError,
+    DatasetSpec,
+    MitsubaPhotographer,
+    PhotographFn,
+    dataset_ready,
+    ensure_dataset,
+    plan_shards,
+    run_generation,
+    split_materials,
+)
+from brdfgan.data.lighting import LightingConfig, LightingDraw
+from brdfgan.data.shards import iter_shard, list_shards, read_manifest, shard_path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def tiny_spec(**change: object) -> DatasetSpec:
+    base: dict[str, object] = {
+        "materials": 6,
+        "material_resolution": 64,
+        "resolution": 32,
+        "crops_per_material": 2,
+        "train_renders": 2,
+        "eval_renders": 1,
+        "test_fraction": 0.34,
+        "val_fraction": 0.17,
+        "materials_per_shard": 2,
+        "spp": 4,
+        "crop": CropSampling(0.5, 1.0),
+        "lighting": LightingConfig(train_count=3, test_count=2, resolution=8),
+    }
+    return DatasetSpec(**{**base, **change})  # type: ignore[arg-type]
+
+
+class TorchPhotographer:
+    """A fast stand-in for Mitsuba with the same contract: flash-only torch render + exposure.
+    Counts calls, and can fail after ``fail_after`` photos to simulate a crash."""
+
+    def __init__(self, spec: DatasetSpec, fail_after: int | None = None) -> None:
+        self.capture = FlashCapture(fov_deg=spec.fov_deg)
+        self.calls = 0
+        self.fail_after = fail_after
+
+    def __call__(
+        self, maps: torch.Tensor, lighting: LightingDraw, intensity: float, temperature: float, seed: int
+    ) -> tuple[torch.Tensor, float]:
+        if self.fail_after is not None and self.calls >= self.fail_after:
+            raise RuntimeError("simulated crash")
+        self.calls += 1
+        capture = FlashCapture(self.capture.fov_deg, intensity, blackbody_rgb(temperature))
+        ldr, scale = auto_expose(render_flash(maps[None], capture)[0])
+        return ldr, float(scale)
+
+
+def torch_photographer(spec: DatasetSpec) -> PhotographFn:
+    return TorchPhotographer(spec)
+
+
+def shard_hashes(root: Path) -> dict[str, str]:
+    return {
+        f"{p.parent.name}/{p.name}": hashlib.sha256(p.read_bytes()).hexdigest()
+        for split in SPLITS
+        for p in list_shards(root, split)
+    }
+
+
+def all_metas(root: Path) -> dict[str, list[dict]]:
+    return {split: [s.meta for p in list_shards(root, split) for s in iter_shard(p)] for split in SPLITS}
+
+
+def test_materials_are_split_before_augmentation() -> None:
+    spec = tiny_spec(materials=50, test_fraction=0.2, val_fraction=0.1)
+    splits = split_materials(spec)
+    assert [len(splits[s]) for s in ("train", "val", "test")] == [35, 5, 10]
+    assert sorted(m for ms in splits.values() for m in ms) == list(range(50))
+    assert split_materials(spec) == splits  # seeded
+    assert split_materials(tiny_spec(materials=50, test_fraction=0.2, val_fraction=0.1, seed=1)) != splits
+
+
+def test_generated_splits_share_no_material_and_keep_all_crops_together(tmp_path: Path) -> None:
+    spec = tiny_spec()
+    summary = run_generation(spec, tmp_path, progress=False, photographer=torch_photographer)
+    assert len(summary.written) == len(plan_shards(spec)) and not summary.skipped
+    metas = all_metas(tmp_path)
+    seeds = {split: {m["material_seed"] for m in metas[split]} for split in SPLITS}
+    assert seeds["train"] and seeds["val"] and seeds["test"]
+    assert not (seeds["train"] & seeds["test"]) and not (seeds["train"] & seeds["val"])
+    assert not (seeds["val"] & seeds["test"])
+    for split in SPLITS:
+        per_material = Counter(m["material_index"] for m in metas[split])
+        expected = spec.crops_per_material * spec.renders_per_crop(split)
+        assert set(per_material.values()) == {expected}, split
+        manifest = read_manifest(tmp_path, split)
+        assert manifest["samples"] == len(metas[split])
+        assert sorted(manifest["material_indices"]) == sorted(per_material)
+        assert manifest["spec"] == spec.to_json() and "git_commit" in manifest["code_version"]
+    # The test split sees only test environments, training and validation only training ones.
+    env = {split: {m["lighting"]["environment"]["env_id"] for m in metas[split]} for split in SPLITS}
+    assert not (env["test"] & (env["train"] | env["val"]))
+
+
+def test_same_spec_same_bytes_other_seed_other_bytes(tmp_path: Path) -> None:
+    spec = tiny_spec(materials=3, test_fraction=0.34, val_fraction=0.0)
+    run_generation(spec, tmp_path / "a", progress=False, photographer=torch_photographer)
+    run_generation(spec, tmp_path / "b", progress=False, photographer=torch_photographer)
+    run_generation(tiny_spec(materials=3, val_fraction=0.0, seed=7), tmp_path / "c", progress=False,
+                   photographer=torch_photographer)  # fmt: skip
+    a, b, c = (shard_hashes(tmp_path / n) for n in "abc")
+    assert a and a == b
+    assert a != c
+
+
+def test_shards_can_be_made_separately_and_in_any_order(tmp_path: Path) -> None:
+    spec = tiny_spec()
+    jobs = plan_shards(spec)
+    run_generation(spec, tmp_path / "whole", progress=False, photographer=torch_photographer)
+    for position in reversed(range(len(jobs))):  # as separate processes/machines would
+        run_generation(
+            spec, tmp_path / "parts", shards=position, progress=False, photographer=torch_photographer
+        )
+    assert shard_hashes(tmp_path / "whole") == shard_hashes(tmp_path / "parts")
+    assert dataset_ready(spec, tmp_path / "parts")
+
+
+def test_resume_after_a_crash_finishes_without_duplicates(tmp_path: Path) -> None:
+    spec = tiny_spec()
+    run_generation(spec, tmp_path / "clean", progress=False, photographer=torch_photographer)
+
+    crashed = TorchPhotographer(spec, fail_after=9)  # 8 samples in shard 0, dies inside shard 1
+    with pytest.raises(RuntimeError, match="simulated crash"):
+        run_generation(spec, tmp_path / "run", progress=False, photographer=lambda _: crashed)
+    # What a SIGKILL would leave besides: a stale temp file and a truncated shard.
+    stale = shard_path(tmp_path / "run", "test", 0).with_name(".test-000000.tar.0123456789ab.tmp")
+    stale.write_bytes(b"partial")
+    truncated = shard_path(tmp_path / "run", "val", 0)
+    truncated.write_bytes(shard_path(tmp_path / "clean", "val", 0).read_bytes()[:3000])
+    assert len(list_shards(tmp_path / "run", "train")) == 1 and not dataset_ready(spec, tmp_path / "run")
+
+    counting = TorchPhotographer(spec)
+    summary = run_generation(spec, tmp_path / "run", progress=False, photographer=lambda _: counting)
+    assert len(summary.skipped) == 1  # the shard finished before the crash is not redone
+    assert counting.calls == sum(j.sample_count(spec) for j in plan_shards(spec)[1:])
+    assert shard_hashes(tmp_path / "run") == shard_hashes(tmp_path / "clean")
+    assert not list((tmp_path / "run").rglob("*.tmp"))
+    keys = [s.key for split in SPLITS for p in list_shards(tmp_path / "run", split) for s in iter_shard(p)]
+    assert len(keys) == len(set(keys))
+    assert dataset_ready(spec, tmp_path / "run")
+    # A third run has nothing to do.
+    again = run_generation(spec, tmp_path / "run", progress=False, photographer=torch_photographer)
+    assert not again.written and len(again.skipped) == len(plan_shards(spec))
+
+
+def test_a_directory_of_another_spec_is_refused(tmp_path: Path) -> None:
+    run_generation(tiny_spec(materials=3, val_fraction=0.0), tmp_path, progress=False,
+                   photographer=torch_photographer)  # fmt: skip
+    with pytest.raises(DatasetConfigError, match=r"different config \(dataset.spp differs\)"):
+        run_generation(tiny_spec(materials=3, val_fraction=0.0, spp=9), tmp_path, progress=False,
+                       photographer=torch_photographer)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"materials": 0}, "dataset.materials must be a positive integer"),
+        ({"spp": 10}, "dataset.spp must be a perfect square"),
+        ({"resolution": 128}, "must not exceed dataset.material_resolution"),
+        ({"test_fraction": 1.5}, r"dataset.test_fraction must lie in \[0, 1\)"),
+        ({"families": ("wood_planks", "woood")}, "unknown material family 'woood'"),
+        ({"materials": 2, "test_fraction": 0.5, "val_fraction": 0.4}, "leaves no training material"),
+    ],
+)
+def test_bad_specs_are_one_line_errors(change: dict[str, object], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        split_materials(tiny_spec(**change))
+
+
+def test_unwritable_output_is_a_clear_error(tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    with pytest.raises(DatasetConfigError, match="exists and is not a directory"):
+        run_generation(tiny_spec(), blocker, progress=False, photographer=torch_photographer)
+    with pytest.raises(DatasetConfigError, match="not writable"):
+        run_generation(tiny_spec(), blocker / "sub", progress=False, photographer=torch_photographer)
+
+
+@pytest.mark.mitsuba
+def test_end_to_end_mitsuba_generation_feeds_the_datamodule(tmp_path: Path) -> None:
+    from brdfgan.data.datamodule import ShardDataModule
+
+    spec = tiny_spec(materials=3, crops_per_material=1, val_fraction=0.0, materials_per_shard=1)
+    data_dir = tmp_path / "data"
+    module = ShardDataModule(
+        str(data_dir), batch_size=2, prepare=lambda: ensure_dataset(spec, data_dir, progress=False)
+    )
+    module.prepare_data()
+    module.setup("fit")
+    batch = next(iter(module.train_dataloader()))
+    assert batch["photo"].shape == (2, 3, 32, 32) and batch["maps"].shape == (2, 8, 32, 32)
+    photo = batch["photo"]
+    assert photo.min() >= 0.0 and photo.max() <= 1.0 and photo.mean() > 0.01  # exposed, not black
+    meta = all_metas(data_dir)["train"][0]
+    assert meta["render"]["spp"] == 4 and meta["exposure_scale"] > 0
+    assert {"intensity_w_sr", "temperature_k"} <= set(meta["flash"])
+    # The real photographer is what made these: Mitsuba, environment + flash.
+    assert isinstance(MitsubaPhotographer(spec).renderer.variant, str)
+
+
+def _generate_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+    return subprocess.run(
+        [sys.executable, str(ROOT / "generate.py"), *args, "progress=false"],
+        cwd=cwd, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("dataset.families=[woood]", "unknown material family 'woood'"),
+        ("dataset.materials=-1", "dataset.materials must be a positive integer"),
+        ("dataset.lighting.folder=EMPTY", "EMPTY: no .exr or .hdr environment maps"),
+        ("dataset.no_such_key=1", "no_such_key"),
+    ],
+)
+def test_cli_bad_input_is_one_line_and_writes_nothing(tmp_path: Path, override: str, message: str) -> None:
+    empty = tmp_path / "empty_envs"
+    empty.mkdir()
+    override = override.replace("EMPTY", str(empty))
+    message = message.replace("EMPTY", str(empty))
+    prefix = "+" if "no_such_key" in override else ""
+    result = _generate_cli("dataset=tiny", f"out_dir={tmp_path / 'out'}", prefix + override, cwd=tmp_path)
+    assert result.returncode != 0
+    errors = [line for line in result.stderr.splitlines() if line.strip()]
+    assert any(message in line for line in errors), result.stderr
+    assert "Traceback" not in result.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_cli_plan_lists_every_shard(tmp_path: Path) -> None:
+    result = _generate_cli("dataset=tiny", "plan=true", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "shards; run them all with: python generate.py -m shard='range(0," in result.stdout
+    assert json.dumps("train")[1:-1] in result.stdout
+
+
+def test_contact_sheet_shows_every_panel_of_random_samples(tmp_path: Path) -> None:
+    from brdfgan.data.contact_sheet import COLUMNS, main, pick_samples
+    from brdfgan.io.images import read_image
+
+    spec = tiny_spec()
+    run_generation(spec, tmp_path, progress=False, photographer=torch_photographer)
+    picked = pick_samples(tmp_path, "train", rows=3, seed=0)
+    assert len(picked) == 3 and len({s.key for s in picked}) == 3
+    assert [s.key for s in pick_samples(tmp_path, "train", rows=3, seed=0)] == [s.key for s in picked]
+    assert main([str(tmp_path), "--rows", "3", "--out", str(tmp_path / "sheet.png")]) == 0
+    sheet = read_image(tmp_path / "sheet.png")
+    assert sheet.shape[1] == len(COLUMNS) * spec.resolution
+    assert sheet.shape[0] > 3 * spec.resolution  # rows plus the header
+    row = sheet[-spec.resolution :]
+    normal_panel = row[:, 2 * spec.resolution : 3 * spec.resolution]
+    assert abs(normal_panel[..., 2].mean() - 1.0) < 0.1  # (n+1)/2 of mostly +Z normals is blue
