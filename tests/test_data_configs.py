@@ -46,6 +46,6 @@ def test_data_configs_instantiate_a_datamodule(name: str) -> None:
         return
     # The prepare hook generates exactly the dataset generate.py makes for the same name.
     prepare = module._prepare
-    assert prepare is not None and prepare.keywords["out_dir"] == f"data/{name}"
+    assert prepare is not None and prepare.keywords["out_dir"] == f"./data/{name}"
     generated = hydra.utils.instantiate(_compose([f"dataset={name}"]).dataset, _convert_="all")
     assert prepare.keywords["spec"] == generated

@@ -94,6 +94,16 @@ def check_map_shape(maps: Tensor) -> None:
         raise InvalidMapsError(f"maps must be floating point, got {maps.dtype}")
 
 
+def check_map_pair(pred: Tensor, target: Tensor) -> None:
+    """Both are map tensors of the same shape (losses and metrics compare them texel by texel)."""
+    check_map_shape(pred)
+    check_map_shape(target)
+    if pred.shape != target.shape:
+        raise ValueError(
+            f"pred and target must have the same shape, got {tuple(pred.shape)} and {tuple(target.shape)}"
+        )
+
+
 def validate_maps(maps: Tensor, *, normal_tolerance: float = NORMAL_UNIT_TOLERANCE) -> None:
     """Check shape, finiteness, value ranges and unit normals; raise a one-line error if bad.
 

@@ -1,0 +1,86 @@
+"""Parameter loss L_p (paper §4.1): the predicted maps compared directly with the ground truth.
+
+"For every parameter map except the surface normals the MAE is used"; normals use the angular
+distance ``acos(a·b)/π``. Maps are compared in their stored encoding (DESIGN.md §2): base color
+sRGB-encoded, as the paper compares the parameter maps themselves, not derived quantities.
+
+How the four per-map terms make L_p: the **plain sum of the four per-map means**
+(``param = basecolor + normal + roughness + metallic``). Each map counts once whatever its
+channel count — a mean over all channels would weight base color (3 channels) three times as
+much as roughness, though the paper treats the maps alike and reports their errors separately —
+and the paper adds terms up wherever it combines losses ("the content loss is a sum of two
+different losses"). The combination is one line in :func:`parameter_loss`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+from brdfgan.core.svbrdf import check_map_pair, normalize_normal, split_maps
+
+# The dot product is clamped to [-1 + ε, 1 - ε] because d acos(x)/dx = -1/√(1-x²) is infinite at
+# x = ±1, which identical (or opposite) normals reach. ε = 1e-6 stays representable next to 1 in
+# float32 (spacing 6e-8) and costs little: the loss is flat below an angle of √(2ε) ≈ 0.08°
+# (finer than the ≈ 0.45° step of an 8-bit normal map), and identical normals score
+# acos(1 - ε)/π ≈ 4.5e-4 instead of 0.
+ANGULAR_EPS = 1e-6
+
+PARAMETER_TERMS: tuple[str, ...] = ("param_basecolor", "param_normal", "param_roughness", "param_metallic")
+
+
+def angular_distance(a: Tensor, b: Tensor, dim: int = -3, eps: float = ANGULAR_EPS) -> Tensor:
+    """Per-pixel angle between two normal fields divided by π, in [0, 1] (paper: ``acos(a·b)/π``).
+
+    Both inputs are renormalised first, like the renderer does, so the loss measures the normals
+    that are shaded and its gradient is tangent to the unit sphere. The computation runs in at
+    least float32 so the clamp bound ``1 - eps`` does not round to 1 under reduced precision.
+
+    Args:
+        a, b: normal fields, unit vectors along ``dim``.
+        dim: the vector axis.
+        eps: the dot product is clamped to ``[-1 + eps, 1 - eps]`` (see :data:`ANGULAR_EPS`).
+
+    Shape:
+        - a, b: ``(*, 3, H, W)`` (vector axis ``dim``), the same shape
+        - output: the input shape without ``dim``, e.g. ``(*, H, W)``
+    """
+    if not isinstance(a, Tensor) or not isinstance(b, Tensor):
+        raise TypeError("angular_distance expects tensors")
+    if a.shape != b.shape:
+        raise ValueError(f"normal fields must have the same shape, got {tuple(a.shape)} and {tuple(b.shape)}")
+    if a.ndim == 0 or a.shape[dim] != 3:
+        raise ValueError(f"normal fields need 3 components along dim {dim}, got shape {tuple(a.shape)}")
+    if not 0.0 < eps < 1.0:
+        raise ValueError(f"eps must lie in (0, 1), got {eps}")
+    dtype = torch.promote_types(torch.promote_types(a.dtype, b.dtype), torch.float32)
+    a_unit = normalize_normal(a.to(dtype), dim=dim)
+    b_unit = normalize_normal(b.to(dtype), dim=dim)
+    cosine = (a_unit * b_unit).sum(dim=dim).clamp(-1.0 + eps, 1.0 - eps)
+    return torch.acos(cosine) / math.pi
+
+
+def parameter_loss(pred: Tensor, target: Tensor) -> dict[str, Tensor]:
+    """The paper's L_p and its per-map parts: L1 on base color, roughness and metallic, mean
+    angular distance on the normals.
+
+    Returns:
+        ``param_basecolor``, ``param_normal``, ``param_roughness``, ``param_metallic`` (scalars)
+        and ``param`` = L_p, their sum (see the module docstring).
+
+    Shape:
+        - pred, target: ``(*, 8, H, W)`` in the layout of :mod:`brdfgan.core.svbrdf`
+        - output: scalars
+    """
+    check_map_pair(pred, target)
+    p, t = split_maps(pred), split_maps(target)
+    terms = {
+        "param_basecolor": (p.basecolor - t.basecolor).abs().mean(),
+        "param_normal": angular_distance(p.normal, t.normal).mean(),
+        "param_roughness": (p.roughness - t.roughness).abs().mean(),
+        "param_metallic": (p.metallic - t.metallic).abs().mean(),
+    }
+    terms["param"] = sum((terms[name] for name in PARAMETER_TERMS[1:]), terms[PARAMETER_TERMS[0]])
+    return terms

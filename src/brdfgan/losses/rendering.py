@@ -1,0 +1,166 @@
+"""Rendering loss L_r (paper §4.1): predicted and true maps re-rendered under the same random
+light/view configurations, compared with L1 after ``log(1 + x)``.
+
+The configurations come from :func:`~brdfgan.core.sampling.sample_rendering_loss_configs`
+(ten by default: five random, five with a mirror highlight, random light colour).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import torch
+from torch import Tensor, nn
+
+from brdfgan.core.render import PointLightRenderer, PointLights, render_point_lights
+from brdfgan.core.sampling import (
+    RenderConfigs,
+    RenderingLossSampling,
+    log_transform,
+    sample_rendering_loss_configs,
+)
+from brdfgan.core.svbrdf import check_map_pair, check_map_shape
+
+# render(maps, camera_position, lights, plane_half_size) -> (B, V, 3, H, W), as render_point_lights.
+RenderFn = Callable[[Tensor, Tensor, PointLights, float], Tensor]
+
+
+def configs_to(
+    configs: RenderConfigs, device: torch.device | str | None, dtype: torch.dtype
+) -> RenderConfigs:
+    """The configurations on ``device`` in ``dtype`` (a no-op for tensors already there)."""
+
+    def move(t: Tensor) -> Tensor:
+        return t.to(device=device, dtype=dtype)
+
+    lights = configs.lights
+    return RenderConfigs(
+        camera_position=move(configs.camera_position),
+        lights=PointLights(
+            position=move(lights.position), intensity=move(lights.intensity), color=move(lights.color)
+        ),
+    )
+
+
+def rendering_loss(
+    pred: Tensor,
+    target: Tensor,
+    configs: RenderConfigs,
+    render: RenderFn = render_point_lights,
+    plane_half_size: float = 1.0,
+) -> Tensor:
+    """Mean absolute difference of ``log(1 + x)`` of both map sets rendered under ``configs``.
+
+    The target is rendered without autograd (it is data). Rendering runs in at least float32 —
+    point-light radiance spans orders of magnitude, too much for half precision — on the device
+    of ``pred``, to which ``configs`` are moved.
+
+    Args:
+        pred: predicted maps.
+        target: ground-truth maps.
+        configs: the light/view configurations, shared by both renderings.
+        render: the renderer, called as ``render(maps, camera_position, lights, plane_half_size)``.
+        plane_half_size: half the side of the sample square (as used to draw ``configs``).
+
+    Shape:
+        - pred, target: ``(B, 8, H, W)``
+        - configs: camera ``(B, V, 3)``, lights ``(B, V, K, ·)``
+        - output: scalar
+    """
+    check_map_pair(pred, target)
+    if pred.ndim != 4:
+        raise ValueError(f"maps must have shape (B, 8, H, W), got {tuple(pred.shape)}")
+    if configs.camera_position.shape[0] != pred.shape[0]:
+        raise ValueError(
+            f"configs were drawn for a batch of {configs.camera_position.shape[0]}, maps have {pred.shape[0]}"
+        )
+    dtype = torch.promote_types(pred.dtype, torch.float32)
+    configs = configs_to(configs, pred.device, dtype)
+    pred_image = render(pred.to(dtype), configs.camera_position, configs.lights, plane_half_size)
+    with torch.no_grad():
+        target_image = render(
+            target.to(device=pred.device, dtype=dtype),
+            configs.camera_position,
+            configs.lights,
+            plane_half_size,
+        )
+    return (log_transform(pred_image) - log_transform(target_image)).abs().mean()
+
+
+class RenderingLoss(nn.Module):
+    """:func:`rendering_loss` with fresh configurations drawn for every call.
+
+    Randomness: the module owns a ``torch.Generator`` seeded with ``seed``, so a run's sequence
+    of configurations is reproducible. It is a CPU generator on purpose:
+    :func:`sample_rendering_loss_configs` draws on the CPU so that one seed gives the same
+    configurations on every device; the few numbers (``B × V × 11``) are then moved to the maps'
+    device. The generator state is not part of ``state_dict``; a resumed run reseeds.
+
+    Under DDP every rank holds its own copy built with the same ``seed``, so all ranks would draw
+    the *same* configurations for their different samples — harmless but wasteful. The training
+    module should call ``reseed(seed + global_rank)`` once the rank is known (e.g. in ``setup``).
+
+    Args:
+        sampling: how configurations are drawn (default: the paper's 5 random + 5 specular).
+        seed: initial seed of the generator.
+        plane_half_size: half the side of the sample square.
+        compile: render through ``torch.compile`` (see :class:`~brdfgan.core.render.PointLightRenderer`).
+
+    Shape:
+        - pred, target: ``(B, 8, H, W)``
+        - output: scalar, or ``(scalar, RenderConfigs)`` with ``return_configs=True``
+    """
+
+    def __init__(
+        self,
+        sampling: RenderingLossSampling = RenderingLossSampling(),
+        seed: int = 0,
+        plane_half_size: float = 1.0,
+        compile: bool = False,
+    ) -> None:
+        super().__init__()
+        self.sampling = sampling
+        self.plane_half_size = plane_half_size
+        self.renderer = PointLightRenderer(plane_half_size=plane_half_size, compile=compile)
+        self.rng = torch.Generator(device="cpu")
+        self.seed = seed
+        self.reseed(seed)
+
+    def reseed(self, seed: int) -> None:
+        """Restart the configuration sequence from ``seed`` (under DDP: ``seed + global_rank``)."""
+        self.seed = seed
+        self.rng.manual_seed(seed)
+
+    def sample_configs(
+        self, batch: int, device: torch.device | str | None = None, dtype: torch.dtype = torch.float32
+    ) -> RenderConfigs:
+        """Draw the next configurations from the module's generator."""
+        return sample_rendering_loss_configs(
+            batch,
+            self.sampling,
+            plane_half_size=self.plane_half_size,
+            generator=self.rng,
+            dtype=dtype,
+            device=device,
+        )
+
+    def _render(
+        self, maps: Tensor, camera_position: Tensor, lights: PointLights, plane_half_size: float
+    ) -> Tensor:
+        return self.renderer(maps, camera_position, lights)
+
+    def forward(
+        self, pred: Tensor, target: Tensor, return_configs: bool = False
+    ) -> Tensor | tuple[Tensor, RenderConfigs]:
+        check_map_shape(pred)
+        if pred.ndim != 4:
+            raise ValueError(f"maps must have shape (B, 8, H, W), got {tuple(pred.shape)}")
+        dtype = torch.promote_types(pred.dtype, torch.float32)
+        configs = self.sample_configs(pred.shape[0], device=pred.device, dtype=dtype)
+        loss = rendering_loss(
+            pred, target, configs, render=self._render, plane_half_size=self.plane_half_size
+        )
+        return (loss, configs) if return_configs else loss
+
+    def extra_repr(self) -> str:
+        return f"sampling={self.sampling}, seed={self.seed}"

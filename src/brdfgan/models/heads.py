@@ -1,0 +1,70 @@
+"""The ends of the networks: input encodings, the generator's output head, weight init.
+
+Both networks work in centred ranges: the photo (linear LDR in [0, 1]) enters as ``2x - 1``, and the
+discriminator sees the maps centred the same way
+(:func:`brdfgan.models.discriminator.discriminator_input`).
+The generator's last layer produces 8 unconstrained channels; :func:`maps_from_raw` turns them into a
+map set that always satisfies :func:`brdfgan.core.svbrdf.validate_maps`.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, ROUGHNESS, join_maps, normalize_normal
+
+PHOTO_CHANNELS = 3
+# Lower bound on the normal's z before normalisation: keeps the vector length >= 1e-3, so the
+# normalisation never divides by ~0 (finite gradients) and the normal never points into the surface.
+NORMAL_Z_MIN = 1e-3
+INIT_STD = 0.02
+
+
+def encode_photo(photo: Tensor) -> Tensor:
+    """Linear LDR photo in [0, 1] → centred range [-1, 1] (``2x - 1``), the networks' input scale.
+
+    Shape: any; output has the input's shape.
+    """
+    return photo * 2.0 - 1.0
+
+
+def maps_from_raw(raw: Tensor) -> Tensor:
+    """The generator's output head: 8 unconstrained channels → a valid map set.
+
+    - basecolor, roughness, metallic: ``sigmoid`` (range [0, 1]).
+    - normal: ``x`` and ``y`` raw, ``z = softplus(z_raw) + 1e-3``, then :func:`normalize_normal`.
+      softplus keeps z > 0 (the normal points out of the surface) with a smooth, non-vanishing
+      gradient for z_raw around 0; a raw output of 0 gives a flat +Z normal,
+      and the tilt is driven linearly by x and y, unlike a ``tanh``/``sqrt(1 - x² - y²)`` head whose
+      gradient blows up near the horizon.
+
+    Shape:
+        - raw: ``(*, 8, H, W)``
+        - output: ``(*, 8, H, W)`` in the layout of :mod:`brdfgan.core.svbrdf`
+    """
+    basecolor = torch.sigmoid(raw[..., BASECOLOR, :, :])
+    xy = raw[..., NORMAL.start : NORMAL.start + 2, :, :]
+    z = F.softplus(raw[..., NORMAL.start + 2 : NORMAL.stop, :, :]) + NORMAL_Z_MIN
+    normal = normalize_normal(torch.cat([xy, z], dim=-3))
+    roughness = torch.sigmoid(raw[..., ROUGHNESS, :, :])
+    metallic = torch.sigmoid(raw[..., METALLIC, :, :])
+    return join_maps(basecolor, normal, roughness, metallic)
+
+
+def init_weights(module: nn.Module) -> None:
+    """pix2pixHD initialisation, shared by generator and discriminators.
+
+    Convolutions ~ N(0, 0.02), biases 0, affine norm scales ~ N(1, 0.02). For the 3×3×512 convs
+    that dominate the generator, 0.02 is close to He init (sqrt(2 / 4608) ≈ 0.021); the first
+    layers get smaller weights, which the InstanceNorm after them makes harmless.
+    """
+    for m in module.modules():
+        if isinstance(m, nn.Conv2d | nn.ConvTranspose2d):
+            nn.init.normal_(m.weight, 0.0, INIT_STD)
+            if m.bias is not None:
+                nn.init.zeros_(m.bias)
+        elif isinstance(m, nn.InstanceNorm2d | nn.BatchNorm2d) and m.affine:
+            nn.init.normal_(m.weight, 1.0, INIT_STD)
+            nn.init.zeros_(m.bias)

@@ -1,0 +1,193 @@
+"""The conditional GAN as a LightningModule with manual optimization (paper §4, DESIGN.md §5.5).
+
+Per training batch: a discriminator step, then a generator step, each inside
+``toggled_optimizer`` with ``manual_backward`` and optional ``clip_gradients``. The learning
+rate follows :class:`~brdfgan.training.schedule.LinearDecaySchedule` over *generator* steps —
+schedulers are stepped by hand after each generator step, because ``global_step`` counts every
+optimizer step (two per batch with a discriminator) and would halve the schedule.
+
+A loss term that is switched off is not computed: without the adversarial and the feature term
+there is no discriminator at all — no forward, no step, no optimizer state, no parameters.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import lightning as L
+import torch
+from torch import Tensor, nn
+from torch.optim import Optimizer
+from torch.optim.lr_scheduler import LambdaLR
+
+from brdfgan.core.sampling import sample_rendering_loss_configs
+from brdfgan.losses.parameter import parameter_loss
+from brdfgan.losses.rendering import rendering_loss
+from brdfgan.losses.total import GANLoss
+from brdfgan.training.schedule import LinearDecaySchedule
+
+OptimizerFactory = Callable[..., Optimizer]
+
+# Validation renders under fixed configurations so every epoch and every model is compared alike.
+VALIDATION_RENDER_SEED = 2019
+
+
+class SVBRDFGAN(L.LightningModule):
+    """Generator + optional multi-scale discriminator trained with the paper's losses.
+
+    Args:
+        generator: photo ``(B, 3, H, W)`` → maps ``(B, 8, H, W)``.
+        discriminator: a factory (Hydra ``_partial_``) building the discriminator; called only
+            when the loss needs one.
+        loss: the loss terms and their switches.
+        optimizer: a factory ``params → Optimizer`` (Hydra ``_partial_``; paper: Adam 2e-4,
+            β = (0.5, 0.999)), used for both networks.
+        constant_lr_fraction: share of training at the base learning rate before the linear
+            decay (paper: 0.5).
+        total_steps: generator steps of the whole run; default ``max_epochs ×`` the datamodule's
+            ``train_batches_per_epoch`` (or ``trainer.max_steps`` when set).
+        gradient_clip: max gradient norm per network (``None``: no clipping).
+    """
+
+    def __init__(
+        self,
+        generator: nn.Module,
+        discriminator: Callable[[], nn.Module] | None,
+        loss: GANLoss,
+        optimizer: OptimizerFactory,
+        constant_lr_fraction: float = 0.5,
+        total_steps: int | None = None,
+        gradient_clip: float | None = None,
+    ) -> None:
+        super().__init__()
+        self.automatic_optimization = False
+        self.generator = generator
+        self.loss = loss
+        self.uses_discriminator = loss.switches.needs_discriminator
+        if self.uses_discriminator and discriminator is None:
+            raise ValueError("model.discriminator: the loss needs one (adversarial or feature term)")
+        self.discriminator = discriminator() if self.uses_discriminator and discriminator else None
+        self.optimizer_factory = optimizer
+        self.constant_lr_fraction = constant_lr_fraction
+        self.total_steps = total_steps
+        self.gradient_clip = gradient_clip
+        self.save_hyperparameters(ignore=["generator", "discriminator", "loss", "optimizer"])
+
+    def setup(self, stage: str) -> None:
+        # Each DDP rank draws its own rendering-loss configurations.
+        self.loss.reseed(int(self.loss.seed) + self.global_rank)
+
+    def forward(self, photo: Tensor) -> Tensor:
+        return self.generator(photo)
+
+    # -- optimisation ------------------------------------------------------------------------
+
+    def _schedule_steps(self) -> int:
+        if self.total_steps is not None:
+            return self.total_steps
+        trainer = self.trainer
+        if trainer.max_steps and trainer.max_steps > 0:
+            # max_steps counts optimizer steps: two per batch when a discriminator trains.
+            return max(1, trainer.max_steps // (2 if self.uses_discriminator else 1))
+        datamodule = getattr(trainer, "datamodule", None)
+        per_epoch = getattr(datamodule, "train_batches_per_epoch", None)
+        if per_epoch is None or trainer.max_epochs is None or trainer.max_epochs < 0:
+            raise ValueError("cannot infer the schedule length: set model.total_steps or trainer.max_epochs")
+        return max(1, trainer.max_epochs * per_epoch)
+
+    def configure_optimizers(self) -> Any:
+        schedule = LinearDecaySchedule(self._schedule_steps(), self.constant_lr_fraction)
+        g_opt = self.optimizer_factory(self.generator.parameters())
+        optimizers = [g_opt]
+        if self.discriminator is not None:
+            optimizers.append(self.optimizer_factory(self.discriminator.parameters()))
+        schedulers = [{"scheduler": LambdaLR(opt, schedule), "interval": "step"} for opt in optimizers]
+        return optimizers, schedulers
+
+    def _optimizers(self) -> tuple[Any, Any | None]:
+        optimizers = self.optimizers()
+        if isinstance(optimizers, list):
+            return optimizers[0], optimizers[1] if len(optimizers) > 1 else None
+        return optimizers, None
+
+    def _step(self, optimizer: Any, loss: Tensor) -> None:
+        optimizer.zero_grad(set_to_none=True)
+        self.manual_backward(loss)
+        if self.gradient_clip is not None:
+            self.clip_gradients(
+                optimizer, gradient_clip_val=self.gradient_clip, gradient_clip_algorithm="norm"
+            )
+        optimizer.step()
+
+    def training_step(self, batch: Mapping[str, Any], batch_idx: int) -> None:
+        photo, maps = batch["photo"], batch["maps"]
+        g_opt, d_opt = self._optimizers()
+        fake = self.generator(photo)
+        logged: dict[str, Tensor] = {}
+
+        if self.discriminator is not None and d_opt is not None:
+            with self.toggled_optimizer(d_opt):
+                d_real = self.discriminator(photo, maps)
+                d_fake = self.discriminator(photo, fake.detach())
+                d_terms = self.loss.discriminator_terms(d_real, d_fake)
+                self._step(d_opt, d_terms["d_total"])
+            logged.update(d_terms)
+
+        with self.toggled_optimizer(g_opt):
+            d_fake_g = d_real_g = None
+            if self.discriminator is not None:
+                d_fake_g = self.discriminator(photo, fake)
+                with torch.no_grad():  # the real features are targets for feature matching
+                    d_real_g = self.discriminator(photo, maps) if self.loss.switches.feature else None
+            g_terms = self.loss.generator_terms(fake, maps, d_fake_g, d_real_g)
+            self._step(g_opt, g_terms["g_total"])
+        logged.update(g_terms)
+
+        schedulers = self.lr_schedulers()
+        for scheduler in schedulers if isinstance(schedulers, list) else [schedulers]:
+            scheduler.step()
+        self.log_dict(
+            {f"train/{name}": value.detach() for name, value in logged.items()},
+            prog_bar=False,
+            on_step=True,
+            on_epoch=True,
+            batch_size=photo.shape[0],
+        )
+        self.log("train/g_total_bar", g_terms["g_total"].detach(), prog_bar=True, logger=False)
+        self.log("train/lr", g_opt.param_groups[0]["lr"], on_step=True, on_epoch=False)
+
+    def on_train_epoch_end(self) -> None:
+        datamodule = getattr(self.trainer, "datamodule", None)
+        skipped = getattr(datamodule, "skipped", None)
+        if skipped is not None:
+            self.log("data/skipped", float(skipped.total), on_epoch=True, on_step=False)
+
+    # -- evaluation --------------------------------------------------------------------------
+
+    def _evaluate(self, batch: Mapping[str, Any], batch_idx: int, stage: str) -> Tensor:
+        photo, maps = batch["photo"], batch["maps"]
+        fake = self.generator(photo)
+        terms = parameter_loss(fake, maps)
+        configs = sample_rendering_loss_configs(
+            photo.shape[0],
+            self.loss.rendering_sampling,
+            generator=torch.Generator().manual_seed(VALIDATION_RENDER_SEED + batch_idx),
+        )
+        terms["render"] = rendering_loss(fake, maps, configs)
+        terms["loss"] = terms["param"] + terms["render"]
+        self.log_dict(
+            {f"{stage}/{name}": value for name, value in terms.items()},
+            on_epoch=True,
+            on_step=False,
+            prog_bar=False,
+            batch_size=photo.shape[0],
+            sync_dist=True,
+        )
+        return terms["loss"]
+
+    def validation_step(self, batch: Mapping[str, Any], batch_idx: int) -> Tensor:
+        return self._evaluate(batch, batch_idx, "val")
+
+    def test_step(self, batch: Mapping[str, Any], batch_idx: int) -> Tensor:
+        return self._evaluate(batch, batch_idx, "test")

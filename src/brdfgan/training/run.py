@@ -1,0 +1,61 @@
+"""Build everything a training run needs from its config, then fit and test (``train.py``).
+
+Everything is instantiated before the first step, so a wrong ``_target_`` argument or value is
+reported as one line before any data is generated or any time is spent training.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+import hydra
+import lightning as L
+from omegaconf import DictConfig, OmegaConf
+
+log = logging.getLogger(__name__)
+
+
+class TrainConfigError(ValueError):
+    """The run config is unusable; the message names the key."""
+
+
+def _instantiate_all(group: DictConfig | None) -> list[Any]:
+    if not group:
+        return []
+    return [hydra.utils.instantiate(node, _convert_="all") for node in group.values() if node is not None]
+
+
+def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.Trainer]:
+    """Datamodule, module (with its loss) and trainer of a run config."""
+    datamodule = hydra.utils.instantiate(cfg.data, _convert_="all")
+    loss = hydra.utils.instantiate(cfg.loss, _convert_="all")
+    module = hydra.utils.instantiate(cfg.model, loss=loss, _convert_="all")
+    callbacks = _instantiate_all(cfg.get("callbacks"))
+    loggers = _instantiate_all(cfg.get("logger"))
+    trainer = hydra.utils.instantiate(cfg.trainer, callbacks=callbacks, logger=loggers)
+    return datamodule, module, trainer
+
+
+def train(cfg: DictConfig) -> float | None:
+    """Fit (optionally resuming from ``ckpt_path``), test the best checkpoint, and return the
+    monitored metric (for sweeps), or ``None`` when it was not logged."""
+    if cfg.ckpt_path is not None and not Path(cfg.ckpt_path).is_file():
+        raise TrainConfigError(f"ckpt_path: checkpoint {cfg.ckpt_path} does not exist")
+    L.seed_everything(cfg.seed, workers=True)
+    datamodule, module, trainer = build(cfg)
+    log.info("run config:\n%s", OmegaConf.to_yaml(cfg, resolve=True))
+    if cfg.train:
+        trainer.fit(module, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
+    metric = trainer.callback_metrics.get(cfg.monitor)
+    value = float(metric) if metric is not None else None
+    if cfg.test:
+        checkpoint = getattr(trainer.checkpoint_callback, "best_model_path", "") or None
+        if not cfg.train:
+            checkpoint = cfg.ckpt_path
+        trainer.test(module, datamodule=datamodule, ckpt_path=checkpoint)
+    if value is not None and not math.isfinite(value):
+        log.warning("%s is %s", cfg.monitor, value)
+    return value

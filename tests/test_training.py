@@ -1,0 +1,192 @@
+"""The training platform: config groups compose, the GAN step, the schedule, resume, train.py."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import hydra
+import lightning as L
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import DictConfig, OmegaConf
+
+from brdfgan.training.config import register_configs
+from brdfgan.training.run import build
+from brdfgan.training.schedule import LinearDecaySchedule
+
+ROOT = Path(__file__).resolve().parents[1]
+CONF = ROOT / "conf"
+LOSSES = ["full", "no_adv", "no_feat", "no_param", "no_render"]
+
+register_configs()
+
+
+def compose_train(overrides: list[str], root: Path | None = None) -> DictConfig:
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(config_name="train", overrides=overrides, return_hydra_config=True)
+    # Outside a Hydra run there is no runtime.output_dir: pin the paths the run would get.
+    base = root or Path("/tmp/brdfgan-test-runs")
+    OmegaConf.set_struct(cfg, False)
+    cfg.paths.root_dir = str(base)
+    cfg.paths.output_dir = str(base / "run")
+    del cfg["hydra"]
+    return cfg
+
+
+@pytest.fixture(scope="session")
+def tiny_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The tiny dataset of conf/data/tiny.yaml, made once with Mitsuba."""
+    root = tmp_path_factory.mktemp("project")
+    cfg = compose_train(["experiment=smoke"], root)
+    module = hydra.utils.instantiate(cfg.data, _convert_="all")
+    assert module.data_dir == root / "data" / "tiny"
+    module.prepare_data()
+    return root
+
+
+@pytest.mark.parametrize("loss", LOSSES)
+@pytest.mark.parametrize("experiment", ["null", "cpu", "smoke", "paper"])
+def test_every_loss_and_experiment_composes_and_builds(loss: str, experiment: str) -> None:
+    cfg = compose_train([f"loss={loss}"] + ([f"experiment={experiment}"] if experiment != "null" else []))
+    if experiment == "paper":
+        assert cfg.trainer.devices == 4 and cfg.trainer.strategy == "ddp"
+        assert cfg.trainer.max_epochs == 200 and cfg.data.batch_size == 8
+        assert cfg.data.epoch_samples // (4 * 8) == 5000  # 5000 steps per epoch on 4 GPUs
+        assert cfg.model.generator.width == 64 and cfg.model.generator.residual_blocks == 9
+        assert cfg.model.optimizer.lr == 2e-4 and list(cfg.model.optimizer.betas) == [0.5, 0.999]
+        return  # building needs 4 GPUs
+    _, module, trainer = build(cfg)
+    switches = module.loss.switches
+    assert switches.adversarial == (loss != "no_adv") and switches.feature == (loss != "no_feat")
+    assert switches.parameter == (loss != "no_param") and switches.rendering == (loss != "no_render")
+    assert isinstance(trainer, L.Trainer)
+
+
+@pytest.mark.parametrize("group", ["trainer=gpu", "trainer=ddp", "logger=tensorboard", "logger=wandb"])
+def test_other_groups_compose(group: str) -> None:
+    cfg = compose_train([group])
+    assert cfg.trainer._target_ == "lightning.pytorch.Trainer"
+
+
+def test_paper_model_has_the_paper_generator() -> None:
+    cfg = compose_train(["model=paper", "loss=no_adv"])
+    generator = hydra.utils.instantiate(cfg.model.generator)
+    assert abs(sum(p.numel() for p in generator.parameters()) / 1e6 - 45.6) < 0.2
+
+
+def test_wrong_key_or_type_fails_at_composition() -> None:
+    with pytest.raises(Exception, match="no_such_key"):
+        compose_train(["no_such_key=1"])
+    with pytest.raises(Exception, match="seed"):
+        compose_train(["seed=abc"])
+
+
+def test_without_adversarial_and_feature_terms_there_is_no_discriminator() -> None:
+    cfg = compose_train(["loss=no_adv", "loss.switches.feature=false"])
+    _, module, _ = build(cfg)
+    assert module.discriminator is None
+    assert not any("discriminator" in name for name, _ in module.named_parameters())
+    cfg = compose_train(["loss=full"])
+    _, module, _ = build(cfg)
+    assert module.discriminator is not None
+
+
+def test_linear_decay_schedule() -> None:
+    schedule = LinearDecaySchedule(total_steps=10, constant_fraction=0.5)
+    assert [schedule(s) for s in range(11)] == pytest.approx([1, 1, 1, 1, 1, 1.0, 0.8, 0.6, 0.4, 0.2, 0.0])
+    with pytest.raises(ValueError):
+        LinearDecaySchedule(0)
+
+
+def _fit(cfg: DictConfig, ckpt_path: str | None = None) -> tuple[L.LightningModule, L.Trainer]:
+    L.seed_everything(cfg.seed, workers=True)
+    datamodule, module, trainer = build(cfg)
+    trainer.fit(module, datamodule=datamodule, ckpt_path=ckpt_path)
+    return module, trainer
+
+
+@pytest.mark.mitsuba
+@pytest.mark.parametrize("loss", ["full", "no_adv"])
+def test_gan_step_counts_and_schedule_follow_generator_steps(tiny_data: Path, loss: str) -> None:
+    cfg = compose_train(["experiment=smoke", f"loss={loss}", "logger=csv", "callbacks=none"], tiny_data)
+    cfg.loss.switches.feature = loss == "full"
+    module, trainer = _fit(cfg)
+    batches = trainer.datamodule.train_batches_per_epoch * cfg.trainer.max_epochs
+    optimizers_per_batch = 2 if module.discriminator is not None else 1
+    assert trainer.global_step == batches * optimizers_per_batch
+    # Generator steps drive the lr: at the end it has decayed to 0 whatever global_step says.
+    g_opt = trainer.optimizers[0]
+    assert g_opt.param_groups[0]["lr"] == pytest.approx(0.0, abs=1e-12)
+    logged = trainer.callback_metrics
+    assert "train/g_total" in logged and "val/loss" in logged
+    assert ("train/d_total" in logged) == (loss == "full")
+    assert math.isfinite(float(logged["val/loss"]))
+
+
+@pytest.mark.mitsuba
+def test_resume_continues_with_the_same_step_count_and_lr(tiny_data: Path, tmp_path: Path) -> None:
+    overrides = ["experiment=smoke", "logger=csv", "trainer.max_epochs=3"]
+    full = compose_train(overrides, tiny_data)
+    full.paths.output_dir = str(tmp_path / "full")
+    _, straight = _fit(full)
+
+    first = compose_train([*overrides[:-1], "trainer.max_epochs=1"], tiny_data)
+    first.paths.output_dir = str(tmp_path / "interrupted")
+    _fit(first)
+    last = tmp_path / "interrupted" / "checkpoints" / "last.ckpt"
+    assert last.is_file()
+    resumed_cfg = compose_train(overrides, tiny_data)
+    resumed_cfg.paths.output_dir = str(tmp_path / "interrupted")
+    _, resumed = _fit(resumed_cfg, ckpt_path=str(last))
+    assert resumed.global_step == straight.global_step
+    for a, b in zip(resumed.optimizers, straight.optimizers, strict=True):
+        assert a.param_groups[0]["lr"] == pytest.approx(b.param_groups[0]["lr"])
+    assert (tmp_path / "interrupted" / "checkpoints").glob("epoch*.ckpt")
+
+
+def _train_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "PROJECT_ROOT": str(cwd)}
+    return subprocess.run(
+        [sys.executable, str(ROOT / "train.py"), *args], cwd=cwd, env=env, capture_output=True, text=True,
+        timeout=600,
+    )  # fmt: skip
+
+
+@pytest.mark.mitsuba
+def test_train_py_runs_the_loop_and_returns_the_metric(tiny_data: Path) -> None:
+    result = _train_cli("experiment=smoke", cwd=tiny_data)
+    assert result.returncode == 0, result.stderr[-3000:]
+    runs = sorted((tiny_data / "logs" / "smoke" / "runs").iterdir())
+    checkpoints = {p.name for p in (runs[-1] / "checkpoints").iterdir()}
+    assert "last.ckpt" in checkpoints and any(name.startswith("epoch") for name in checkpoints)
+    assert (runs[-1] / "csv").exists()
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("ckpt_path=/nonexistent.ckpt", "ckpt_path: checkpoint /nonexistent.ckpt does not exist"),
+        ("model.generator.no_such_arg=1", "no_such_arg"),
+        ("seed=abc", "seed"),
+    ],
+)
+def test_train_py_bad_input_is_a_clear_error(tmp_path: Path, override: str, message: str) -> None:
+    prefix = "+" if "no_such_arg" in override else ""
+    result = _train_cli("experiment=smoke", prefix + override, cwd=tmp_path)
+    assert result.returncode != 0
+    assert message in result.stderr, result.stderr[-2000:]
+    assert "Traceback" not in result.stderr
+
+
+def test_ablation_sweep_config_lists_the_grid(tmp_path: Path) -> None:
+    result = _train_cli("--config-dir", str(ROOT / "sweeps"), "--config-name", "ablation", "--cfg", "hydra",
+                        cwd=tmp_path)  # fmt: skip
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "loss: full,no_adv,no_feat,no_param,no_render" in result.stdout
+    assert "seed: 0,1,2" in result.stdout
+    torch.manual_seed(0)  # keep the random state of later tests independent of this one
