@@ -190,3 +190,17 @@ def test_ablation_sweep_config_lists_the_grid(tmp_path: Path) -> None:
     assert "loss: full,no_adv,no_feat,no_param,no_render" in result.stdout
     assert "seed: 0,1,2" in result.stdout
     torch.manual_seed(0)  # keep the random state of later tests independent of this one
+
+
+@pytest.mark.mitsuba
+def test_ddp_on_two_cpu_processes_trains_and_tests(tiny_data: Path) -> None:
+    # The paper trains with DDP; two gloo processes on the CPU exercise the same code path:
+    # per-rank shard splitting, both networks in one module, toggled optimizers.
+    result = _train_cli(
+        "experiment=smoke", "trainer.devices=2", "+trainer.strategy=ddp_find_unused_parameters_true",
+        "task_name=ddp", cwd=tiny_data,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr[-3000:]
+    runs = sorted((tiny_data / "logs" / "ddp" / "runs").iterdir())
+    assert (runs[-1] / "checkpoints" / "last.ckpt").is_file()
+    assert "test/loss" in result.stdout + result.stderr
