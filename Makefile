@@ -51,6 +51,7 @@ bench: setup
 	$(PY) -m benchmarks.bench_capture
 	$(PY) -m benchmarks.bench_generate
 	$(PY) -m benchmarks.bench_datamodule
+	$(PY) -m benchmarks.bench_evaluate
 
 data: setup
 	$(PY) generate.py

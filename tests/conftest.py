@@ -1,9 +1,16 @@
 from __future__ import annotations
 
+from pathlib import Path
+
+import hydra
+import pytest
 import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import DictConfig, OmegaConf
 from torch import Tensor
 
 from brdfgan.core.svbrdf import join_maps, normalize_normal
+from brdfgan.training.config import register_configs
 
 
 def random_maps(
@@ -19,3 +26,30 @@ def random_maps(
     ramp = torch.linspace(-0.4, 0.25, height, dtype=dtype).view(height, 1).expand(shape)
     normal = torch.cat([0.5 * rand() - 0.1, ramp + 0.1 * rand(), torch.ones(shape, dtype=dtype)], dim=-3)
     return join_maps(rand(3), normalize_normal(normal), 0.1 + 0.9 * rand(), (rand() > 0.5).to(dtype))
+
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+register_configs()
+
+
+def compose_train(overrides: list[str], root: Path | None = None) -> DictConfig:
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(config_name="train", overrides=overrides, return_hydra_config=True)
+    # Outside a Hydra run there is no runtime.output_dir: pin the paths the run would get.
+    base = root or Path("/tmp/brdfgan-test-runs")
+    OmegaConf.set_struct(cfg, False)
+    cfg.paths.root_dir = str(base)
+    cfg.paths.output_dir = str(base / "run")
+    del cfg["hydra"]
+    return cfg
+
+
+@pytest.fixture(scope="session")
+def tiny_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The tiny dataset of conf/data/tiny.yaml, made once with Mitsuba."""
+    root = tmp_path_factory.mktemp("project")
+    cfg = compose_train(["experiment=smoke"], root)
+    module = hydra.utils.instantiate(cfg.data, _convert_="all")
+    assert module.data_dir == root / "data" / "tiny"
+    module.prepare_data()
+    return root

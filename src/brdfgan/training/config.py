@@ -25,6 +25,7 @@ class TrainConfig:
     trainer: dict[str, Any] = field(default_factory=dict)
     logger: dict[str, Any] | None = None
     callbacks: dict[str, Any] | None = None
+    metrics: dict[str, Any] | None = None
 
 
 def register_configs() -> None:

@@ -48,6 +48,8 @@ class SVBRDFGAN(L.LightningModule):
         total_steps: generator steps of the whole run; default ``max_epochs ×`` the datamodule's
             ``train_batches_per_epoch`` (or ``trainer.max_steps`` when set).
         gradient_clip: max gradient norm per network (``None``: no clipping).
+        metrics: a factory of the evaluator's metric collection (:mod:`brdfgan.metrics`), so
+            validation and test report the same numbers as ``evaluate.py``.
     """
 
     def __init__(
@@ -59,6 +61,7 @@ class SVBRDFGAN(L.LightningModule):
         constant_lr_fraction: float = 0.5,
         total_steps: int | None = None,
         gradient_clip: float | None = None,
+        metrics: Callable[[], nn.Module] | None = None,
     ) -> None:
         super().__init__()
         self.automatic_optimization = False
@@ -72,7 +75,9 @@ class SVBRDFGAN(L.LightningModule):
         self.constant_lr_fraction = constant_lr_fraction
         self.total_steps = total_steps
         self.gradient_clip = gradient_clip
-        self.save_hyperparameters(ignore=["generator", "discriminator", "loss", "optimizer"])
+        self.val_metrics = metrics() if metrics is not None else None
+        self.test_metrics = metrics() if metrics is not None else None
+        self.save_hyperparameters(ignore=["generator", "discriminator", "loss", "optimizer", "metrics"])
 
     def setup(self, stage: str) -> None:
         # Each DDP rank draws its own rendering-loss configurations.
@@ -176,6 +181,9 @@ class SVBRDFGAN(L.LightningModule):
         )
         terms["render"] = rendering_loss(fake, maps, configs)
         terms["loss"] = terms["param"] + terms["render"]
+        metrics = self.val_metrics if stage == "val" else self.test_metrics
+        if metrics is not None:
+            metrics.update(fake, maps)
         self.log_dict(
             {f"{stage}/{name}": value for name, value in terms.items()},
             on_epoch=True,
@@ -185,6 +193,21 @@ class SVBRDFGAN(L.LightningModule):
             sync_dist=True,
         )
         return terms["loss"]
+
+    def _log_metrics(self, stage: str) -> None:
+        metrics = self.val_metrics if stage == "val" else self.test_metrics
+        if metrics is None:
+            return
+        values = metrics.compute()
+        if values:
+            self.log_dict({f"{stage}/{name}": value for name, value in values.items()}, sync_dist=False)
+        metrics.reset()
+
+    def on_validation_epoch_end(self) -> None:
+        self._log_metrics("val")
+
+    def on_test_epoch_end(self) -> None:
+        self._log_metrics("test")
 
     def validation_step(self, batch: Mapping[str, Any], batch_idx: int) -> Tensor:
         return self._evaluate(batch, batch_idx, "val")

@@ -15,6 +15,8 @@ import hydra
 import lightning as L
 from omegaconf import DictConfig, OmegaConf
 
+from brdfgan.evaluation.evaluator import evaluate_models, write_results
+
 log = logging.getLogger(__name__)
 
 
@@ -56,6 +58,17 @@ def train(cfg: DictConfig) -> float | None:
         if not cfg.train:
             checkpoint = cfg.ckpt_path
         trainer.test(module, datamodule=datamodule, ckpt_path=checkpoint)
+        if cfg.get("metrics") is not None:
+            # The evaluator's tables for this run (brdfgan.report builds the ablation from them).
+            # Every rank evaluates its part; the metrics' compute() gathers the sums of all ranks.
+            results = evaluate_models(
+                {"model": module.generator},
+                datamodule.test_dataloader(),
+                hydra.utils.instantiate(cfg.metrics),
+                module.device,
+            )
+            if trainer.is_global_zero:
+                write_results(results, cfg.paths.output_dir)
     if value is not None and not math.isfinite(value):
         log.warning("%s is %s", cfg.monitor, value)
     return value

@@ -1,0 +1,1 @@
+"""Evaluation: run generators over a test split, metric tables, bar charts, qualitative grids."""

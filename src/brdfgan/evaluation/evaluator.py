@@ -1,0 +1,145 @@
+"""Evaluate generators on a split and write what a paper table needs.
+
+``evaluate_models`` runs every model over the same batches with the same metric definitions
+(:mod:`brdfgan.metrics`); ``write_results`` writes ``metrics.json``, ``metrics.csv``,
+``metrics.md`` and ``rmse.png`` (models × maps, full vs downscaled, like the paper's comparison
+figure); ``comparison_grid`` shows input | ground truth | prediction per map | re-render for a
+fixed list of samples.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
+from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
+from brdfgan.data.shards import Sample
+from brdfgan.io.images import write_image
+
+PAPER_MAPS = ("diffuse", "specular", "normal", "roughness")
+ALL_MAPS = (*PAPER_MAPS, "basecolor", "metallic")
+
+
+@torch.no_grad()
+def evaluate_models(
+    models: Mapping[str, nn.Module],
+    batches: Iterable[Mapping[str, object]],
+    make_metrics: object,
+    device: torch.device | str = "cpu",
+) -> dict[str, dict[str, float]]:
+    """Metric values per model name. ``make_metrics()`` builds a fresh metric per model; every
+    model sees the same batches in the same order."""
+    metrics = {name: make_metrics().to(device) for name in models}  # type: ignore[operator]
+    for model in models.values():
+        model.to(device).eval()
+    for batch in batches:
+        photo = batch["photo"].to(device)  # type: ignore[union-attr]
+        truth = batch["maps"].to(device)  # type: ignore[union-attr]
+        for name, model in models.items():
+            metrics[name].update(model(photo), truth)
+    return {name: {k: float(v) for k, v in metric.compute().items()} for name, metric in metrics.items()}
+
+
+def write_results(results: Mapping[str, Mapping[str, float]], out_dir: str | os.PathLike[str]) -> list[Path]:
+    """``metrics.json``, ``metrics.csv`` (one row per model), ``metrics.md`` and ``rmse.png``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    names = sorted({key for values in results.values() for key in values})
+    (out / "metrics.json").write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
+    with (out / "metrics.csv").open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["model", *names])
+        for model, values in results.items():
+            writer.writerow([model, *(f"{values[n]:.6f}" if n in values else "" for n in names)])
+    (out / "metrics.md").write_text(markdown_table(results))
+    bar_chart(results, out / "rmse.png")
+    return [out / n for n in ("metrics.json", "metrics.csv", "metrics.md", "rmse.png")]
+
+
+def markdown_table(results: Mapping[str, Mapping[str, float]]) -> str:
+    """Per-map RMSE at full and downscaled resolution, angular and re-render error, per model."""
+    columns = [(f"rmse/{m}", f"{m}") for m in ALL_MAPS] + [(f"rmse256/{m}", f"{m} ↓256") for m in PAPER_MAPS]
+    columns += [("normal_angle_deg", "normal °"), ("rerender_rmse", "re-render")]
+    present = [(key, label) for key, label in columns if any(key in v for v in results.values())]
+    lines = ["| model | " + " | ".join(label for _, label in present) + " |"]
+    lines.append("|---|" + "---|" * len(present))
+    for model, values in results.items():
+        cells = [f"{values[key]:.4f}" if key in values else "–" for key, _ in present]
+        lines.append(f"| {model} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def bar_chart(results: Mapping[str, Mapping[str, float]], path: Path) -> Path:
+    """Grouped bars: the paper's four maps, one bar per (model, full | downscaled)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    downscaled = [m for m in results if any(k.startswith("rmse256/") for k in results[m])]
+    series = [(m, "rmse") for m in results] + [(f"{m} ↓256", "rmse256") for m in downscaled]
+    width = 0.8 / max(1, len(series))
+    figure, axis = plt.subplots(figsize=(1.8 + 1.6 * len(PAPER_MAPS), 3.6), dpi=120)
+    for index, (label, prefix) in enumerate(series):
+        model = label.removesuffix(" ↓256")
+        values = [results[model].get(f"{prefix}/{m}", np.nan) for m in PAPER_MAPS]
+        axis.bar(np.arange(len(PAPER_MAPS)) + index * width, values, width, label=label)
+    axis.set_xticks(np.arange(len(PAPER_MAPS)) + width * (len(series) - 1) / 2, PAPER_MAPS)
+    axis.set_ylabel("RMSE")
+    axis.legend(fontsize=7)
+    figure.tight_layout()
+    figure.savefig(path)
+    plt.close(figure)
+    return path
+
+
+def _novel_light_render(maps: Tensor, capture: FlashCapture) -> Tensor:
+    """Render under one fixed light off to the side (not the training flash), display-ready."""
+    batch = maps.shape[0]
+    camera = maps.new_tensor([0.0, 0.0, capture.camera_height]).expand(batch, 1, 3)
+    lights = PointLights(
+        position=maps.new_tensor([1.2, 0.8, 1.6]).view(1, 1, 1, 3).expand(batch, 1, 1, 3),
+        intensity=maps.new_full((batch, 1, 1), 3.0),
+        color=maps.new_ones(batch, 1, 1, 3),
+    )
+    image = render_point_lights(maps, camera, lights, capture.plane_half_size)[:, 0]
+    return linear_to_srgb(image.clamp(0.0, 1.0))
+
+
+def _panels(maps: Tensor) -> list[Tensor]:
+    parts = split_maps(maps)
+    return [parts.basecolor, encode_normal(parts.normal), parts.roughness.expand(3, -1, -1),
+            parts.metallic.expand(3, -1, -1)]  # fmt: skip
+
+
+@torch.no_grad()
+def comparison_grid(generator: nn.Module, samples: Sequence[Sample]) -> np.ndarray:
+    """One row per sample: input | (GT, prediction) per map | (GT, prediction) re-render.
+
+    Shape: output ``(N·H, 11·W, 3)`` display-ready in [0, 1].
+    """
+    photos = torch.stack([s.photo for s in samples])
+    truth = torch.stack([s.maps for s in samples])
+    pred = generator.eval()(photos)
+    capture = FlashCapture()
+    renders = _novel_light_render(torch.cat([truth, pred]), capture)
+    rows = []
+    for i in range(len(samples)):
+        panels = [linear_to_srgb(photos[i].clamp(0.0, 1.0))]
+        for t, p in zip(_panels(truth[i]), _panels(pred[i]), strict=True):
+            panels += [t, p]
+        panels += [renders[i], renders[len(samples) + i]]
+        rows.append(torch.cat(panels, dim=-1))
+    return torch.cat(rows, dim=-2).permute(1, 2, 0).numpy()
+
+
+def write_grid(generator: nn.Module, samples: Sequence[Sample], path: str | os.PathLike[str]) -> Path:
+    return write_image(path, comparison_grid(generator, samples))

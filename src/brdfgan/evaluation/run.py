@@ -1,0 +1,58 @@
+"""``evaluate.py``: models from checkpoints or weights → metrics tables, chart and grids."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import hydra
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from brdfgan.data.shards import Sample, iter_shard, list_shards
+from brdfgan.evaluation.evaluator import evaluate_models, markdown_table, write_grid, write_results
+from brdfgan.inference.weights import load_generator
+
+log = logging.getLogger(__name__)
+
+
+def fixed_samples(data_dir: Path, split: str, count: int) -> list[Sample]:
+    """The first ``count`` samples of a split in shard and key order — fixed, not cherry-picked."""
+    samples: list[Sample] = []
+    for shard in list_shards(data_dir, split):
+        for sample in iter_shard(shard):
+            if len(samples) == count:
+                return samples
+            samples.append(sample)
+    return samples
+
+
+def _models(ckpt: Any) -> dict[str, str]:
+    if isinstance(ckpt, Mapping):
+        return {str(k): str(v) for k, v in ckpt.items()}
+    paths = [ckpt] if isinstance(ckpt, str) else list(ckpt)
+    return {Path(p).resolve().parent.parent.name if p.endswith(".ckpt") else Path(p).stem: p for p in paths}
+
+
+def evaluate(cfg: DictConfig, out_dir: str | Path) -> dict[str, dict[str, float]]:
+    """Run every model of ``cfg.ckpt`` over ``cfg.split`` of ``cfg.data`` and write the results."""
+    device = torch.device("cuda" if cfg.device == "auto" and torch.cuda.is_available() else
+                          ("cpu" if cfg.device == "auto" else cfg.device))  # fmt: skip
+    ckpt = OmegaConf.to_container(cfg.ckpt, resolve=True) if OmegaConf.is_config(cfg.ckpt) else cfg.ckpt
+    models = {name: load_generator(path)[0] for name, path in _models(ckpt).items()}
+    datamodule = hydra.utils.instantiate(cfg.data, _convert_="all")
+    datamodule.prepare_data()
+    datamodule.splits["test"] = cfg.split  # the test loader streams each sample once, in order
+    datamodule.setup("test")
+    make_metrics = hydra.utils.instantiate(cfg.metrics)
+    results = evaluate_models(models, datamodule.test_dataloader(), make_metrics, device)
+    written = write_results(results, out_dir)
+    samples = fixed_samples(Path(datamodule.data_dir), cfg.split, cfg.grid_samples)
+    for name, model in models.items():
+        if samples:
+            written.append(write_grid(model.cpu(), samples, Path(out_dir) / f"grid_{name}.png"))
+    log.info("\n%s", markdown_table(results))
+    log.info("wrote %s", ", ".join(str(p) for p in written))
+    return results

@@ -1,0 +1,1 @@
+"""Inference: loading trained generators (safetensors weights, training checkpoints)."""

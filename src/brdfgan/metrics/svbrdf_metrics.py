@@ -1,0 +1,387 @@
+"""Evaluation metrics for predicted SVBRDF maps (paper §6.2), as DDP-correct torchmetrics.
+
+Every metric keeps only **sums and counts** (float64 sums, int64 counts, registered with
+``dist_reduce_fx="sum"``) and takes the square root or the ratio in ``compute``. The value over a
+dataset is therefore exact whatever the batch split or the number of processes — never a mean of
+per-batch means, which would weight a short last batch like a full one.
+
+Definitions (``pred`` and ``true`` in the 8-channel layout of :mod:`brdfgan.core.svbrdf`):
+
+- **Per-map RMSE** (:class:`MapRMSE`): ``sqrt(Σ (p − t)² / N)`` over every pixel *and channel* of
+  the dataset, per map:
+
+  ========= ========================================================================
+  basecolor the stored sRGB-encoded base colour (as a texture file holds it)
+  diffuse   derived albedo ``d = b (1 − m)`` (paper §3), ``b`` the linear base colour
+  specular  derived F0 ``s = 0.04 (1 − m) + b m`` (paper §3)
+  normal    unit-vector components in [-1, 1], 3 channels; both fields renormalised
+            first (like the renderer does). Per pixel ``|p − t|² = 2 − 2 cos θ``, so
+            two normals 90° apart give ``sqrt(2/3)``. An RMSE of the file encoding
+            ``(n + 1)/2`` would be exactly half of this value.
+  roughness perceptual roughness as stored
+  metallic  as stored
+  ========= ========================================================================
+
+  The derived albedos are compared in the colour space :data:`ALBEDO_SPACE` (default: linear,
+  the space in which the paper and DESIGN.md §2 define them and the renderer uses them; ``"srgb"``
+  compares them sRGB-encoded, like the albedo files of Deschaintre et al. 2018).
+
+- **Downscaled RMSE** (``MapRMSE(downscale_to=256)``, the paper's "downscaled to 256²"): each
+  compared image above is first computed at full resolution *in the encoding in which it is
+  compared*, then both prediction and ground truth are area-averaged to the target size (like
+  resizing the map files); averaged normals are renormalised. Inputs whose shorter side is already
+  ``<= downscale_to`` are skipped (nothing is accumulated), so a 256² test set reports no
+  duplicate of its full-resolution numbers.
+
+- **Normal angular error** (:class:`NormalAngularError`): mean over all pixels of the angle in
+  degrees between the renormalised normals, ``atan2(|p × t|, p · t)`` — equal to ``acos(p · t)``
+  for unit vectors but accurate for small angles, and unbiased (the training loss
+  :func:`~brdfgan.losses.parameter.angular_distance` clamps the cosine, which scores identical
+  normals 0.08° instead of 0).
+
+- **Re-rendering error** (:class:`RerenderError`): ``sqrt(mean((log(1 + R(p)) − log(1 + R(t)))²))``
+  over all pixels, colour channels and configurations, ``R`` the point-light renderer of the
+  rendering loss under a fixed set of light/view configurations drawn once from the seed.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+from torchmetrics import Metric, MetricCollection
+
+from brdfgan.core.render import PointLights, render_point_lights
+from brdfgan.core.sampling import (
+    RenderConfigs,
+    RenderingLossSampling,
+    log_transform,
+    sample_rendering_loss_configs,
+)
+from brdfgan.core.svbrdf import (
+    check_map_pair,
+    diffuse_albedo,
+    linear_to_srgb,
+    normalize_normal,
+    specular_albedo,
+    split_maps,
+    srgb_to_linear,
+)
+
+AlbedoSpace = Literal["linear", "srgb"]
+
+# The one switch for the colour space of the derived-albedo RMSE (see the module docstring).
+ALBEDO_SPACE: AlbedoSpace = "linear"
+
+# Compared maps and their channel counts, in reporting order.
+RMSE_MAPS: dict[str, int] = {
+    "diffuse": 3,
+    "specular": 3,
+    "normal": 3,
+    "roughness": 1,
+    "basecolor": 3,
+    "metallic": 1,
+}
+
+
+def _as_batch(pred: Tensor, true: Tensor) -> tuple[Tensor, Tensor]:
+    """Check a prediction/ground-truth pair and return both as ``(B, 8, H, W)`` in >= float32,
+    detached, on ``pred``'s device (metrics never need gradients)."""
+    check_map_pair(pred, true)
+    if pred.ndim == 3:
+        pred, true = pred.unsqueeze(0), true.unsqueeze(0)
+    if pred.ndim != 4:
+        raise ValueError(f"maps must have shape (B, 8, H, W) or (8, H, W), got {tuple(pred.shape)}")
+    dtype = torch.promote_types(torch.promote_types(pred.dtype, true.dtype), torch.float32)
+    return pred.detach().to(dtype), true.detach().to(device=pred.device, dtype=dtype)
+
+
+def compared_maps(maps: Tensor, albedo_space: AlbedoSpace = ALBEDO_SPACE) -> dict[str, Tensor]:
+    """The images that :class:`MapRMSE` compares, each in the encoding in which it is compared.
+
+    Args:
+        maps: map sets (base colour sRGB-encoded).
+        albedo_space: ``"linear"`` or ``"srgb"`` encoding of the derived albedos.
+
+    Shape:
+        - maps: ``(*, 8, H, W)``
+        - output: ``diffuse``, ``specular``, ``normal``, ``basecolor`` ``(*, 3, H, W)``;
+          ``roughness``, ``metallic`` ``(*, 1, H, W)``
+    """
+    if albedo_space not in ("linear", "srgb"):
+        raise ValueError(f"albedo_space must be 'linear' or 'srgb', got {albedo_space!r}")
+    parts = split_maps(maps)
+    linear = srgb_to_linear(parts.basecolor)
+    diffuse = diffuse_albedo(linear, parts.metallic)
+    specular = specular_albedo(linear, parts.metallic)
+    if albedo_space == "srgb":
+        diffuse, specular = linear_to_srgb(diffuse), linear_to_srgb(specular)
+    return {
+        "diffuse": diffuse,
+        "specular": specular,
+        "normal": normalize_normal(parts.normal),
+        "roughness": parts.roughness,
+        "basecolor": parts.basecolor,
+        "metallic": parts.metallic,
+    }
+
+
+def downscaled_size(height: int, width: int, downscale_to: int) -> tuple[int, int]:
+    """Output size whose shorter side is ``downscale_to``, keeping the aspect ratio."""
+    scale = downscale_to / min(height, width)
+    return max(1, round(height * scale)), max(1, round(width * scale))
+
+
+def area_downscale(image: Tensor, size: tuple[int, int], *, is_normal: bool = False) -> Tensor:
+    """Area-average an image to ``size`` (the mean over each output pixel's footprint).
+
+    For an integer factor this is the exact block mean; normals are renormalised after averaging
+    because the mean of unit vectors is shorter than 1.
+
+    Shape:
+        - image: ``(B, C, H, W)``
+        - output: ``(B, C, *size)``
+    """
+    small = F.adaptive_avg_pool2d(image, size)
+    return normalize_normal(small) if is_normal else small
+
+
+class MapRMSE(Metric):
+    """Per-map RMSE over a whole dataset (definitions in the module docstring).
+
+    Args:
+        downscale_to: when set, area-downscale prediction and ground truth so their shorter side
+            has this size before comparing; inputs already that small or smaller are skipped.
+        albedo_space: colour space of the derived albedos (default :data:`ALBEDO_SPACE`).
+        prefix: prepended to the keys of ``compute`` (e.g. ``"rmse/"``).
+        kwargs: passed to :class:`torchmetrics.Metric` (sync options).
+
+    ``compute()`` returns ``{prefix + map: RMSE}`` (float64 scalars) for the maps of
+    :data:`RMSE_MAPS`, or an empty dict when nothing was accumulated (every input skipped).
+
+    Shape:
+        - pred, true: ``(B, 8, H, W)`` or ``(8, H, W)``
+    """
+
+    is_differentiable = False
+    higher_is_better = False
+    full_state_update = False
+
+    pixels: Tensor
+
+    def __init__(
+        self,
+        downscale_to: int | None = None,
+        albedo_space: AlbedoSpace = ALBEDO_SPACE,
+        prefix: str = "",
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(**kwargs)
+        if downscale_to is not None and downscale_to < 1:
+            raise ValueError(f"downscale_to must be a positive size, got {downscale_to}")
+        if albedo_space not in ("linear", "srgb"):
+            raise ValueError(f"albedo_space must be 'linear' or 'srgb', got {albedo_space!r}")
+        self.downscale_to = downscale_to
+        self.albedo_space = albedo_space
+        self.prefix = prefix
+        for name in RMSE_MAPS:
+            self.add_state(f"sse_{name}", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum")
+        # Pixel count shared by all maps; a map's value count is pixels × its channels.
+        self.add_state("pixels", torch.zeros((), dtype=torch.int64), dist_reduce_fx="sum")
+
+    def update(self, pred: Tensor, true: Tensor) -> None:
+        pred, true = _as_batch(pred, true)
+        batch, _, height, width = pred.shape
+        size: tuple[int, int] | None = None
+        if self.downscale_to is not None:
+            if min(height, width) <= self.downscale_to:
+                return
+            size = downscaled_size(height, width, self.downscale_to)
+        pred_images = compared_maps(pred, self.albedo_space)
+        true_images = compared_maps(true, self.albedo_space)
+        for name in RMSE_MAPS:
+            p, t = pred_images[name], true_images[name]
+            if size is not None:
+                p = area_downscale(p, size, is_normal=name == "normal")
+                t = area_downscale(t, size, is_normal=name == "normal")
+            sse = getattr(self, f"sse_{name}")
+            sse += (p - t).square().sum(dtype=torch.float64)
+        out_h, out_w = size if size is not None else (height, width)
+        self.pixels += batch * out_h * out_w
+
+    def compute(self) -> dict[str, Tensor]:
+        if int(self.pixels) == 0:
+            return {}
+        return {
+            f"{self.prefix}{name}": (getattr(self, f"sse_{name}") / (self.pixels * channels)).sqrt()
+            for name, channels in RMSE_MAPS.items()
+        }
+
+
+class NormalAngularError(Metric):
+    """Mean angle in degrees between predicted and true normals over all pixels of a dataset.
+
+    Angle per pixel: ``atan2(|p × t|, p · t)`` of the renormalised normals (see the module
+    docstring). The median is not provided: it needs every value, which does not reduce as sums.
+
+    Shape:
+        - pred, true: ``(B, 8, H, W)`` or ``(8, H, W)``
+        - compute: float64 scalar (NaN before any update)
+    """
+
+    is_differentiable = False
+    higher_is_better = False
+    full_state_update = False
+
+    sum_deg: Tensor
+    pixels: Tensor
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.add_state("sum_deg", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("pixels", torch.zeros((), dtype=torch.int64), dist_reduce_fx="sum")
+
+    def update(self, pred: Tensor, true: Tensor) -> None:
+        pred, true = _as_batch(pred, true)
+        p = normalize_normal(split_maps(pred).normal)
+        t = normalize_normal(split_maps(true).normal)
+        sine = torch.linalg.vector_norm(torch.cross(p, t, dim=-3), dim=-3)
+        cosine = (p * t).sum(dim=-3)
+        self.sum_deg += torch.rad2deg(torch.atan2(sine, cosine)).sum(dtype=torch.float64)
+        self.pixels += cosine.numel()
+
+    def compute(self) -> Tensor:
+        return self.sum_deg / self.pixels
+
+
+def fixed_render_configs(configs: int = 16, seed: int = 0, plane_half_size: float = 1.0) -> RenderConfigs:
+    """The evaluation's light/view configurations: ``configs // 2`` random and the rest with a
+    mirror highlight (the rendering loss's two kinds), drawn once for a batch of 1 from
+    ``torch.Generator().manual_seed(seed)`` — so they depend on ``(seed, configs)`` only.
+
+    Shape:
+        - output: camera ``(1, configs, 3)``, lights ``(1, configs, 1, ·)``, CPU float64
+    """
+    if configs < 1:
+        raise ValueError(f"need at least one configuration, got {configs}")
+    sampling = RenderingLossSampling(random_configs=configs // 2, specular_configs=configs - configs // 2)
+    return sample_rendering_loss_configs(
+        1,
+        sampling,
+        plane_half_size=plane_half_size,
+        generator=torch.Generator().manual_seed(seed),
+        dtype=torch.float64,
+    )
+
+
+class RerenderError(Metric):
+    """Log-space RMSE between renderings of predicted and true maps under fixed configurations.
+
+    Every sample of every batch, of every model evaluated with the same ``(configs, seed)``, is
+    rendered under the same configurations (:func:`fixed_render_configs`), so values compare
+    across models and do not depend on how the data is batched. Rendering uses
+    :func:`~brdfgan.core.render.render_point_lights` in at least float32, one configuration at a
+    time to bound memory at 512².
+
+    Args:
+        configs: number of light/view configurations (half random, half with a highlight).
+        seed: seed of the configuration draw.
+        plane_half_size: half the side of the sample square (as in the rendering loss).
+        kwargs: passed to :class:`torchmetrics.Metric`.
+
+    Shape:
+        - pred, true: ``(B, 8, H, W)`` or ``(8, H, W)``
+        - compute: float64 scalar (NaN before any update)
+    """
+
+    is_differentiable = False
+    higher_is_better = False
+    full_state_update = False
+
+    sse: Tensor
+    values: Tensor
+
+    def __init__(self, configs: int = 16, seed: int = 0, plane_half_size: float = 1.0, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.num_configs = configs
+        self.seed = seed
+        self.plane_half_size = plane_half_size
+        # Plain attribute, not a state: a constant of the metric, moved to the data per update.
+        self.render_configs = fixed_render_configs(configs, seed, plane_half_size)
+        self.add_state("sse", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("values", torch.zeros((), dtype=torch.int64), dist_reduce_fx="sum")
+
+    def update(self, pred: Tensor, true: Tensor) -> None:
+        pred, true = _as_batch(pred, true)
+        batch = pred.shape[0]
+        camera = self.render_configs.camera_position.to(device=pred.device, dtype=pred.dtype)
+        lights = self.render_configs.lights
+        position = lights.position.to(device=pred.device, dtype=pred.dtype)
+        intensity = lights.intensity.to(device=pred.device, dtype=pred.dtype)
+        color = lights.color.to(device=pred.device, dtype=pred.dtype)
+        for v in range(self.num_configs):
+            view = slice(v, v + 1)
+            config_lights = PointLights(
+                position=position[:, view].expand(batch, -1, -1, -1),
+                intensity=intensity[:, view].expand(batch, -1, -1),
+                color=color[:, view].expand(batch, -1, -1, -1),
+            )
+            config_camera = camera[:, view].expand(batch, -1, -1)
+            pred_image = render_point_lights(pred, config_camera, config_lights, self.plane_half_size)
+            true_image = render_point_lights(true, config_camera, config_lights, self.plane_half_size)
+            diff = log_transform(pred_image) - log_transform(true_image)
+            self.sse += diff.square().sum(dtype=torch.float64)
+            self.values += diff.numel()
+
+    def compute(self) -> Tensor:
+        return (self.sse / self.values).sqrt()
+
+
+class SVBRDFMetrics(MetricCollection):
+    """All evaluation metrics behind one ``update(pred_maps, true_maps)``, computed as a flat dict.
+
+    Keys of ``compute()`` (float64 scalars, with the collection's optional ``prefix``):
+    ``rmse/{diffuse,specular,normal,roughness,basecolor,metallic}``, the same under
+    ``rmse{downscale_to}/`` (e.g. ``rmse256/…``; absent when ``downscale_to`` is ``None`` or every
+    input was already that small), ``normal_angle_deg`` and ``rerender_rmse``. Log them with
+    ``log_dict(metrics.compute())`` — Lightning's ``log_dict(metrics)`` expects scalar metrics.
+
+    Compute groups are off on purpose: torchmetrics would merge children whose states happen to be
+    equal after the first batch (e.g. both RMSE metrics at zero for a perfect prediction) and
+    then feed both from one state.
+
+    Args:
+        downscale_to: size of the downscaled RMSE, or ``None`` for none.
+        rerender_configs: configurations of :class:`RerenderError`.
+        seed: seed of those configurations.
+        albedo_space: colour space of the derived-albedo RMSE.
+        prefix: prepended to every key (e.g. ``"val/"``).
+        metric_kwargs: passed to every child :class:`torchmetrics.Metric`. A process that computes
+            alone while a process group is initialised (e.g. rank 0 evaluating after DDP
+            training) must pass ``sync_on_compute=False``: otherwise ``compute`` all-gathers the
+            states and waits for ranks that never call it.
+
+    Shape:
+        - pred_maps, true_maps: ``(B, 8, H, W)`` or ``(8, H, W)``
+    """
+
+    def __init__(
+        self,
+        downscale_to: int | None = 256,
+        rerender_configs: int = 16,
+        seed: int = 0,
+        albedo_space: AlbedoSpace = ALBEDO_SPACE,
+        prefix: str | None = None,
+        **metric_kwargs: Any,
+    ) -> None:
+        kw = metric_kwargs
+        metrics: dict[str, Metric] = {"rmse": MapRMSE(albedo_space=albedo_space, prefix="rmse/", **kw)}
+        if downscale_to is not None:
+            metrics[f"rmse{downscale_to}"] = MapRMSE(
+                downscale_to, albedo_space=albedo_space, prefix=f"rmse{downscale_to}/", **kw
+            )
+        metrics["normal_angle_deg"] = NormalAngularError(**kw)
+        metrics["rerender_rmse"] = RerenderError(configs=rerender_configs, seed=seed, **kw)
+        super().__init__(metrics, prefix=prefix, compute_groups=False)

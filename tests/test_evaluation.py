@@ -1,0 +1,120 @@
+"""Weights files, evaluate.py outputs and the ablation report."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+import yaml
+
+from brdfgan.inference.weights import WeightsError, load_generator, load_weights, save_weights
+from brdfgan.models.generator import Generator
+from brdfgan.report import ReportError, ablation_rows, collect, write_report
+
+ROOT = Path(__file__).resolve().parents[1]
+TARGET = "brdfgan.models.generator.Generator"
+
+
+def tiny_generator() -> tuple[Generator, dict[str, int]]:
+    config = {"in_channels": 3, "width": 8, "downsamplings": 2, "residual_blocks": 1}
+    torch.manual_seed(0)
+    return Generator(**config), config
+
+
+def test_weights_round_trip_rebuilds_the_architecture(tmp_path: Path) -> None:
+    generator, config = tiny_generator()
+    photo = torch.rand(1, 3, 32, 32)
+    expected = generator.eval()(photo)
+    path = save_weights(
+        tmp_path / "w.safetensors", generator, target=TARGET, config=config, model_id="tiny-1", extra={"n": 3}
+    )
+    loaded, meta = load_weights(path)
+    assert meta["model_id"] == "tiny-1" and meta["config"] == config and meta["extra"] == {"n": 3}
+    torch.testing.assert_close(loaded(photo), expected)
+    half = save_weights(tmp_path / "h.safetensors", generator, target=TARGET, config=config, model_id="t",
+                        half=True)  # fmt: skip
+    assert half.stat().st_size < 0.6 * path.stat().st_size
+    torch.testing.assert_close(load_generator(half)[0](photo), expected, atol=5e-3, rtol=0)
+
+
+def test_bad_weights_are_clear_errors(tmp_path: Path) -> None:
+    with pytest.raises(WeightsError, match="weights file not found"):
+        load_weights(tmp_path / "missing.safetensors")
+    garbage = tmp_path / "garbage.safetensors"
+    garbage.write_bytes(b"not safetensors at all")
+    with pytest.raises(WeightsError, match="not a brdfgan safetensors weights file"):
+        load_weights(garbage)
+    generator, _ = tiny_generator()
+    evil = save_weights(tmp_path / "evil.safetensors", generator, target="os.system", config={}, model_id="x")
+    with pytest.raises(WeightsError, match="is not a brdfgan model"):
+        load_weights(evil)
+    with pytest.raises(WeightsError, match=r"expected a \.safetensors weights file or a \.ckpt"):
+        load_generator(tmp_path / "model.pt")
+
+
+def _fake_run(root: Path, loss: str, seed: int, metrics: dict[str, float]) -> None:
+    run = root / f"loss={loss},seed={seed}"
+    (run / ".hydra").mkdir(parents=True)
+    (run / ".hydra" / "config.yaml").write_text(yaml.safe_dump({"seed": seed}))
+    choices = {"hydra": {"runtime": {"choices": {"loss": loss}}}}
+    (run / ".hydra" / "hydra.yaml").write_text(yaml.safe_dump(choices))
+    (run / "metrics.json").write_text(json.dumps({"model": metrics}))
+
+
+def test_ablation_report_has_the_paper_layout_and_percentages(tmp_path: Path) -> None:
+    _fake_run(tmp_path, "full", 0, {"rmse/diffuse": 0.10, "rmse/normal": 0.20})
+    _fake_run(tmp_path, "full", 1, {"rmse/diffuse": 0.12, "rmse/normal": 0.20})
+    _fake_run(tmp_path, "no_adv", 0, {"rmse/diffuse": 0.121, "rmse/normal": 0.19})
+    _fake_run(tmp_path, "no_render", 0, {"rmse/diffuse": 0.143, "rmse/normal": 0.25})
+    runs = collect([tmp_path])
+    assert set(runs) == {"full", "no_adv", "no_render"} and set(runs["full"]) == {0, 1}
+    rows = ablation_rows(runs)
+    assert rows[0] == ["metric", "proposed", "−L_r", "−L_a"]
+    diffuse = rows[1]
+    assert diffuse[1].startswith("0.1100 ± 0.0141")
+    assert diffuse[2] == "0.1430 (+30.0%)" and diffuse[3] == "0.1210 (+10.0%)"
+    assert rows[3][3] == "0.1900 (-5.0%)"  # normal: better than proposed
+    markdown, table = write_report([tmp_path], tmp_path / "out")
+    assert "| diffuse | 0.1100 ± 0.0141 | 0.1430 (+30.0%) | 0.1210 (+10.0%) |" in markdown.read_text()
+    assert table.read_text().startswith("metric,proposed")
+    with pytest.raises(ReportError, match="no training runs"):
+        collect([tmp_path / "out"])
+
+
+def _cli(script: str, *args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "PROJECT_ROOT": str(cwd)}
+    return subprocess.run([sys.executable, str(ROOT / script), *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=600)  # fmt: skip
+
+
+@pytest.mark.mitsuba
+def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> None:
+    trained = _cli("train.py", "experiment=smoke", "task_name=evaltest", cwd=tiny_data)
+    assert trained.returncode == 0, trained.stderr[-3000:]
+    run = sorted((tiny_data / "logs" / "evaltest" / "runs").iterdir())[-1]
+    metrics = json.loads((run / "metrics.json").read_text())["model"]
+    assert {"rmse/diffuse", "rmse/normal", "normal_angle_deg", "rerender_rmse"} <= set(metrics)
+    ckpt = run / "checkpoints" / "last.ckpt"
+    generator, meta = load_generator(ckpt)
+    weights = save_weights(tiny_data / "model.safetensors", generator, target=meta["target"],
+                           config=meta["config"], model_id="smoke")  # fmt: skip
+
+    result = _cli("evaluate.py", "data=tiny", f"ckpt={{ours: {ckpt}, exported: {weights}}}", "grid_samples=2",
+                  cwd=tiny_data)  # fmt: skip
+    assert result.returncode == 0, result.stderr[-3000:]
+    out = sorted((tiny_data / "logs" / "evaluate" / "runs").iterdir())[-1]
+    outputs = ("metrics.json", "metrics.csv", "metrics.md", "rmse.png", "grid_ours.png", "grid_exported.png")
+    for name in outputs:
+        assert (out / name).is_file(), name
+    results = json.loads((out / "metrics.json").read_text())
+    # The exported weights are the checkpoint's generator: same numbers.
+    assert results["ours"]["rmse/diffuse"] == pytest.approx(results["exported"]["rmse/diffuse"], rel=1e-5)
+    assert "| ours |" in (out / "metrics.md").read_text()
+
+    bad = _cli("evaluate.py", "data=tiny", "ckpt=/nonexistent.ckpt", cwd=tiny_data)
+    assert bad.returncode == 2 and "checkpoint not found" in bad.stderr and "Traceback" not in bad.stderr

@@ -1,0 +1,369 @@
+"""Evaluation metrics: golden values, sum-based accumulation, downscaling, DDP-style merging."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import pytest
+import torch
+from torch import Tensor
+
+from brdfgan.core.svbrdf import InvalidMapsError, flat_maps, join_maps, split_maps
+from brdfgan.metrics import (
+    RMSE_MAPS,
+    MapRMSE,
+    NormalAngularError,
+    RerenderError,
+    SVBRDFMetrics,
+    compared_maps,
+    fixed_render_configs,
+)
+from tests.conftest import random_maps
+
+SRGB_HALF_LINEAR = ((0.5 + 0.055) / 1.055) ** 2.4  # sRGB 0.5 decoded: 0.21404…
+
+
+def normal_maps(normal: tuple[float, float, float], size: int = 4, batch: int = 1) -> Tensor:
+    """Flat gray maps with one constant normal."""
+    maps = flat_maps(size, size, batch=(batch,), dtype=torch.float64)
+    maps[:, 3:6] = torch.tensor(normal, dtype=torch.float64).view(1, 3, 1, 1)
+    return maps
+
+
+# ---------------------------------------------------------------- golden values
+
+
+def test_constant_offsets_give_known_rmse() -> None:
+    true = flat_maps(6, 6, basecolor=(0.5, 0.5, 0.5), roughness=0.5, metallic=0.0, batch=(2,))
+    pred = flat_maps(6, 6, basecolor=(0.6, 0.5, 0.3), roughness=0.75, metallic=0.1, batch=(2,))
+    metric = MapRMSE()
+    metric.update(pred, true)
+    out = metric.compute()
+    assert set(out) == set(RMSE_MAPS)
+    assert out["roughness"].item() == pytest.approx(0.25, abs=1e-7)
+    assert out["metallic"].item() == pytest.approx(0.1, abs=1e-7)
+    # base colour in its stored sRGB encoding: per-channel offsets 0.1, 0, -0.2
+    assert out["basecolor"].item() == pytest.approx(math.sqrt((0.01 + 0.0 + 0.04) / 3), abs=1e-7)
+    assert out["normal"].item() == 0.0
+
+
+def test_derived_albedo_rmse_by_hand() -> None:
+    # Base colour sRGB 0.5 everywhere (linear b = 0.21404). Prediction dielectric (m = 0),
+    # ground truth half metallic (m = 0.5):
+    #   diffuse  pred b,    true b/2            -> error b/2
+    #   specular pred 0.04, true 0.02 + b/2     -> error 0.02 - b/2
+    true = flat_maps(4, 4, basecolor=(0.5, 0.5, 0.5), metallic=0.5, batch=(1,), dtype=torch.float64)
+    pred = flat_maps(4, 4, basecolor=(0.5, 0.5, 0.5), metallic=0.0, batch=(1,), dtype=torch.float64)
+    b = SRGB_HALF_LINEAR
+    metric = MapRMSE()
+    metric.update(pred, true)
+    out = metric.compute()
+    assert out["diffuse"].item() == pytest.approx(b / 2, rel=1e-6)
+    assert out["specular"].item() == pytest.approx(abs(0.02 - b / 2), rel=1e-6)
+    assert out["basecolor"].item() == 0.0
+    assert out["metallic"].item() == pytest.approx(0.5)
+
+
+def test_derived_albedo_rmse_metal_vs_dielectric_and_srgb_switch() -> None:
+    # White metal vs white dielectric: diffuse 0 vs 1, specular 1 vs 0.04 (linear).
+    metal = flat_maps(2, 2, basecolor=(1.0, 1.0, 1.0), metallic=1.0, batch=(1,), dtype=torch.float64)
+    plastic = flat_maps(2, 2, basecolor=(1.0, 1.0, 1.0), metallic=0.0, batch=(1,), dtype=torch.float64)
+    linear = MapRMSE()
+    linear.update(metal, plastic)
+    assert linear.compute()["diffuse"].item() == pytest.approx(1.0)
+    assert linear.compute()["specular"].item() == pytest.approx(0.96)
+    srgb = MapRMSE(albedo_space="srgb")
+    srgb.update(metal, plastic)
+    f0_srgb = 1.055 * 0.04 ** (1 / 2.4) - 0.055  # 0.04 sRGB-encoded: 0.2213…
+    assert srgb.compute()["specular"].item() == pytest.approx(1.0 - f0_srgb, rel=1e-6)
+    with pytest.raises(ValueError, match="albedo_space"):
+        MapRMSE(albedo_space="xyz")  # type: ignore[arg-type]
+
+
+def test_normals_90_degrees_apart() -> None:
+    pred, true = normal_maps((1.0, 0.0, 0.0)), normal_maps((0.0, 0.0, 1.0))
+    angle = NormalAngularError()
+    angle.update(pred, true)
+    assert angle.compute().item() == pytest.approx(90.0, abs=1e-9)
+    rmse = MapRMSE()
+    rmse.update(pred, true)
+    # |a - b|² = 2 per pixel, spread over 3 components
+    assert rmse.compute()["normal"].item() == pytest.approx(math.sqrt(2.0 / 3.0))
+
+
+def test_normal_metrics_renormalise_and_are_exact_for_identical_normals() -> None:
+    true = normal_maps((0.0, 0.6, 0.8))
+    pred = normal_maps((0.0, 3.0, 4.0))  # same direction, length 5
+    angle, rmse = NormalAngularError(), MapRMSE()
+    angle.update(pred, true)
+    rmse.update(pred, true)
+    assert angle.compute().item() == pytest.approx(0.0, abs=1e-6)
+    assert rmse.compute()["normal"].item() == pytest.approx(0.0, abs=1e-7)
+    small = normal_maps((math.sin(1e-4), 0.0, math.cos(1e-4)))
+    angle.reset()
+    angle.update(small, normal_maps((0.0, 0.0, 1.0)))
+    assert angle.compute().item() == pytest.approx(math.degrees(1e-4), rel=1e-6)  # atan2, not acos
+
+
+# ---------------------------------------------------------------- accumulation
+
+
+def test_two_updates_equal_one_concatenated_batch() -> None:
+    pred, true = random_maps(8, 8, seed=1, batch=(5,)), random_maps(8, 8, seed=2, batch=(5,))
+    # Uneven split: a mean of per-batch means would weight the single sample like the four others.
+    split, whole = SVBRDFMetrics(downscale_to=4, rerender_configs=2), SVBRDFMetrics(4, rerender_configs=2)
+    split.update(pred[:1], true[:1])
+    split.update(pred[1:], true[1:])
+    whole.update(pred, true)
+    a, b = split.compute(), whole.compute()
+    assert a.keys() == b.keys()
+    for key in a:
+        torch.testing.assert_close(a[key], b[key], rtol=1e-6, atol=0.0)
+    mean_of_means = MapRMSE()
+    mean_of_means.update(pred[:1], true[:1])
+    first = mean_of_means.compute()["roughness"]
+    assert not torch.isclose(first, b["rmse/roughness"])
+
+
+def test_reset() -> None:
+    metric = SVBRDFMetrics(downscale_to=4, rerender_configs=2)
+    metric.update(random_maps(8, 8, seed=1, batch=(2,)), random_maps(8, 8, seed=2, batch=(2,)))
+    before = metric.compute()
+    metric.reset()
+    same = random_maps(8, 8, seed=3, batch=(2,))
+    metric.update(same, same)
+    after = metric.compute()
+    assert before["rmse/roughness"] > 0
+    for key, value in after.items():
+        assert value.item() == pytest.approx(0.0, abs=1e-5), key
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_dtypes(dtype: torch.dtype) -> None:
+    pred = random_maps(8, 8, seed=1, batch=(2,), dtype=dtype)
+    true = random_maps(8, 8, seed=2, batch=(2,), dtype=dtype)
+    metric = SVBRDFMetrics(downscale_to=4, rerender_configs=2)
+    metric.update(pred, true)
+    out = metric.compute()
+    reference = SVBRDFMetrics(downscale_to=4, rerender_configs=2)
+    reference.update(pred.double(), true.double())
+    for key, value in reference.compute().items():
+        assert torch.isfinite(out[key]) and out[key] > 0, key
+        torch.testing.assert_close(out[key], value, rtol=1e-4, atol=1e-6)
+
+
+def test_bad_input() -> None:
+    metric = MapRMSE()
+    with pytest.raises(ValueError, match="same shape"):
+        metric.update(torch.zeros(1, 8, 4, 4), torch.zeros(1, 8, 4, 5))
+    with pytest.raises(InvalidMapsError):
+        metric.update(torch.zeros(1, 7, 4, 4), torch.zeros(1, 7, 4, 4))
+    with pytest.raises(ValueError, match="positive"):
+        MapRMSE(downscale_to=0)
+    with pytest.raises(ValueError, match="configuration"):
+        RerenderError(configs=0)
+
+
+def test_unbatched_input() -> None:
+    pred, true = random_maps(4, 4, seed=1), random_maps(4, 4, seed=2)
+    single, batched = MapRMSE(), MapRMSE()
+    single.update(pred, true)
+    batched.update(pred[None], true[None])
+    assert single.compute() == batched.compute()
+
+
+# ---------------------------------------------------------------- downscaling
+
+
+def checkerboard(size: int) -> Tensor:
+    """1 on even (i + j), 0 on odd: every 2×2 block averages to 0.5."""
+    index = torch.arange(size)
+    return ((index[:, None] + index[None, :]) % 2 == 0).double()
+
+
+def test_downscale_is_area_average() -> None:
+    size, tilt = 8, 0.4
+    board = checkerboard(size)
+    pred = flat_maps(size, size, batch=(1,), dtype=torch.float64)
+    pred[:, 0:3] = board  # base colour black/white
+    pred[:, 6] = board  # roughness 0/1
+    # normals tilted ±x: their block mean points straight up once renormalised
+    sign = 2.0 * board - 1.0
+    pred[:, 3] = sign * math.sin(tilt)
+    pred[:, 5] = math.cos(tilt)
+    true = flat_maps(size, size, basecolor=(0.5, 0.5, 0.5), roughness=0.5, batch=(1,), dtype=torch.float64)
+
+    full, half = MapRMSE(), MapRMSE(downscale_to=size // 2)
+    full.update(pred, true)
+    half.update(pred, true)
+    full_out, half_out = full.compute(), half.compute()
+    assert full_out["roughness"].item() == pytest.approx(0.5)
+    assert full_out["basecolor"].item() == pytest.approx(0.5)
+    assert full_out["normal"].item() > 0.1
+    for name in ("roughness", "basecolor", "normal", "metallic"):
+        assert half_out[name].item() == pytest.approx(0.0, abs=1e-12), name
+    # Derived albedos are downscaled in their compared (linear) space: the mean of linear 0 and 1
+    # is 0.5, not the linear value of sRGB 0.5, so the diffuse error is 0.5 - 0.214.
+    assert half_out["diffuse"].item() == pytest.approx(0.5 - SRGB_HALF_LINEAR, rel=1e-9)
+
+
+def test_downscale_skips_small_inputs() -> None:
+    pred, true = random_maps(8, 8, seed=1, batch=(1,)), random_maps(8, 8, seed=2, batch=(1,))
+    metric = MapRMSE(downscale_to=8)
+    metric.update(pred, true)
+    assert metric.compute() == {}
+    collection = SVBRDFMetrics(downscale_to=8, rerender_configs=2)
+    collection.update(pred, true)
+    keys = set(collection.compute())
+    assert keys == {f"rmse/{name}" for name in RMSE_MAPS} | {"normal_angle_deg", "rerender_rmse"}
+    collection = SVBRDFMetrics(downscale_to=4, rerender_configs=2, prefix="val/")
+    collection.update(pred, true)
+    keys = set(collection.compute())
+    assert {f"val/rmse4/{name}" for name in RMSE_MAPS} <= keys
+    assert "val/rerender_rmse" in keys and len(keys) == 2 * len(RMSE_MAPS) + 2
+
+
+def test_downscale_non_square_keeps_aspect() -> None:
+    pred, true = random_maps(8, 16, seed=1, batch=(1,)), random_maps(8, 16, seed=2, batch=(1,))
+    metric = MapRMSE(downscale_to=4)
+    metric.update(pred, true)
+    assert int(metric.pixels) == 4 * 8
+
+
+# ---------------------------------------------------------------- re-rendering error
+
+
+def test_rerender_error_zero_for_identical_positive_otherwise() -> None:
+    a, b = random_maps(8, 8, seed=1, batch=(2,)), random_maps(8, 8, seed=2, batch=(2,))
+    metric = RerenderError(configs=4)
+    metric.update(a, a)
+    assert metric.compute().item() == 0.0
+    metric.reset()
+    metric.update(a, b)
+    assert metric.compute().item() > 0.01
+    assert int(metric.values) == 2 * 4 * 3 * 8 * 8
+
+
+def test_rerender_error_reproducible_and_batch_independent() -> None:
+    pred, true = random_maps(8, 8, seed=3, batch=(4,)), random_maps(8, 8, seed=4, batch=(4,))
+    split, whole = RerenderError(configs=4, seed=7), RerenderError(configs=4, seed=7)
+    split.update(pred[:1], true[:1])
+    split.update(pred[1:], true[1:])
+    whole.update(pred, true)
+    torch.testing.assert_close(split.compute(), whole.compute(), rtol=1e-6, atol=0.0)
+    other_seed = RerenderError(configs=4, seed=8)
+    other_seed.update(pred, true)
+    assert not torch.isclose(other_seed.compute(), whole.compute())
+
+
+def test_fixed_configs_depend_on_seed_and_count_only() -> None:
+    torch.manual_seed(123)  # the global generator must not matter
+    a = fixed_render_configs(6, seed=5)
+    torch.manual_seed(456)
+    b = fixed_render_configs(6, seed=5)
+    assert torch.equal(a.camera_position, b.camera_position)
+    assert torch.equal(a.lights.color, b.lights.color)
+    assert a.camera_position.shape == (1, 6, 3)
+    # half random, half highlight configurations, all above the sample
+    assert (a.camera_position[..., 2] > 0).all() and (a.lights.position[..., 2] > 0).all()
+
+
+# ---------------------------------------------------------------- distributed reduction
+
+
+def _states(metric: MapRMSE) -> Iterator[Tensor]:
+    return iter([getattr(metric, name) for name in metric._reductions])
+
+
+def test_merge_state_equals_single_process() -> None:
+    pred, true = random_maps(8, 8, seed=5, batch=(3,)), random_maps(8, 8, seed=6, batch=(3,))
+    single = SVBRDFMetrics(downscale_to=4, rerender_configs=2)
+    single.update(pred, true)
+    expected = single.compute()
+
+    ranks = [SVBRDFMetrics(downscale_to=4, rerender_configs=2) for _ in range(2)]
+    ranks[0].update(pred[:2], true[:2])
+    ranks[1].update(pred[2:], true[2:])
+    for name, metric in ranks[0].items(keep_base=True):
+        metric.merge_state(ranks[1][name])
+    merged = ranks[0].compute()
+    for key, value in expected.items():
+        torch.testing.assert_close(merged[key], value, rtol=1e-6, atol=0.0)
+
+
+def test_simulated_all_gather_sync_equals_single_process() -> None:
+    # The path DDP takes: every state is all-gathered, then reduced with its dist_reduce_fx.
+    pred, true = random_maps(8, 8, seed=7, batch=(4,)), random_maps(8, 8, seed=8, batch=(4,))
+    single = MapRMSE()
+    single.update(pred, true)
+    rank0, rank1 = MapRMSE(), MapRMSE()
+    rank0.update(pred[:1], true[:1])
+    rank1.update(pred[1:], true[1:])
+    peer_states = _states(rank1)
+
+    def fake_all_gather(tensor: Tensor, group: object = None) -> list[Tensor]:
+        return [tensor, next(peer_states)]
+
+    rank0.sync(dist_sync_fn=fake_all_gather, distributed_available=lambda: True)
+    synced = MapRMSE.compute(rank0)  # the unwrapped compute: the wrapper would try to sync again
+    for key, value in single.compute().items():
+        torch.testing.assert_close(synced[key], value, rtol=1e-6, atol=0.0)
+    rank0.unsync()
+    assert int(rank0.pixels) == 8 * 8
+
+
+def test_collection_forwards_sync_options() -> None:
+    # Rank 0 evaluating alone after DDP training must not all-gather: sync_on_compute=False.
+    metrics = SVBRDFMetrics(downscale_to=4, rerender_configs=2, sync_on_compute=False)
+    assert all(not metric.sync_on_compute for metric in metrics.values())
+    assert all(metric.sync_on_compute for metric in SVBRDFMetrics(rerender_configs=2).values())
+
+
+def test_compared_maps_layout() -> None:
+    maps = random_maps(4, 4, seed=9, batch=(2,), dtype=torch.float64)
+    images = compared_maps(maps)
+    assert {name: image.shape[1] for name, image in images.items()} == RMSE_MAPS
+    parts = split_maps(maps)
+    assert torch.equal(images["basecolor"], parts.basecolor)
+    rebuilt = join_maps(parts.basecolor, images["normal"], images["roughness"], images["metallic"])
+    torch.testing.assert_close(rebuilt, maps)
+
+
+def _ddp_worker(rank: int, world: int, port: int, out_dir: str) -> None:
+    import torch.distributed as dist
+
+    dist.init_process_group("gloo", init_method=f"tcp://127.0.0.1:{port}", rank=rank, world_size=world)
+    try:
+        pred, true = random_maps(8, 8, seed=11, batch=(3,)), random_maps(8, 8, seed=12, batch=(3,))
+        shard = slice(0, 1) if rank == 0 else slice(1, 3)  # uneven shards, as a last batch can be
+        metrics = SVBRDFMetrics(downscale_to=4, rerender_configs=2)
+        metrics.update(pred[shard], true[shard])
+        synced = metrics.compute()
+        # rank 0 alone, as after training: without sync_on_compute=False this would wait forever
+        if rank == 0:
+            alone = SVBRDFMetrics(downscale_to=4, rerender_configs=2, sync_on_compute=False)
+            alone.update(pred, true)
+            torch.save({"synced": synced, "alone": alone.compute()}, f"{out_dir}/rank0.pt")
+        dist.barrier()
+    finally:
+        dist.destroy_process_group()
+
+
+def test_real_gloo_all_gather_equals_single_process(tmp_path) -> None:
+    import socket
+
+    import torch.multiprocessing as mp
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    # spawn, not fork: a forked child can deadlock in the thread pools torch already started here
+    mp.spawn(_ddp_worker, args=(2, port, str(tmp_path)), nprocs=2, join=True)
+    result = torch.load(tmp_path / "rank0.pt")
+    pred, true = random_maps(8, 8, seed=11, batch=(3,)), random_maps(8, 8, seed=12, batch=(3,))
+    single = SVBRDFMetrics(downscale_to=4, rerender_configs=2)
+    single.update(pred, true)
+    for key, value in single.compute().items():
+        torch.testing.assert_close(result["synced"][key], value, rtol=1e-6, atol=0.0)
+        torch.testing.assert_close(result["alone"][key], value, rtol=1e-6, atol=0.0)
