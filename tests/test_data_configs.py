@@ -36,13 +36,13 @@ def test_paper_dataset_follows_the_paper_protocol() -> None:
     assert abs(train_samples - 40544) / 40544 < 0.01  # the paper's training-set size
 
 
-@pytest.mark.parametrize("name", ["default", "tiny", "paper"])
+@pytest.mark.parametrize("name", ["default", "tiny", "paper", "deschaintre"])
 def test_data_configs_instantiate_a_datamodule(name: str) -> None:
     cfg = _compose([f"+data={name}"])
     module = hydra.utils.instantiate(cfg.data, _convert_="all")
     assert isinstance(module, ShardDataModule)
-    if name == "paper":
-        assert module._prepare is None  # too big to make on the fly
+    if name in ("paper", "deschaintre"):
+        assert module._prepare is None  # too big to make on the fly / converted, not generated
         return
     # The prepare hook generates exactly the dataset generate.py makes for the same name.
     prepare = module._prepare

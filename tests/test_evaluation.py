@@ -118,3 +118,23 @@ def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> N
 
     bad = _cli("evaluate.py", "data=tiny", "ckpt=/nonexistent.ckpt", cwd=tiny_data)
     assert bad.returncode == 2 and "checkpoint not found" in bad.stderr and "Traceback" not in bad.stderr
+
+
+@pytest.mark.mitsuba
+def test_baseline_trains_and_is_evaluated_by_the_same_commands(tiny_data: Path) -> None:
+    # The baseline trains with the content losses only (no discriminator); 6 levels fit 64² crops.
+    baseline = ["model=deschaintre2018", "model.generator.levels=6"]
+    baseline += ["loss=no_adv", "loss.switches.feature=false"]
+    baseline += ["data=tiny", "trainer.max_epochs=1", "trainer.num_sanity_val_steps=0", "task_name=baseline"]
+    trained = _cli("train.py", *baseline, cwd=tiny_data)
+    assert trained.returncode == 0, trained.stderr[-3000:]
+    run = sorted((tiny_data / "logs" / "baseline" / "runs").iterdir())[-1]
+    assert "rmse/diffuse" in json.loads((run / "metrics.json").read_text())["model"]
+    ckpt = run / "checkpoints" / "last.ckpt"
+    _, meta = load_generator(ckpt)
+    assert meta["target"] == "brdfgan.models.deschaintre2018.Deschaintre2018"
+    result = _cli("evaluate.py", "data=tiny", f"ckpt={{deschaintre2018: {ckpt}}}", "grid_samples=1",
+                  "task_name=baseline_eval", cwd=tiny_data)  # fmt: skip
+    assert result.returncode == 0, result.stderr[-3000:]
+    out = sorted((tiny_data / "logs" / "baseline_eval" / "runs").iterdir())[-1]
+    assert "| deschaintre2018 |" in (out / "metrics.md").read_text()
