@@ -105,7 +105,7 @@ def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> N
                            config=meta["config"], model_id="smoke")  # fmt: skip
 
     result = _cli("evaluate.py", "data=tiny", f"ckpt={{ours: {ckpt}, exported: {weights}}}", "grid_samples=2",
-                  cwd=tiny_data)  # fmt: skip
+                  "logger=many", cwd=tiny_data)  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
     out = sorted((tiny_data / "logs" / "evaluate" / "runs").iterdir())[-1]
     outputs = ("metrics.json", "metrics.csv", "metrics.md", "rmse.png", "grid_ours.png", "grid_exported.png")
@@ -115,6 +115,10 @@ def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> N
     # The exported weights are the checkpoint's generator: same numbers.
     assert results["ours"]["rmse/diffuse"] == pytest.approx(results["exported"]["rmse/diffuse"], rel=1e-5)
     assert "| ours |" in (out / "metrics.md").read_text()
+    # ... and the same numbers and images went to the dashboards (CSV and TensorBoard here).
+    logged = next((out / "csv").rglob("metrics.csv")).read_text()
+    assert "ours/rmse/diffuse" in logged and "exported/rerender_rmse" in logged
+    assert list((out / "tensorboard").rglob("events.out.tfevents.*"))
 
     bad = _cli("evaluate.py", "data=tiny", "ckpt=/nonexistent.ckpt", cwd=tiny_data)
     assert bad.returncode == 2 and "checkpoint not found" in bad.stderr and "Traceback" not in bad.stderr

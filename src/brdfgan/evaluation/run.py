@@ -36,6 +36,27 @@ def _models(ckpt: Any) -> dict[str, str]:
     return {Path(p).resolve().parent.parent.name if p.endswith(".ckpt") else Path(p).stem: p for p in paths}
 
 
+def log_to_loggers(
+    logger_cfg: DictConfig | None, results: Mapping[str, Mapping[str, float]], images: list[Path]
+) -> None:
+    """Send the metrics (``<model>/<metric>``) and the PNGs to the configured Lightning loggers:
+    every logger takes the metrics; TensorBoard and W&B also take the chart and the grids."""
+    from lightning.pytorch.loggers import TensorBoardLogger, WandbLogger
+
+    from brdfgan.io.images import read_image
+
+    flat = {f"{model}/{k}": v for model, values in results.items() for k, v in values.items()}
+    for node in (logger_cfg or {}).values():
+        logger = hydra.utils.instantiate(node)
+        logger.log_metrics(flat)
+        for path in images:
+            if isinstance(logger, TensorBoardLogger):
+                logger.experiment.add_image(path.stem, read_image(path)[..., :3], dataformats="HWC")
+            elif isinstance(logger, WandbLogger):
+                logger.log_image(key=path.stem, images=[str(path)])
+        logger.finalize("success")
+
+
 def evaluate(cfg: DictConfig, out_dir: str | Path) -> dict[str, dict[str, float]]:
     """Run every model of ``cfg.ckpt`` over ``cfg.split`` of ``cfg.data`` and write the results."""
     device = torch.device("cuda" if cfg.device == "auto" and torch.cuda.is_available() else
@@ -53,6 +74,7 @@ def evaluate(cfg: DictConfig, out_dir: str | Path) -> dict[str, dict[str, float]
     for name, model in models.items():
         if samples:
             written.append(write_grid(model.cpu(), samples, Path(out_dir) / f"grid_{name}.png"))
+    log_to_loggers(cfg.get("logger"), results, [p for p in written if p.suffix == ".png"])
     log.info("\n%s", markdown_table(results))
     log.info("wrote %s", ", ".join(str(p) for p in written))
     return results
