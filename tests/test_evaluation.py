@@ -142,3 +142,28 @@ def test_baseline_trains_and_is_evaluated_by_the_same_commands(tiny_data: Path) 
     assert result.returncode == 0, result.stderr[-3000:]
     out = sorted((tiny_data / "logs" / "baseline_eval" / "runs").iterdir())[-1]
     assert "| deschaintre2018 |" in (out / "metrics.md").read_text()
+
+
+def test_checkpoint_of_another_architecture_is_a_clear_error(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    (run / ".hydra").mkdir(parents=True)
+    (run / "checkpoints").mkdir()
+    node = {"_target_": TARGET, "in_channels": 3, "width": 16, "downsamplings": 2, "residual_blocks": 1}
+    (run / ".hydra" / "config.yaml").write_text(yaml.safe_dump({"model": {"generator": node}}))
+    generator, _ = tiny_generator()  # width 8: does not fit the width-16 config
+    ckpt = run / "checkpoints" / "last.ckpt"
+    torch.save({"state_dict": {f"generator.{k}": v for k, v in generator.state_dict().items()}}, ckpt)
+    with pytest.raises(WeightsError, match="does not fit its run's generator"):
+        load_generator(ckpt)
+    (run / ".hydra" / "config.yaml").unlink()
+    with pytest.raises(WeightsError, match="no run config at"):
+        load_generator(ckpt)
+
+
+def test_evaluating_an_empty_split_names_the_folder(tmp_path: Path) -> None:
+    generator, config = tiny_generator()
+    weights = save_weights(tmp_path / "w.safetensors", generator, target=TARGET, config=config, model_id="t")
+    result = _cli("evaluate.py", "data=deschaintre", f"ckpt={weights}", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr[-2000:]
+    assert f"no shards in {tmp_path}/data/deschaintre/test" in result.stderr
+    assert "Traceback" not in result.stderr
