@@ -49,6 +49,14 @@ class MaterialLayers:
     roughness: Tensor
     metallic: Tensor
 
+    @classmethod
+    def dielectric(cls, basecolor: Tensor, height: Tensor, roughness: Tensor) -> MaterialLayers:
+        """Layers of a non-metal from ``(H, W)`` height and roughness (roughness clipped to [0, 1]).
+
+        Shape: basecolor ``(3, H, W)``, height and roughness ``(H, W)``.
+        """
+        return cls(basecolor, height[None], roughness.clamp(0.0, 1.0)[None], torch.zeros(1, *height.shape))
+
 
 GenerateFn = Callable[[Mapping[str, float], int, torch.Generator], MaterialLayers]
 

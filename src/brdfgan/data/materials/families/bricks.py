@@ -71,12 +71,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     brick_rough = params["brick_roughness"] + 0.05 * grit - 0.03 * mottle
     mortar_rough = 0.95 + 0.03 * grit
     roughness = mortar_rough + (brick_rough - mortar_rough) * face
-    return MaterialLayers(
-        basecolor=basecolor,
-        height=height[None],
-        roughness=roughness.clamp(0.0, 1.0)[None],
-        metallic=torch.zeros(1, size, size),
-    )
+    return MaterialLayers.dielectric(basecolor, height, roughness)
 
 
 FAMILY = MaterialFamily(

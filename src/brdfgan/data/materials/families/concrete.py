@@ -80,12 +80,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
         - 0.25 * trowel * smooth_patch
         + (1.0 - params["roughness"]) * 0.8 * pore
     )
-    return MaterialLayers(
-        basecolor=basecolor,
-        height=height[None],
-        roughness=roughness.clamp(0.0, 1.0)[None],
-        metallic=torch.zeros(1, size, size),
-    )
+    return MaterialLayers.dielectric(basecolor, height, roughness)
 
 
 FAMILY = MaterialFamily(

@@ -93,12 +93,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     # grooves and creases stay rough.
     base = min(params["roughness"] + 0.2, 0.95) if is_fabric else params["roughness"]
     roughness = base + 0.2 * groove + 0.04 * blotch
-    return MaterialLayers(
-        basecolor=basecolor,
-        height=height[None],
-        roughness=roughness.clamp(0.0, 1.0)[None],
-        metallic=torch.zeros(1, size, size),
-    )
+    return MaterialLayers.dielectric(basecolor, height, roughness)
 
 
 FAMILY = MaterialFamily(

@@ -60,12 +60,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     relief = _RELIEF * size
     height = relief * (0.3 * cloud - veins)
     roughness = params["roughness"] * (1.0 + 0.5 * veins + 0.1 * cloud)
-    return MaterialLayers(
-        basecolor=basecolor,
-        height=height[None],
-        roughness=roughness.clamp(0.0, 1.0)[None],
-        metallic=torch.zeros(1, size, size),
-    )
+    return MaterialLayers.dielectric(basecolor, height, roughness)
 
 
 FAMILY = MaterialFamily(

@@ -56,12 +56,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     ).clamp(0.02, 0.95)
 
     roughness = params["roughness"] + 0.06 * grit + (0.98 - params["roughness"]) * crack
-    return MaterialLayers(
-        basecolor=basecolor,
-        height=height[None],
-        roughness=roughness.clamp(0.0, 1.0)[None],
-        metallic=torch.zeros(1, size, size),
-    )
+    return MaterialLayers.dielectric(basecolor, height, roughness)
 
 
 FAMILY = MaterialFamily(

@@ -66,12 +66,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     glaze_rough = params["glaze_roughness"] * (1.0 + 0.15 * glaze_noise)
     grout_rough = 0.9 + 0.05 * grout_noise
     roughness = grout_rough + (glaze_rough - grout_rough) * face
-    return MaterialLayers(
-        basecolor=basecolor,
-        height=height[None],
-        roughness=roughness.clamp(0.0, 1.0)[None],
-        metallic=torch.zeros(1, size, size),
-    )
+    return MaterialLayers.dielectric(basecolor, height, roughness)
 
 
 FAMILY = MaterialFamily(
