@@ -69,6 +69,7 @@ from brdfgan.data.shards import (
     write_manifest,
     write_shard,
 )
+from brdfgan.io.atomic import write_text_atomic
 
 log = logging.getLogger(__name__)
 
@@ -369,12 +370,7 @@ def _first_difference(a: Any, b: Any, prefix: str = "dataset") -> str:
 
 
 def _write_json_atomic(path: Path, content: Mapping[str, Any]) -> None:
-    temp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        temp.write_text(json.dumps(content, indent=2, sort_keys=True) + "\n")
-        os.replace(temp, path)
-    finally:
-        temp.unlink(missing_ok=True)
+    write_text_atomic(path, json.dumps(content, indent=2, sort_keys=True) + "\n")
 
 
 def _shard_complete(path: Path, expected: int) -> bool:

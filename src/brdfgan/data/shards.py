@@ -40,7 +40,6 @@ import json
 import os
 import re
 import tarfile
-import uuid
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import InitVar, dataclass
 from pathlib import Path
@@ -61,6 +60,7 @@ from brdfgan.core.svbrdf import (
     split_maps,
     validate_maps,
 )
+from brdfgan.io.atomic import fsync_directory, temp_path, write_text_atomic
 
 __all__ = [
     "MANIFEST_NAME",
@@ -292,7 +292,7 @@ def write_shard(path: str | os.PathLike[str], samples: Iterable[Sample]) -> Shar
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    temp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    temp = temp_path(path)
     keys: set[str] = set()
     try:
         # O_EXCL never clobbers; 0o666 lets the umask decide (mkstemp would force 0o600).
@@ -314,7 +314,7 @@ def write_shard(path: str | os.PathLike[str], samples: Iterable[Sample]) -> Shar
     except BaseException:
         temp.unlink(missing_ok=True)
         raise
-    _fsync_directory(path.parent)
+    fsync_directory(path.parent)
     return ShardInfo(path=path, count=len(keys), bytes=path.stat().st_size, sha256=_sha256(path))
 
 
@@ -328,20 +328,6 @@ def _add_member(tar: tarfile.TarFile, name: str, data: bytes) -> None:
     info.uname = info.gname = ""
     info.type = tarfile.REGTYPE
     tar.addfile(info, io.BytesIO(data))  # BytesIO shares the bytes, no copy
-
-
-def _fsync_directory(directory: Path) -> None:
-    # Makes the rename itself durable; not every platform/filesystem allows it, hence best effort.
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 def _sha256(path: Path) -> str:
@@ -464,19 +450,7 @@ def write_manifest(root: str | os.PathLike[str], split: str, manifest: Mapping[s
     except (TypeError, ValueError) as error:
         raise ShardError(f"{path}: manifest is not JSON-serialisable ({error})") from error
     path.parent.mkdir(parents=True, exist_ok=True)
-    temp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
-    try:
-        fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temp, path)
-    except BaseException:
-        temp.unlink(missing_ok=True)
-        raise
-    _fsync_directory(path.parent)
-    return path
+    return write_text_atomic(path, text)
 
 
 def read_manifest(root: str | os.PathLike[str], split: str) -> dict[str, Any]:

@@ -18,6 +18,8 @@ from typing import Any
 import torch
 from torch import nn
 
+from brdfgan.io.atomic import atomic_replace
+
 MODEL_PACKAGE = "brdfgan.models."
 
 
@@ -58,12 +60,8 @@ def save_weights(
         "config": json.dumps(dict(config), sort_keys=True),
         "extra": json.dumps(dict(extra or {}), sort_keys=True),
     }
-    temp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with atomic_replace(path) as temp:
         save_file(tensors, str(temp), metadata=metadata)
-        os.replace(temp, path)
-    finally:
-        temp.unlink(missing_ok=True)
     return path
 
 

@@ -1,0 +1,56 @@
+"""Atomic file replacement: write beside the target under a hidden temporary name, fsync, rename.
+
+A reader (or a resumed job) sees either the old file or the complete new one, never a partial
+one; temporary names start with ``.`` and end with ``.tmp`` so globs for real files skip them.
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+
+def temp_path(path: Path) -> Path:
+    """``.<name>.<random>.tmp`` in the target's directory (same filesystem, so rename is atomic)."""
+    return path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+
+
+@contextmanager
+def atomic_replace(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a fresh temporary path to write; on success it is fsynced and renamed over ``path``
+    (and the directory entry fsynced), on any error it is removed and ``path`` is untouched."""
+    path = Path(path)
+    temp = temp_path(path)
+    try:
+        yield temp
+        with temp.open("rb+") as handle:
+            os.fsync(handle.fileno())
+        os.replace(temp, path)
+    except BaseException:
+        temp.unlink(missing_ok=True)
+        raise
+    fsync_directory(path.parent)
+
+
+def fsync_directory(directory: Path) -> None:
+    """Make a rename in ``directory`` durable (best effort: not every filesystem allows it)."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
+    """Replace ``path`` with ``text`` (UTF-8) atomically."""
+    with atomic_replace(path) as temp:
+        temp.write_text(text, encoding="utf-8")
+    return Path(path)
