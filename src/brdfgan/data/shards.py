@@ -60,7 +60,7 @@ from brdfgan.core.svbrdf import (
     split_maps,
     validate_maps,
 )
-from brdfgan.io.atomic import fsync_directory, temp_path, write_text_atomic
+from brdfgan.io.atomic import atomic_replace, write_text_atomic
 
 __all__ = [
     "MANIFEST_NAME",
@@ -292,29 +292,22 @@ def write_shard(path: str | os.PathLike[str], samples: Iterable[Sample]) -> Shar
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    temp = temp_path(path)
     keys: set[str] = set()
-    try:
-        # O_EXCL never clobbers; 0o666 lets the umask decide (mkstemp would force 0o600).
-        fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        with os.fdopen(fd, "wb") as handle:
-            with tarfile.open(fileobj=handle, mode="w", format=tarfile.USTAR_FORMAT) as tar:
-                for sample in samples:
-                    if not isinstance(sample, Sample):
-                        raise ShardError(f"{path}: expected Sample objects, got {type(sample).__name__}")
-                    if sample.key in keys:
-                        raise ShardError(f"{path}: duplicate sample key {sample.key!r}")
-                    keys.add(sample.key)
-                    files = encode_sample(sample)
-                    for member in SAMPLE_MEMBERS:
-                        _add_member(tar, f"{sample.key}.{member}", files[member])
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temp, path)
-    except BaseException:
-        temp.unlink(missing_ok=True)
-        raise
-    fsync_directory(path.parent)
+    # "x": exclusive create, never clobbers; the mode follows the umask (mkstemp would force 0o600).
+    with (
+        atomic_replace(path) as temp,
+        temp.open("xb") as handle,
+        tarfile.open(fileobj=handle, mode="w", format=tarfile.USTAR_FORMAT) as tar,
+    ):
+        for sample in samples:
+            if not isinstance(sample, Sample):
+                raise ShardError(f"{path}: expected Sample objects, got {type(sample).__name__}")
+            if sample.key in keys:
+                raise ShardError(f"{path}: duplicate sample key {sample.key!r}")
+            keys.add(sample.key)
+            files = encode_sample(sample)
+            for member in SAMPLE_MEMBERS:
+                _add_member(tar, f"{sample.key}.{member}", files[member])
     return ShardInfo(path=path, count=len(keys), bytes=path.stat().st_size, sha256=_sha256(path))
 
 
