@@ -323,3 +323,32 @@ def test_fewer_eval_shards_than_ranks_evaluates_everything_everywhere(
     with pytest.warns(ShardWarning, match="every rank evaluates the whole split"):
         loader = dm.val_dataloader()
     assert sorted(loaded_keys(loader)) == sorted(keys["val"])
+
+
+def test_train_crop_takes_matching_windows_and_eval_stays_whole(
+    dataset: tuple[Path, dict[str, list[str]]],
+) -> None:
+    root, _ = dataset
+    dm = ShardDataModule(str(root), batch_size=4, train_crop=5, shuffle_buffer=0)
+    dm.setup("fit")
+    windows = set()
+    for batch in dm.train_dataloader():
+        assert batch["photo"].shape == (4, 3, 5, 5) and batch["maps"].shape == (4, 8, 5, 5)
+        for photo, maps, key, meta in zip(
+            batch["photo"], batch["maps"], batch["key"], batch["meta"], strict=True
+        ):
+            x, y, size = meta["train_crop"]
+            _, shard, i = key.split("-")
+            whole = make_sample(key, 1000 * int(shard) + int(i))
+            # Photo and maps are cut from the same window of the stored sample.
+            assert torch.allclose(photo, whole.photo[:, y : y + size, x : x + size], atol=1 / 65535)
+            assert torch.allclose(maps[:3], whole.maps[:3, y : y + size, x : x + size], atol=2 / 65535)
+            windows.add((x, y))
+    assert len(windows) > 1  # positions vary
+    assert next(iter(dm.val_dataloader()))["photo"].shape[-1] == SIZE
+    with pytest.raises(ValueError, match="train_crop"):
+        ShardDataModule(str(root), train_crop=0)
+    too_big = ShardDataModule(str(root), batch_size=1, train_crop=SIZE + 1)
+    too_big.setup("fit")
+    with pytest.raises(ShardError, match="larger than sample"):
+        next(iter(too_big.train_dataloader()))

@@ -24,7 +24,7 @@ LOSSES = ["full", "no_adv", "no_feat", "no_param", "no_render"]
 
 
 @pytest.mark.parametrize("loss", LOSSES)
-@pytest.mark.parametrize("experiment", ["null", "cpu", "smoke", "paper"])
+@pytest.mark.parametrize("experiment", ["null", "cpu", "smoke", "paper", "default_model"])
 def test_every_loss_and_experiment_composes_and_builds(loss: str, experiment: str) -> None:
     cfg = compose_train([f"loss={loss}"] + ([f"experiment={experiment}"] if experiment != "null" else []))
     if experiment == "paper":
@@ -34,6 +34,10 @@ def test_every_loss_and_experiment_composes_and_builds(loss: str, experiment: st
         assert cfg.model.generator.width == 64 and cfg.model.generator.residual_blocks == 9
         assert cfg.model.optimizer.lr == 2e-4 and list(cfg.model.optimizer.betas) == [0.5, 0.999]
         return  # building needs 4 GPUs
+    if experiment == "default_model":
+        # 128² crops of the 256² default_model dataset, validated on whole photos.
+        assert cfg.data.train_crop == 128 and cfg.data.data_dir.endswith("default_model")
+        assert cfg.data.prepare.spec.materials == 96 and cfg.data.prepare.spec.resolution == 256
     _, module, trainer = build(cfg)
     switches = module.loss.switches
     assert switches.adversarial == (loss != "no_adv") and switches.feature == (loss != "no_feat")

@@ -191,6 +191,7 @@ class ShardStream(IterableDataset):
         shuffle_buffer: int = 0,
         batches_per_epoch: int | None = None,
         max_samples: int | None = None,
+        crop: int | None = None,
     ) -> None:
         super().__init__()
         if kind not in _KINDS:
@@ -207,6 +208,7 @@ class ShardStream(IterableDataset):
         self.shuffle_buffer = shuffle_buffer
         self.batches_per_epoch = batches_per_epoch
         self.max_samples = max_samples
+        self.crop = crop
         # Counts the iterations of this copy of the dataset: in the main process (no workers)
         # or in a persistent worker, which keeps its copy between epochs.
         self.epoch = 0
@@ -250,9 +252,10 @@ class ShardStream(IterableDataset):
                 initial = min(SHUFFLE_INITIAL, self.shuffle_buffer)
                 records = wds.shuffle(self.shuffle_buffer, initial, rng=rng)(records)
             delivered = 0
+            crop_rng = random.Random(_mix(self.seed, epoch, repeat, self.rank, worker, 2))
             for sample in self._decode(records):
                 delivered += 1
-                yield sample
+                yield sample if self.crop is None else random_crop(sample, self.crop, crop_rng)
             if delivered == 0:
                 warnings.warn(
                     f"train worker {worker} of rank {self.rank} got no readable sample from its shards; "
@@ -318,6 +321,27 @@ class ShardStream(IterableDataset):
                 self.counter.add(self.kind, _SAMPLES)
                 continue
             yield sample
+
+
+def random_crop(sample: Sample, size: int, rng: random.Random) -> Sample:
+    """A ``size``² window of a sample at a uniformly random position (photo and maps alike).
+
+    The generator is fully convolutional, so training on crops of the rendered photos is
+    training on smaller photos with the flash hotspot anywhere in (or outside) the window.
+    ``meta["train_crop"]`` records the window as ``[x, y, size]``.
+
+    Shape:
+        - sample.photo: ``(3, H, W)``, sample.maps: ``(8, H, W)`` with ``H, W >= size``
+        - output: the same with ``H = W = size``
+    """
+    height, width = sample.photo.shape[-2:]
+    if size > min(height, width):
+        raise ShardError(f"train crop {size} is larger than sample {sample.key} ({height}x{width})")
+    y = rng.randrange(height - size + 1)
+    x = rng.randrange(width - size + 1)
+    window = (..., slice(y, y + size), slice(x, x + size))
+    meta = {**sample.meta, "train_crop": [x, y, size]}
+    return Sample(sample.key, sample.photo[window], sample.maps[window], meta, check=False)
 
 
 def _batches(samples: Iterator[Sample], batch_size: int, *, partial: bool) -> Iterator[dict[str, Any]]:
@@ -388,6 +412,9 @@ class ShardDataModule(L.LightningDataModule):
         pin_memory: DataLoader ``pin_memory``.
         epoch_samples: samples per training epoch over all ranks; default: the valid samples in
             the train split (counted in ``setup``).
+        train_crop: train on random ``train_crop``² windows of each sample (see
+            :func:`random_crop`), e.g. 128² crops of 256² data for 4× cheaper steps; validation
+            and test always see whole samples. ``None``: whole samples.
         prepare: called by :meth:`prepare_data` (rank 0 only), e.g. to generate a missing dataset.
 
     After :meth:`setup`, :attr:`skipped` reports skipped shards and samples.
@@ -406,6 +433,7 @@ class ShardDataModule(L.LightningDataModule):
         seed: int = 0,
         pin_memory: bool = False,
         epoch_samples: int | None = None,
+        train_crop: int | None = None,
         prepare: Callable[[], None] | None = None,
     ) -> None:
         super().__init__()
@@ -415,7 +443,8 @@ class ShardDataModule(L.LightningDataModule):
             raise ValueError(f"num_workers must be >= 0, got {num_workers}")
         if shuffle_buffer < 0:
             raise ValueError(f"shuffle_buffer must be >= 0, got {shuffle_buffer}")
-        for name, value in (("val_samples", val_samples), ("epoch_samples", epoch_samples)):
+        named = (("val_samples", val_samples), ("epoch_samples", epoch_samples), ("train_crop", train_crop))
+        for name, value in named:
             if value is not None and value < 1:
                 raise ValueError(f"{name} must be >= 1 or None, got {value}")
         self.save_hyperparameters(ignore=["prepare"])
@@ -428,6 +457,7 @@ class ShardDataModule(L.LightningDataModule):
         self.seed = seed
         self.pin_memory = pin_memory
         self.epoch_samples = epoch_samples
+        self.train_crop = train_crop
         self._prepare = prepare
         self._indices: dict[str, _SplitIndex] = {}
         self._skipped_shards = 0
@@ -468,7 +498,7 @@ class ShardDataModule(L.LightningDataModule):
                 ShardWarning,
                 stacklevel=2,
             )
-        stream = self._stream("train", index, shuffle_buffer=self.shuffle_buffer)
+        stream = self._stream("train", index, shuffle_buffer=self.shuffle_buffer, crop=self.train_crop)
         self.teardown("fit")  # a previous train loader's workers are not needed any more
         self._train_loader = self._loader(stream, persistent=self.num_workers > 0)
         return self._train_loader
