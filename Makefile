@@ -15,7 +15,7 @@ endif
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml Makefile
+$(STAMP): pyproject.toml Makefile scripts/install_gltf_validator.sh
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || { echo "error: $(PYTHON) must be Python >= 3.11" >&2; exit 1; }
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
@@ -27,6 +27,8 @@ $(STAMP): pyproject.toml Makefile
 		apt-get install -y -qq libllvm19 >/dev/null 2>&1 || { apt-get update -qq >/dev/null 2>&1 && apt-get install -y -qq libllvm19 >/dev/null 2>&1; } \
 		|| echo "warning: libllvm19 could not be installed; Mitsuba falls back to the slower scalar_rgb variant" >&2; \
 	fi
+	@# The Khronos glTF validator (npm) for the .glb export test; optional, never fails setup.
+	@bash scripts/install_gltf_validator.sh
 	@touch $(STAMP)
 
 test: setup
@@ -57,5 +59,5 @@ data: setup
 	$(PY) generate.py
 
 clean:
-	rm -rf $(VENV) outputs multirun .pytest_cache .ruff_cache src/*.egg-info
+	rm -rf $(VENV) .node outputs multirun .pytest_cache .ruff_cache src/*.egg-info
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +
