@@ -1,0 +1,561 @@
+"""Reading a user's flash photo into linear RGB (DESIGN.md §2: the network sees linear LDR).
+
+Formats and how their values are interpreted (``colorspace=None`` picks the format's default):
+
+======  ===========================  ============  ===================================================
+source  decoder                      default       notes
+======  ===========================  ============  ===================================================
+jpeg    Pillow                       ``"srgb"``    8-bit; EXIF orientation applied; CMYK rejected
+png     OpenCV (pixels), own header  ``"srgb"``    8/16-bit; EXIF (``eXIf`` chunk) orientation applied
+exr     OpenEXR (``read_image``)     ``"linear"``  half/float; may exceed 1; NaN/Inf rejected,
+                                                   negative values clamped to 0 with a warning
+raw     rawpy (LibRaw)               ``"linear"``  linear demosaic, camera white balance, sRGB
+                                                   primaries, ``/ 65535``; the only colour space
+======  ===========================  ============  ===================================================
+
+Why two decoders for JPEG and PNG. Pillow raises "image file is truncated" on a JPEG cut in the
+middle, where OpenCV/libjpeg may fill the missing part with grey and only print a warning, so JPEG
+pixels come from Pillow. Pillow reduces 16-bit RGB PNGs to 8 bits, so PNG pixels come from OpenCV
+(``IMREAD_UNCHANGED``, which, unlike the default ``IMREAD_COLOR``, does *not* apply EXIF
+orientation: the orientation is applied exactly once, here, with :func:`apply_orientation`).
+Pillow still identifies every file first: its detected format (not the extension) and mode decide
+what happens, so a text file renamed ``.jpg``, a CMYK JPEG or a grayscale PNG are reported before
+any pixel is decoded.
+
+Alpha: an alpha channel with any transparent pixel is an error (a cut-out, not a photo); a fully
+opaque one (many tools always write RGBA) is dropped with a warning. Truncation detection relies on
+Pillow's default ``ImageFile.LOAD_TRUNCATED_IMAGES = False``; code that flips that global defeats it.
+
+Every failure is a :class:`PhotoError` whose message is one line starting with the file's path.
+Suspicious but usable input gives human-readable strings in :attr:`Photo.warnings` (the CLI prints
+them); the colour-space heuristic behind one of them is described at :func:`colorspace_warning`.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import cv2
+import numpy as np
+import torch
+from PIL import Image, UnidentifiedImageError
+
+from brdfgan.core.svbrdf import srgb_to_linear
+from brdfgan.io.images import ImageIOError, read_image
+
+__all__ = [
+    "EXR_PHOTO_EXTENSIONS",
+    "JPEG_PHOTO_EXTENSIONS",
+    "LOOKS_LINEAR_MAX_MEDIAN",
+    "LOOKS_LINEAR_MIN_P99",
+    "LOOKS_SRGB_MIN_MEDIAN",
+    "MIN_PHOTO_SIZE",
+    "PHOTO_EXTENSIONS",
+    "PNG_PHOTO_EXTENSIONS",
+    "RAW_PHOTO_EXTENSIONS",
+    "Colorspace",
+    "Photo",
+    "PhotoError",
+    "apply_orientation",
+    "colorspace_warning",
+    "read_photo",
+]
+
+Colorspace = Literal["srgb", "linear"]
+Source = Literal["jpeg", "png", "exr", "raw"]
+
+JPEG_PHOTO_EXTENSIONS = frozenset({".jpg", ".jpeg"})
+PNG_PHOTO_EXTENSIONS = frozenset({".png"})
+EXR_PHOTO_EXTENSIONS = frozenset({".exr"})
+RAW_PHOTO_EXTENSIONS = frozenset(
+    {".dng", ".cr2", ".cr3", ".nef", ".arw", ".orf", ".rw2", ".raf", ".pef", ".srw"}
+)
+PHOTO_EXTENSIONS = JPEG_PHOTO_EXTENSIONS | PNG_PHOTO_EXTENSIONS | EXR_PHOTO_EXTENSIONS | RAW_PHOTO_EXTENSIONS
+
+MIN_PHOTO_SIZE = 32
+
+# Colour-space heuristic thresholds on the *stored* values of an 8/16-bit file, normalised to
+# [0, 1] (see colorspace_warning for the reasoning and the limits).
+LOOKS_LINEAR_MAX_MEDIAN = 0.1
+LOOKS_LINEAR_MIN_P99 = 0.3
+LOOKS_SRGB_MIN_MEDIAN = 0.3
+# The heuristic and the grayscale check look at a strided subsample of about this many pixels.
+_STATISTICS_PIXELS = 250_000
+
+_EXIF_ORIENTATION_TAG = 0x0112
+# Pillow modes without colour: a flash photo must be RGB to estimate a base colour.
+_GRAYSCALE_MODES = frozenset({"1", "L", "I", "I;16", "I;16B", "I;16L", "I;16N", "F"})
+_GRAY_ALPHA_MODES = frozenset({"LA", "La"})
+# LibRaw's ``flip`` (applied by postprocess) → the equivalent EXIF orientation tag.
+_LIBRAW_FLIP_TO_EXIF = {0: 1, 3: 3, 5: 8, 6: 6}
+_EXR_PIXEL_BITS = {0: 32, 1: 16, 2: 32}  # UINT, HALF, FLOAT
+
+
+class PhotoError(ValueError):
+    """A photo cannot be used; the message is one line and starts with the file's path."""
+
+    def __init__(self, path: str | os.PathLike[str], problem: str) -> None:
+        # Library messages (LibRaw, OpenEXR) can span lines; the CLI prints exactly one.
+        super().__init__(" ".join(f"{path}: {problem}".split()))
+
+
+@dataclass(frozen=True)
+class Photo:
+    """A decoded photo in linear RGB plus how it was interpreted.
+
+    Attributes:
+        path: the file read.
+        linear: ``(3, H, W)`` float32 linear RGB, EXIF orientation applied. JPEG/PNG lie in
+            ``[0, 1]``; EXR may exceed 1; RAW is in ``[0, 1]`` relative to the white level.
+        source: ``"jpeg"``, ``"png"``, ``"exr"`` or ``"raw"`` (from the file's content for
+            JPEG/PNG, not its extension).
+        bit_depth: 8/16 for JPEG/PNG, 16/32 for half/float EXR, the sensor's bits for RAW when
+            LibRaw reports a white level, else ``None``.
+        colorspace: ``"srgb"`` (the stored values were decoded with the sRGB curve) or ``"linear"``.
+        orientation: the EXIF orientation tag that was applied (1 = none).
+        warnings: human-readable warnings for the user.
+    """
+
+    path: Path
+    linear: torch.Tensor
+    source: str
+    bit_depth: int | None
+    colorspace: str
+    orientation: int
+    warnings: tuple[str, ...]
+
+    @property
+    def height(self) -> int:
+        return int(self.linear.shape[-2])
+
+    @property
+    def width(self) -> int:
+        return int(self.linear.shape[-1])
+
+
+def read_photo(path: str | os.PathLike[str], colorspace: Colorspace | None = None) -> Photo:
+    """Read a JPEG, PNG, EXR or camera RAW photo into linear RGB.
+
+    Args:
+        path: the photo file; its extension must be one of :data:`PHOTO_EXTENSIONS`.
+        colorspace: how to interpret the stored values. ``None``: the format's default (sRGB for
+            JPEG/PNG, linear for EXR and RAW). ``"srgb"``: decode with the sRGB curve.
+            ``"linear"``: take the values as they are. RAW files are always decoded linearly;
+            asking for ``"srgb"`` there is an error.
+
+    Raises:
+        PhotoError: the file is missing, unreadable, not an image, truncated, smaller than
+            :data:`MIN_PHOTO_SIZE` on a side, grayscale, has a (non-opaque) alpha channel, is CMYK,
+            holds NaN/Inf (EXR), or has an unsupported extension. One line, naming the file.
+
+    Shape:
+        - output ``Photo.linear``: ``(3, H, W)`` float32, H and W after EXIF orientation
+    """
+    path = Path(path)
+    if colorspace not in (None, "srgb", "linear"):
+        raise PhotoError(path, f"unknown colour space {colorspace!r}, expected 'srgb' or 'linear'")
+    ext = path.suffix.lower()
+    if ext not in PHOTO_EXTENSIONS:
+        raise PhotoError(
+            path,
+            f"unsupported file type {path.suffix or '(no extension)'!r}; "
+            f"supported: {', '.join(sorted(PHOTO_EXTENSIONS))}",
+        )
+    _check_file(path)
+    if ext in EXR_PHOTO_EXTENSIONS:
+        return _read_exr_photo(path, colorspace or "linear")
+    if ext in RAW_PHOTO_EXTENSIONS:
+        if colorspace == "srgb":
+            raise PhotoError(path, "RAW files are demosaiced linearly; colorspace 'srgb' does not apply")
+        return _read_raw_photo(path)
+    return _read_ldr_photo(path, colorspace)
+
+
+def apply_orientation(image: np.ndarray, orientation: int) -> np.ndarray:
+    """Undo an EXIF orientation like Pillow's ``ImageOps.exif_transpose`` (tags 1–8).
+
+    Returns a view where possible; 1 (or any unknown tag) returns the input.
+
+    Shape:
+        - image: ``(H, W, ...)``
+        - output: ``(H, W, ...)`` for tags 1–4, ``(W, H, ...)`` for tags 5–8
+    """
+    if orientation == 2:
+        return image[:, ::-1]
+    if orientation == 3:
+        return image[::-1, ::-1]
+    if orientation == 4:
+        return image[::-1]
+    if orientation == 5:
+        return image.swapaxes(0, 1)
+    if orientation == 6:
+        return np.rot90(image, k=-1)
+    if orientation == 7:
+        return image[::-1, ::-1].swapaxes(0, 1)
+    if orientation == 8:
+        return np.rot90(image, k=1)
+    return image
+
+
+def colorspace_warning(stored: np.ndarray, colorspace: Colorspace) -> str | None:
+    """A warning when the stored values of an 8/16-bit photo look like the other colour space.
+
+    The statistic is the luma ``Y`` of the *stored* values (normalised to [0, 1], before any
+    decoding). It relies on how cameras expose: a meter puts the scene average near middle grey,
+    18 % of saturation in linear terms, which the sRGB curve stores as ~0.46.
+
+    - Read as sRGB but looks linear: ``median(Y) < 0.1`` while ``p99(Y) >= 0.3``. Decoded as sRGB
+      that median would be ~1 % of saturation, over 7 stops below the highlights: a camera never
+      exposes a JPEG like that, but a linear image written without the sRGB curve (a RAW export
+      saved as-is, a rendering, our own auto-exposed training inputs with median ~0.05–0.09)
+      looks exactly like that.
+    - Read as linear but looks sRGB: ``median(Y) > 0.3``. A linear photo exposed by a meter has
+      its median near or below 0.18 (flash falloff makes the median smaller than the mean), while
+      the sRGB encoding of the same photo has its median near 0.4–0.5.
+
+    Limits (why these are warnings, not errors): the statistic only sees exposure, not the tone
+    curve itself. A photo of a very dark material (black leather, slate) with a bright flash
+    highlight can trip the first test although it is sRGB; a dark or underexposed sRGB photo
+    (median below 0.3) read as linear is not detected, nor is a bright, overexposed linear image
+    told apart from sRGB. Images between the thresholds are never flagged. EXR and RAW are not
+    checked: their values have no fixed relation to saturation (EXR) or are decoded by us (RAW).
+
+    Shape:
+        - stored: ``(H, W, 3)`` floating point in [0, 1] (any subsample of the photo)
+    """
+    luma = stored.astype(np.float32) @ np.asarray([0.2126, 0.7152, 0.0722], dtype=np.float32)
+    median, p99 = (float(v) for v in np.quantile(luma, [0.5, 0.99]))
+    if colorspace == "srgb" and median < LOOKS_LINEAR_MAX_MEDIAN and p99 >= LOOKS_LINEAR_MIN_P99:
+        return (
+            f"the photo looks linear, not sRGB-encoded (median stored value {median:.3f}, "
+            f"99th percentile {p99:.2f}); if it holds linear data (e.g. a RAW export saved without "
+            f"a tone curve), read it as linear (--input-colorspace linear)"
+        )
+    if colorspace == "linear" and median > LOOKS_SRGB_MIN_MEDIAN:
+        return (
+            f"the photo looks sRGB-encoded, not linear (median stored value {median:.3f}); "
+            f"if it is an ordinary camera JPEG/PNG, read it as sRGB (--input-colorspace srgb)"
+        )
+    return None
+
+
+# --------------------------------------------------------------------------------------------- files
+
+
+def _check_file(path: Path) -> None:
+    if not path.exists():
+        raise PhotoError(path, "file not found")
+    if not path.is_file():
+        raise PhotoError(path, "not a regular file")
+
+
+def _read_bytes(path: Path) -> bytes:
+    try:
+        data = path.read_bytes()
+    except OSError as error:
+        raise PhotoError(path, f"cannot read file ({error.strerror or error})") from error
+    if not data:
+        raise PhotoError(path, "file is empty")
+    return data
+
+
+def _check_size(path: Path, width: int, height: int) -> None:
+    if min(width, height) < MIN_PHOTO_SIZE:
+        raise PhotoError(
+            path, f"image is {width}×{height} pixels; at least {MIN_PHOTO_SIZE} pixels per side are needed"
+        )
+
+
+def _subsample(image: np.ndarray) -> np.ndarray:
+    """A strided subsample of about ``_STATISTICS_PIXELS`` pixels: statistics stay cheap on 24 MP."""
+    stride = max(1, math.ceil(math.sqrt(image.shape[0] * image.shape[1] / _STATISTICS_PIXELS)))
+    return image[::stride, ::stride]
+
+
+def _identical_channels_warning(sample: np.ndarray) -> str | None:
+    if np.array_equal(sample[..., 0], sample[..., 1]) and np.array_equal(sample[..., 1], sample[..., 2]):
+        return (
+            "all three colour channels are identical: the photo looks grayscale, "
+            "so the base colour cannot be estimated"
+        )
+    return None
+
+
+# ------------------------------------------------------------------------------------------ JPEG/PNG
+
+
+def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
+    data = _read_bytes(path)
+    warnings: list[str] = []
+    try:
+        with Image.open(io.BytesIO(data)) as image:
+            pil_format, mode, (width, height) = image.format, image.mode, image.size
+            if pil_format in ("JPEG", "MPO"):  # MPO: multi-picture JPEG written by many cameras
+                source: Source = "jpeg"
+                orientation = _orientation_tag(image.getexif().get(_EXIF_ORIENTATION_TAG, 1), warnings)
+                _check_mode(path, mode)
+                if mode != "RGB":
+                    raise PhotoError(path, f"unsupported JPEG mode {mode!r}, expected RGB")
+                _check_size(path, width, height)
+                image.load()  # raises "image file is truncated" instead of decoding grey
+                stored = np.asarray(image)
+            elif pil_format == "PNG":
+                source = "png"
+                _check_mode(path, mode)
+                _check_size(path, width, height)
+                orientation = _orientation_tag(_png_exif_orientation(data), warnings)
+                stored = None
+            else:
+                raise PhotoError(
+                    path, f"file content is {pil_format or 'an unknown'} image, expected JPEG or PNG"
+                )
+    except PhotoError:
+        raise
+    except UnidentifiedImageError as error:
+        raise PhotoError(path, "not an image file (or an unsupported or corrupt image format)") from error
+    except Image.DecompressionBombError as error:
+        raise PhotoError(path, f"image is too large to decode safely ({error})") from error
+    except (OSError, SyntaxError, ValueError, EOFError, struct.error) as error:
+        raise PhotoError(path, f"truncated or corrupt image data ({error})") from error
+
+    if source == "png":
+        stored = _decode_png(path, data)
+    assert stored is not None
+    stored = _drop_opaque_alpha(path, stored, warnings)
+    expected_ext = JPEG_PHOTO_EXTENSIONS if source == "jpeg" else PNG_PHOTO_EXTENSIONS
+    if path.suffix.lower() not in expected_ext:
+        warnings.append(f"the file holds a {source.upper()} image although its extension is {path.suffix!r}")
+
+    bit_depth = 16 if stored.dtype == np.uint16 else 8
+    levels = 65535 if bit_depth == 16 else 255
+    colorspace = colorspace or "srgb"
+    sample = _subsample(stored)
+    for warning in (
+        _identical_channels_warning(sample),
+        colorspace_warning(sample.astype(np.float32) / levels, colorspace),
+    ):
+        if warning:
+            warnings.append(warning)
+
+    # A lookup table built with the project's sRGB curve decodes every code exactly once and
+    # avoids the several full-size float temporaries of srgb_to_linear on a 24 MP photo.
+    table = torch.arange(levels + 1, dtype=torch.float64) / levels
+    if colorspace == "srgb":
+        table = srgb_to_linear(table)
+    oriented = apply_orientation(stored, orientation)
+    # Indexing with the (C, H, W) view writes the result directly in channel-first order.
+    linear = table.to(torch.float32).numpy()[oriented.transpose(2, 0, 1)]
+    return Photo(
+        path=path,
+        linear=torch.from_numpy(np.ascontiguousarray(linear)),
+        source=source,
+        bit_depth=bit_depth,
+        colorspace=colorspace,
+        orientation=orientation,
+        warnings=tuple(warnings),
+    )
+
+
+def _check_mode(path: Path, mode: str) -> None:
+    # Alpha in RGBA/palette images is judged later on the decoded pixels (an opaque one is harmless).
+    if mode == "CMYK":
+        raise PhotoError(path, "is CMYK; convert it to RGB")
+    if mode in _GRAY_ALPHA_MODES:
+        raise PhotoError(path, "is grayscale with an alpha channel; a colour RGB photo is needed")
+    if mode in _GRAYSCALE_MODES:
+        raise PhotoError(path, "is grayscale; a colour photo is needed")
+
+
+def _orientation_tag(value: object, warnings: list[str]) -> int:
+    try:
+        tag = int(value)  # type: ignore[call-overload]
+    except (TypeError, ValueError):
+        tag = 0
+    if 1 <= tag <= 8:
+        return tag
+    warnings.append(f"ignored invalid EXIF orientation {value!r}")
+    return 1
+
+
+def _png_exif_orientation(data: bytes) -> int:
+    """The orientation in a PNG's ``eXIf`` chunk, found by walking the chunk headers.
+
+    Pillow's ``getexif()`` on a PNG decodes the whole image to look for an ``eXIf`` chunk after
+    the pixel data; walking the chunks costs nothing.
+    """
+    offset = 8  # PNG signature
+    while offset + 8 <= len(data):
+        length, kind = struct.unpack(">I4s", data[offset : offset + 8])
+        if kind == b"eXIf":
+            exif = Image.Exif()
+            exif.load(data[offset + 8 : offset + 8 + length])
+            return int(exif.get(_EXIF_ORIENTATION_TAG, 1))
+        if kind == b"IEND":
+            break
+        offset += 12 + length  # length, type, data, CRC
+    return 1
+
+
+def _decode_png(path: Path, data: bytes) -> np.ndarray:
+    # IMREAD_UNCHANGED keeps 16 bits and, unlike IMREAD_COLOR, ignores EXIF orientation.
+    # OpenCV logs its own "PNG input buffer is incomplete" warning to stderr; the PhotoError below
+    # already says it in one line, so its log is quietened for this call.
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    try:
+        image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    except cv2.error as error:
+        raise PhotoError(path, "truncated or corrupt PNG data") from error
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+    if image is None:
+        raise PhotoError(path, "truncated or corrupt PNG data")
+    if image.dtype not in (np.uint8, np.uint16):
+        raise PhotoError(path, f"unsupported sample type {image.dtype}, expected 8- or 16-bit")
+    if image.ndim == 2 or image.shape[2] < 3:
+        raise PhotoError(path, "is grayscale; a colour photo is needed")
+    if image.shape[2] == 3:
+        return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    return cv2.cvtColor(image, cv2.COLOR_BGRA2RGBA)
+
+
+def _drop_opaque_alpha(path: Path, image: np.ndarray, warnings: list[str]) -> np.ndarray:
+    """RGBA → RGB when every pixel is fully opaque (many tools always write alpha), else an error:
+    transparent pixels have no meaningful colour and mark a cut-out, not a photo."""
+    if image.shape[-1] != 4:
+        return image
+    alpha = image[..., 3]
+    opaque = np.iinfo(image.dtype).max if np.issubdtype(image.dtype, np.integer) else 1.0
+    if not (alpha == opaque).all():
+        raise PhotoError(path, "has an alpha channel with transparent pixels; save the photo as RGB")
+    warnings.append("the alpha channel is fully opaque and was ignored")
+    return image[..., :3]
+
+
+# ----------------------------------------------------------------------------------------------- EXR
+
+
+def _read_exr_photo(path: Path, colorspace: Colorspace) -> Photo:
+    names, bit_depth = _exr_channels(path)
+    # Luminance-only files (Y, Y+A, one channel); other channel sets are read_image's to report.
+    if names is not None and not {"R", "G", "B"} <= set(names) and ("Y" in names or len(names) == 1):
+        channels = ", ".join(sorted(names))
+        raise PhotoError(path, f"is grayscale (EXR channels {channels}); a colour photo is needed")
+    try:
+        image = read_image(path)
+    except ImageIOError as error:
+        raise PhotoError(path, str(error).removeprefix(f"{path}: ")) from error
+    if image.shape[2] == 1:
+        raise PhotoError(path, "is grayscale; a colour photo is needed")
+    _check_size(path, image.shape[1], image.shape[0])
+    warnings: list[str] = []
+    image = _drop_opaque_alpha(path, image, warnings)
+    finite = np.isfinite(image)
+    if not finite.all():
+        count = int((~finite).sum())
+        raise PhotoError(path, f"contains {count} NaN or infinite values")
+    negative = image < 0
+    if negative.any():
+        # Slightly negative values are common in EXR (out-of-gamut colours after a colour-space
+        # conversion, denoiser ringing). They have no physical meaning for a reflectance photo.
+        warnings.append(f"{negative.mean():.2%} of the values were negative and were clamped to 0")
+        image = np.maximum(image, 0.0)
+    warning = _identical_channels_warning(_subsample(image))
+    if warning:
+        warnings.append(warning)
+    linear = torch.from_numpy(np.ascontiguousarray(image.transpose(2, 0, 1)))
+    if colorspace == "srgb":
+        if float(linear.max()) > 1.0:
+            warnings.append("values above 1 were decoded with the sRGB curve, which is defined on [0, 1]")
+        linear = srgb_to_linear(linear)
+    return Photo(
+        path=path,
+        linear=linear.to(torch.float32).contiguous(),
+        source="exr",
+        bit_depth=bit_depth,
+        colorspace=colorspace,
+        orientation=1,
+        warnings=tuple(warnings),
+    )
+
+
+def _exr_channels(path: Path) -> tuple[list[str] | None, int | None]:
+    """Channel names and bits per sample from the first EXR header's ``chlist`` attribute.
+
+    The OpenEXR bindings only report a channel's type from its decoded pixels, and read_image
+    returns float32 whatever was stored; the header says it without decoding anything.
+    Returns ``(None, None)`` when the header cannot be parsed (read_image then reports why).
+    """
+    try:
+        with path.open("rb") as handle:
+            header = handle.read(1 << 20)
+        if header[:4] != b"\x76\x2f\x31\x01":
+            return None, None
+        offset = 8
+        while offset < len(header) and header[offset] != 0:
+            name_end = header.index(b"\0", offset)
+            type_end = header.index(b"\0", name_end + 1)
+            (size,) = struct.unpack_from("<i", header, type_end + 1)
+            value_start = type_end + 5
+            if header[offset:name_end] == b"channels" and header[name_end + 1 : type_end] == b"chlist":
+                names, types = [], set()
+                cursor = value_start
+                while header[cursor] != 0:
+                    end = header.index(b"\0", cursor)
+                    names.append(header[cursor:end].decode("utf-8", "replace"))
+                    types.add(struct.unpack_from("<i", header, end + 1)[0])
+                    cursor = end + 1 + 16  # pixel type, pLinear + 3 reserved, x/y sampling
+                bits = {_EXR_PIXEL_BITS.get(t) for t in types}
+                return names, (max(b for b in bits if b) if bits - {None} else None)
+            offset = value_start + size
+    except (OSError, ValueError, IndexError, struct.error):
+        pass
+    return None, None
+
+
+# ----------------------------------------------------------------------------------------------- RAW
+
+
+def _read_raw_photo(path: Path) -> Photo:
+    import rawpy  # imported lazily: LibRaw is only needed for camera RAW files
+
+    try:
+        with rawpy.imread(str(path)) as raw:
+            white_level = getattr(raw, "white_level", None)
+            flip = int(getattr(raw.sizes, "flip", 0) or 0)
+            # Linear demosaic like the paper's capture (§6.1, RAW exported linear): gamma (1, 1) is
+            # no tone curve, no_auto_bright keeps LibRaw from rescaling, 16 bits keep the shadows.
+            rgb = raw.postprocess(
+                gamma=(1, 1),
+                no_auto_bright=True,
+                use_camera_wb=True,
+                output_bps=16,
+                output_color=rawpy.ColorSpace.sRGB,
+            )
+    except (rawpy.LibRawError, rawpy.NotSupportedError, OSError, ValueError) as error:
+        raise PhotoError(path, f"cannot decode RAW file ({type(error).__name__}: {error})") from error
+    rgb = np.asarray(rgb)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise PhotoError(path, f"RAW decoder returned shape {rgb.shape}, expected (H, W, 3)")
+    _check_size(path, rgb.shape[1], rgb.shape[0])
+    warnings: list[str] = []
+    warning = _identical_channels_warning(_subsample(rgb))
+    if warning:
+        warnings.append(warning)
+    linear = torch.from_numpy(np.ascontiguousarray(rgb.transpose(2, 0, 1)).astype(np.float32) / 65535.0)
+    bit_depth = int(white_level).bit_length() if white_level and int(white_level) > 0 else None
+    return Photo(
+        path=path,
+        linear=linear,
+        source="raw",
+        bit_depth=bit_depth,
+        colorspace="linear",
+        orientation=_LIBRAW_FLIP_TO_EXIF.get(flip, 1),
+        warnings=tuple(warnings),
+    )
