@@ -1,0 +1,372 @@
+from __future__ import annotations
+
+import itertools
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+from PIL import Image
+
+from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
+from brdfgan.core.svbrdf import flat_maps, linear_to_srgb, normalize_normal
+from brdfgan.inference import preview
+from brdfgan.inference.preview import (
+    ENVIRONMENT_LIGHT_DISTANCE,
+    LABEL_HEIGHT,
+    SEPARATOR,
+    SEPARATOR_COLOR,
+    Environment,
+    animation_frames,
+    preview_image,
+    preview_lights,
+    preview_size,
+    relight,
+    render_environment,
+    resize_maps,
+    sample_environment,
+    write_animation,
+    write_preview,
+)
+from tests.conftest import random_maps
+
+SIZE = 32
+
+
+def _plane(size: int = SIZE, normal: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> torch.Tensor:
+    """A white-ish dielectric plane, optionally with every normal tilted the same way."""
+    maps = flat_maps(size, size, basecolor=(0.8, 0.8, 0.8), roughness=0.5, metallic=0.0)
+    maps[3:6] = normalize_normal(torch.tensor(normal).view(3, 1, 1).expand(3, size, size).clone())
+    return maps
+
+
+def _relative_l1(a: torch.Tensor, b: torch.Tensor) -> float:
+    return float((a - b).abs().sum() / b.abs().sum())
+
+
+# ------------------------------------------------------------------------------------------- lights
+
+
+def test_preview_lights_are_novel_and_spread() -> None:
+    lights = preview_lights(4)
+    assert lights.shape == (4, 3)
+    distance = lights.norm(dim=-1)
+    torch.testing.assert_close(distance, torch.full((4,), 3.0))
+    elevation = torch.rad2deg(torch.asin(lights[:, 2] / distance))
+    torch.testing.assert_close(elevation, torch.tensor([45.0, 45.0, 45.0, 12.0]), atol=1e-4, rtol=0)
+    assert (lights[:, :2].norm(dim=-1) > 1.0).all()  # none of them on the flash/camera axis
+    azimuth = torch.rad2deg(torch.atan2(lights[:, 1], lights[:, 0])) % 360
+    torch.testing.assert_close(azimuth, torch.tensor([45.0, 165.0, 285.0, 105.0]), atol=1e-3, rtol=0)
+    assert preview_lights(1).shape == (1, 3)
+    with pytest.raises(ValueError, match="count"):
+        preview_lights(0)
+
+
+# ------------------------------------------------------------------------------------------ relight
+
+
+def test_relight_light_above_centre_is_centred_and_symmetric() -> None:
+    image = relight(_plane(), torch.tensor([[0.0, 0.0, 2.0]]))
+    assert image.shape == (1, 3, SIZE, SIZE)
+    image = image[0]
+    torch.testing.assert_close(image, image.flip(-1), rtol=1e-5, atol=1e-7)
+    torch.testing.assert_close(image, image.flip(-2), rtol=1e-5, atol=1e-7)
+    torch.testing.assert_close(image, image.transpose(-1, -2), rtol=1e-5, atol=1e-7)
+    gray = image.mean(dim=0)
+    centre = slice(SIZE // 2 - 1, SIZE // 2 + 1)
+    assert gray[centre, centre].min() == gray.max()
+    assert gray.max() > 2.0 * gray[0, 0]
+
+
+def test_relight_orientation_convention() -> None:
+    """+X is the right of the image, +Y its top (row 0), as in the renderer and DESIGN.md §2."""
+    plane = _plane()
+    right, up = relight(plane, torch.tensor([[1.5, 0.0, 2.0], [0.0, 1.5, 2.0]])).mean(dim=1)
+    half = SIZE // 2
+    assert right[:, half:].mean() > 1.5 * right[:, :half].mean()
+    assert up[:half].mean() > 1.5 * up[half:].mean()
+
+
+def test_relight_normals_tilted_to_plus_x_face_a_plus_x_light() -> None:
+    lights = torch.tensor([[2.0, 0.0, 1.0], [-2.0, 0.0, 1.0]])
+    plus, minus = relight(_plane(normal=(0.5, 0.0, 1.0)), lights).mean(dim=(1, 2, 3))
+    assert plus > 2.0 * minus
+    flat_plus, flat_minus = relight(_plane(), lights)
+    torch.testing.assert_close(flat_plus, flat_minus.flip(-1), rtol=1e-5, atol=1e-7)  # control: mirror images
+
+
+def test_relight_intensity_forms_and_environment_term() -> None:
+    maps = random_maps(16, 16, seed=1)
+    lights = preview_lights(2)
+    unit = relight(maps, lights)
+    torch.testing.assert_close(
+        relight(maps, lights, intensity=torch.tensor([2.0, 0.5])),
+        unit * torch.tensor([2.0, 0.5]).view(2, 1, 1, 1),
+    )
+    rgb = torch.tensor([[1.0, 0.0, 0.5], [0.0, 3.0, 1.0]])
+    torch.testing.assert_close(relight(maps, lights, intensity=rgb), unit * rgb.view(2, 3, 1, 1))
+    env = Environment()
+    with_env = relight(maps, lights, environment=env, samples=8)
+    torch.testing.assert_close(with_env, unit + render_environment(maps, env, samples=8))
+    with pytest.raises(ValueError, match="intensity"):
+        relight(maps, lights, intensity=torch.ones(3))
+    with pytest.raises(ValueError, match="light_positions"):
+        relight(maps, torch.ones(3))
+    with pytest.raises(ValueError, match=r"\(8, H, W\)"):
+        relight(maps[None], lights)
+
+
+def test_relight_is_differentiable() -> None:
+    maps = random_maps(8, 8, seed=2).requires_grad_(True)
+    relight(maps, preview_lights(2)).sum().backward()
+    assert maps.grad is not None and torch.isfinite(maps.grad).all() and maps.grad.abs().sum() > 0
+
+
+# ------------------------------------------------------------------------------------- environment
+
+
+def test_sample_environment_estimates_horizontal_irradiance() -> None:
+    # A uniform sky of radiance c gives irradiance π·c on an upward surface.
+    directions, irradiance = sample_environment(
+        Environment(zenith=(0.5,) * 3, horizon=(0.5,) * 3, sun_irradiance=0.0), 64
+    )
+    assert directions.shape == irradiance.shape == (64, 3)
+    torch.testing.assert_close(directions.norm(dim=-1), torch.ones(64, dtype=torch.float64))
+    estimate = (irradiance * directions[:, 2:3]).sum(dim=0)
+    torch.testing.assert_close(
+        estimate, torch.full((3,), 0.5 * math.pi, dtype=torch.float64), rtol=0.02, atol=0
+    )
+
+    # Default sky + sun against a fine quadrature of ∫ L(ω) cos θ dω.
+    env = Environment()
+    rows, cols = 1000, 2000
+    u = (torch.arange(rows, dtype=torch.float64) + 0.5) / rows
+    phi = (torch.arange(cols, dtype=torch.float64) + 0.5) * (2 * math.pi / cols)
+    sin_theta = (1 - u * u).sqrt()[:, None]
+    grid = torch.stack([sin_theta * phi.cos(), sin_theta * phi.sin(), u[:, None].expand(-1, cols)], dim=-1)
+    reference = (env.radiance(grid) * u[:, None, None]).sum(dim=(0, 1)) * (2 * math.pi / (rows * cols))
+    directions, irradiance = sample_environment(env, 64)
+    torch.testing.assert_close((irradiance * directions[:, 2:3]).sum(dim=0), reference, rtol=0.03, atol=0)
+
+    # Fixed seed: the same lights every time; another seed: other lights.
+    again = sample_environment(env, 64)
+    torch.testing.assert_close(again[0], directions, rtol=0, atol=0)
+    assert not torch.allclose(sample_environment(env, 64, seed=1)[0], directions)
+
+
+def test_concentrated_environment_acts_as_one_distant_light() -> None:
+    # All energy in a tiny sun lobe (angular radius ~0.2°) and a black sky.
+    env = Environment(
+        zenith=(0.0, 0.0, 0.0),
+        horizon=(0.0, 0.0, 0.0),
+        sun_irradiance=2.0,
+        sun_color=(1.0, 0.8, 0.6),
+        sun_elevation_deg=55.0,
+        sun_azimuth_deg=30.0,
+        sun_sharpness=1e5,
+    )
+    maps = random_maps(SIZE, SIZE, seed=3)
+    maps[6] = 0.3 + 0.7 * maps[6]  # roughness ≥ 0.3: a 0.2° lobe is then indistinguishable from a delta
+    rendered = render_environment(maps, env, samples=16)
+    # Independent reference: one light in the sun direction, 100× farther, float64.
+    distance = 100.0 * ENVIRONMENT_LIGHT_DISTANCE
+    direction = env.sun_direction()
+    lights = PointLights(
+        position=(distance * direction).view(1, 1, 1, 3),
+        intensity=torch.full((1, 1, 1), distance**2, dtype=torch.float64),
+        color=(2.0 * torch.tensor([1.0, 0.8, 0.6], dtype=torch.float64)).view(1, 1, 1, 3),
+    )
+    camera = torch.tensor([0.0, 0.0, FlashCapture().camera_height], dtype=torch.float64).view(1, 1, 3)
+    reference = render_point_lights(maps[None].double(), camera, lights)[0, 0]
+    assert _relative_l1(rendered.double(), reference) < 0.01
+
+
+def test_render_environment_converges_and_chunks_agree() -> None:
+    maps = random_maps(16, 16, seed=4)
+    maps[6] = 0.5 + 0.5 * maps[6]
+    env = Environment()
+    coarse = render_environment(maps, env, samples=64)
+    torch.testing.assert_close(
+        render_environment(maps, env, samples=64, chunk=64), coarse, rtol=1e-4, atol=1e-6
+    )
+    fine = render_environment(maps, env, samples=512)
+    assert _relative_l1(coarse, fine) < 0.05
+    assert coarse.shape == (3, 16, 16) and (coarse >= 0).all()
+
+
+def test_environment_rejects_bad_parameters() -> None:
+    with pytest.raises(ValueError, match="zenith"):
+        Environment(zenith=(-1.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="sun_elevation_deg"):
+        Environment(sun_elevation_deg=0.0)
+    with pytest.raises(ValueError, match="sun_sharpness"):
+        Environment(sun_sharpness=0.0)
+    with pytest.raises(ValueError, match="samples"):
+        sample_environment(Environment(), 0)
+
+
+# ------------------------------------------------------------------------------------------- resize
+
+
+def test_resize_maps_averages_and_keeps_normals_unit() -> None:
+    maps = random_maps(64, 64, seed=5)
+    small = resize_maps(maps, 16)
+    assert small.shape == (8, 16, 16)
+    torch.testing.assert_close(small[3:6].norm(dim=0), torch.ones(16, 16))
+    torch.testing.assert_close(small[6:], F.avg_pool2d(maps[6:], 4))
+    torch.testing.assert_close(resize_maps(_plane(64), 16), _plane(16))
+    assert resize_maps(maps, 64) is maps
+    big = resize_maps(small, (24, 40))
+    assert big.shape == (8, 24, 40)
+    torch.testing.assert_close(big[3:6].norm(dim=0), torch.ones(24, 40))
+
+
+# ------------------------------------------------------------------------------------------ preview
+
+
+def test_preview_image_layout_and_input_tile() -> None:
+    photo = torch.rand(3, 64, 64, generator=torch.Generator().manual_seed(0))
+    maps = random_maps(64, 64, seed=6)
+    tile, lights = 32, 2
+    image = preview_image(photo, maps, tile=tile, lights=lights, samples=8)
+    tiles = 1 + lights + 1
+    assert image.dtype == np.uint8
+    assert image.shape == (tile + LABEL_HEIGHT, tiles * tile + (tiles - 1) * SEPARATOR, 3)
+    assert image.shape[:2] == preview_size(tile, lights)
+    expected = linear_to_srgb(F.avg_pool2d(photo[None], 2)[0]).mul(255).round().to(torch.uint8)
+    np.testing.assert_array_equal(image[LABEL_HEIGHT:, :tile], expected.permute(1, 2, 0).numpy())
+    np.testing.assert_array_equal(
+        image[:, tile : tile + SEPARATOR],
+        np.broadcast_to(SEPARATOR_COLOR, (tile + LABEL_HEIGHT, SEPARATOR, 3)),
+    )
+    renders = [
+        image[LABEL_HEIGHT:, k * (tile + SEPARATOR) : k * (tile + SEPARATOR) + tile] for k in range(1, tiles)
+    ]
+    assert all(r.std() > 0 for r in renders)  # every rendering shows something
+    assert not np.array_equal(renders[0], renders[1])
+
+    bare = preview_image(photo, maps, tile=tile, lights=lights, samples=8, labels=False)
+    assert bare.shape[:2] == preview_size(tile, lights, labels=False) == (tile, image.shape[1])
+    np.testing.assert_array_equal(bare, image[LABEL_HEIGHT:])
+
+
+def test_preview_image_renders_big_maps_at_tile_size(monkeypatch: pytest.MonkeyPatch) -> None:
+    seen: list[tuple[int, ...]] = []
+    original = preview.render_point_lights
+
+    def spy(maps: torch.Tensor, *args: object, **kwargs: object) -> torch.Tensor:
+        seen.append(tuple(maps.shape))
+        return original(maps, *args, **kwargs)
+
+    monkeypatch.setattr(preview, "render_point_lights", spy)
+    image = preview_image(torch.rand(3, 48, 80), random_maps(128, 128, seed=7), tile=16, lights=1, samples=4)
+    assert image.shape[:2] == preview_size(16, 1)
+    assert seen and all(shape[-2:] == (16, 16) for shape in seen)
+
+
+def test_preview_image_rejects_bad_input() -> None:
+    maps = random_maps(16, 16)
+    with pytest.raises(ValueError, match="photo"):
+        preview_image(torch.rand(16, 16), maps, tile=16)
+    with pytest.raises(ValueError, match="tile"):
+        preview_image(torch.rand(3, 16, 16), maps, tile=0)
+
+
+def test_write_preview_png_reads_back_identical(tmp_path: Path) -> None:
+    photo, maps = torch.rand(3, 32, 32), random_maps(32, 32, seed=8)
+    path = write_preview(tmp_path / "preview.png", photo, maps, tile=32, lights=1, samples=4)
+    assert path == tmp_path / "preview.png"
+    back = cv2.cvtColor(cv2.imread(str(path), cv2.IMREAD_UNCHANGED), cv2.COLOR_BGR2RGB)
+    np.testing.assert_array_equal(back, preview_image(photo, maps, tile=32, lights=1, samples=4))
+    assert [p.name for p in tmp_path.iterdir()] == ["preview.png"]
+    with pytest.raises(ValueError, match=r"\.png"):
+        write_preview(tmp_path / "preview.jpg", photo, maps, tile=32)
+
+
+# ---------------------------------------------------------------------------------------- animation
+
+
+def test_animation_frames_move_the_light_with_a_fixed_exposure() -> None:
+    frames = list(animation_frames(_plane(normal=(0.4, 0.0, 1.0)), frames=12, size=SIZE))
+    assert len(frames) == 12
+    assert all(f.shape == (SIZE, SIZE, 3) and f.dtype == np.uint8 for f in frames)
+    assert all(not np.array_equal(a, b) for a, b in itertools.pairwise(frames))
+    means = np.array([f.astype(np.float64).mean() for f in frames])
+    # Frame 0 has the light at +X, where the normals lean; frame 6 at −X. Per-frame auto exposure
+    # would level them; one exposure for all keeps the material's own brightness change.
+    assert means[0] > 1.3 * means[6]
+    steps = np.abs(np.diff(np.append(means, means[0])))
+    assert steps.max() < 0.4 * (means.max() - means.min())  # a smooth cycle, no exposure jumps
+
+
+def test_animation_frames_check_arguments_on_call() -> None:
+    with pytest.raises(ValueError, match="frames"):
+        animation_frames(_plane(), frames=0)
+    with pytest.raises(ValueError, match="elevation"):
+        animation_frames(_plane(), elevation_deg=0.0)
+
+
+def test_write_animation_gif(tmp_path: Path) -> None:
+    path = write_animation(tmp_path / "turn.gif", _plane(normal=(0.3, 0.1, 1.0)), frames=8, size=SIZE, fps=10)
+    with Image.open(path) as gif:
+        assert gif.format == "GIF"
+        assert gif.n_frames == 8
+        assert gif.size == (SIZE, SIZE)
+        assert gif.info["loop"] == 0
+        assert gif.info["duration"] == 100
+    assert [p.name for p in tmp_path.iterdir()] == ["turn.gif"]
+
+
+def _mp4v_available(directory: Path) -> bool:
+    probe = directory / "probe.mp4"
+    writer = cv2.VideoWriter(str(probe), cv2.VideoWriter_fourcc(*"mp4v"), 10.0, (SIZE, SIZE))
+    ok = writer.isOpened()
+    writer.release()
+    probe.unlink(missing_ok=True)
+    return ok
+
+
+def test_write_animation_mp4(tmp_path: Path) -> None:
+    if not _mp4v_available(tmp_path):
+        pytest.skip("this OpenCV build cannot write mp4v video")
+    path = write_animation(tmp_path / "turn.mp4", _plane(normal=(0.3, 0.1, 1.0)), frames=9, size=SIZE, fps=12)
+    capture = cv2.VideoCapture(str(path))
+    try:
+        assert capture.isOpened()
+        frames = []
+        while True:
+            ok, frame = capture.read()
+            if not ok:
+                break
+            frames.append(frame)
+    finally:
+        capture.release()
+    assert len(frames) == 9
+    assert all(f.shape == (SIZE, SIZE, 3) for f in frames)
+    assert [p.name for p in tmp_path.iterdir()] == ["turn.mp4"]
+
+
+def test_write_animation_rejects_bad_suffix_and_unwritable_video(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    for name in ("turn.avi", "turn.png", "turn"):
+        with pytest.raises(ValueError, match="animation must be one of"):
+            write_animation(tmp_path / name, _plane(8), frames=2, size=8)
+
+    class ClosedWriter:
+        def __init__(self, *args: object) -> None:
+            pass
+
+        def isOpened(self) -> bool:
+            return False
+
+        def release(self) -> None:
+            pass
+
+    monkeypatch.setattr(preview.cv2, "VideoWriter", ClosedWriter)
+    with pytest.raises(ValueError, match=r"turn\.mp4: cannot open"):
+        write_animation(tmp_path / "turn.mp4", _plane(8), frames=2, size=8)
+    assert list(tmp_path.iterdir()) == []
