@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,15 +18,26 @@ from brdfgan.inference.weights import load_generator
 log = logging.getLogger(__name__)
 
 
-def fixed_samples(data_dir: Path, split: str, count: int) -> list[Sample]:
-    """The first ``count`` samples of a split in shard and key order — fixed, not cherry-picked."""
+def fixed_samples(data_dir: Path, split: str, count: int, keys: Sequence[str] | None = None) -> list[Sample]:
+    """The first ``count`` samples of a split in shard and key order, or the samples named by
+    ``keys`` (in that order) — a list fixed before training, not cherry-picked afterwards."""
+    wanted = list(keys) if keys else None
+    found: dict[str, Sample] = {}
     samples: list[Sample] = []
     for shard in list_shards(data_dir, split):
         for sample in iter_shard(shard):
-            if len(samples) == count:
-                return samples
-            samples.append(sample)
-    return samples
+            if wanted is None:
+                if len(samples) == count:
+                    return samples
+                samples.append(sample)
+            elif sample.key in wanted:
+                found[sample.key] = sample
+    if wanted is None:
+        return samples
+    missing = [key for key in wanted if key not in found]
+    if missing:
+        raise ValueError(f"grid_keys: no sample {missing[0]!r} in the {split} split of {data_dir}")
+    return [found[key] for key in wanted]
 
 
 def _models(ckpt: Any) -> dict[str, str]:
@@ -70,7 +81,7 @@ def evaluate(cfg: DictConfig, out_dir: str | Path) -> dict[str, dict[str, float]
     make_metrics = hydra.utils.instantiate(cfg.metrics)
     results = evaluate_models(models, datamodule.test_dataloader(), make_metrics, device)
     written = write_results(results, out_dir)
-    samples = fixed_samples(Path(datamodule.data_dir), cfg.split, cfg.grid_samples)
+    samples = fixed_samples(Path(datamodule.data_dir), cfg.split, cfg.grid_samples, cfg.get("grid_keys"))
     for name, model in models.items():
         if samples:
             written.append(write_grid(model.cpu(), samples, Path(out_dir) / f"grid_{name}.png"))

@@ -1,0 +1,140 @@
+"""Trivial reference predictors that any real model must beat (issue: "measured quality").
+
+- :class:`ConstantMaps`: the same map set everywhere, the training set's mean — the best constant
+  under a per-pixel squared error in the stored encodings (normal: the mean direction).
+- :class:`PhotoAsBasecolor`: the input photo (sRGB-encoded) as base colour, a flat normal and
+  constant roughness/metallic (the training means) — what "use the photo as the texture" gives.
+
+Both behave like generators (``forward(photo) -> maps``, ``config()``, ``size_multiple``), so the
+evaluator, :mod:`brdfgan.inference.weights` and ``brdfgan predict`` take them unchanged. Build
+their weight files from a dataset with::
+
+    python -m brdfgan.models.reference DATA_DIR --out DIR     # DIR/{mean_maps,photo_basecolor}.safetensors
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from brdfgan.core.svbrdf import (
+    BASECOLOR,
+    METALLIC,
+    NORMAL,
+    NUM_CHANNELS,
+    ROUGHNESS,
+    linear_to_srgb,
+    normalize_normal,
+)
+
+
+class ConstantMaps(nn.Module):
+    """Predicts ``values`` (8 channels, stored encodings) at every pixel, whatever the photo."""
+
+    size_multiple = 1
+
+    def __init__(self) -> None:
+        super().__init__()
+        flat = torch.tensor([0.5, 0.5, 0.5, 0.0, 0.0, 1.0, 0.5, 0.0])
+        self.register_buffer("values", flat)
+
+    def config(self) -> dict[str, Any]:
+        return {}
+
+    def forward(self, photo: Tensor) -> Tensor:
+        """Shape: photo ``(B, 3, H, W)`` → maps ``(B, 8, H, W)``."""
+        batch, _, height, width = photo.shape
+        values = self.values.to(photo.dtype)
+        return values.view(1, NUM_CHANNELS, 1, 1).expand(batch, NUM_CHANNELS, height, width).clone()
+
+
+class PhotoAsBasecolor(nn.Module):
+    """Base colour = the linear photo sRGB-encoded; flat normal; constant roughness and metallic."""
+
+    size_multiple = 1
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.register_buffer("roughness", torch.tensor(0.5))
+        self.register_buffer("metallic", torch.tensor(0.0))
+
+    def config(self) -> dict[str, Any]:
+        return {}
+
+    def forward(self, photo: Tensor) -> Tensor:
+        """Shape: photo ``(B, 3, H, W)`` linear LDR → maps ``(B, 8, H, W)``."""
+        batch, _, height, width = photo.shape
+        maps = photo.new_zeros(batch, NUM_CHANNELS, height, width)
+        maps[:, BASECOLOR] = linear_to_srgb(photo.clamp(0.0, 1.0))
+        maps[:, NORMAL.start + 2] = 1.0
+        maps[:, ROUGHNESS] = self.roughness.to(photo.dtype)
+        maps[:, METALLIC] = self.metallic.to(photo.dtype)
+        return maps
+
+
+def mean_maps(batches: Any) -> Tensor:
+    """Per-channel mean of the maps of every batch (stored encodings; the normal renormalised).
+
+    Shape:
+        - each batch["maps"]: ``(B, 8, H, W)``
+        - output: ``(8,)``
+    """
+    total = torch.zeros(NUM_CHANNELS, dtype=torch.float64)
+    pixels = 0
+    for batch in batches:
+        maps = batch["maps"].double()
+        total += maps.sum(dim=(0, 2, 3))
+        pixels += maps.shape[0] * maps.shape[2] * maps.shape[3]
+    if pixels == 0:
+        raise ValueError("no training samples to average")
+    mean = total / pixels
+    mean[NORMAL] = normalize_normal(mean[NORMAL].view(3, 1, 1), dim=0).view(3)
+    return mean.float()
+
+
+def reference_models(mean: Tensor) -> dict[str, nn.Module]:
+    """Both references, parameterised by the training mean ``(8,)``."""
+    constant = ConstantMaps()
+    constant.values.copy_(mean)
+    photo = PhotoAsBasecolor()
+    photo.roughness.fill_(float(mean[ROUGHNESS]))
+    photo.metallic.fill_(float(mean[METALLIC]))
+    return {"mean_maps": constant, "photo_basecolor": photo}
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    from brdfgan.data.datamodule import ShardDataModule
+    from brdfgan.errors import exit_on_user_error
+    from brdfgan.inference.weights import save_weights
+
+    parser = argparse.ArgumentParser(prog="python -m brdfgan.models.reference", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    parser.add_argument("data_dir", type=Path, help="a generated dataset; its train split is averaged")
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args(argv)
+
+    @exit_on_user_error
+    def run() -> None:
+        datamodule = ShardDataModule(str(args.data_dir), batch_size=16, train_split=None, val_split=None,
+                                     test_split="train")  # fmt: skip
+        datamodule.setup("test")
+        mean = mean_maps(datamodule.test_dataloader())
+        args.out.mkdir(parents=True, exist_ok=True)
+        for name, model in reference_models(mean).items():
+            path = args.out / f"{name}.safetensors"
+            save_weights(path, model, target=f"brdfgan.models.reference.{type(model).__name__}", config={},
+                         model_id=f"{name} ({args.data_dir.name} train mean)",
+                         extra={"train_mean": [round(float(v), 6) for v in mean]})  # fmt: skip
+            print(path)
+
+    run()
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
