@@ -1,0 +1,122 @@
+"""Turn a training run into a ``.safetensors`` weights file that ``brdfgan predict`` can load.
+
+    python -m brdfgan.inference.export_weights RUN_DIR [--checkpoint last|best|PATH]
+        [--out PATH] [--model-id ID] [--half] [--hardware TEXT]
+
+The file holds the generator's tensors (fp16 with ``--half``), the model id, the class and its
+constructor arguments (the architecture is rebuilt without Hydra or pickle), and a training
+summary in ``extra``: the resolution the model expects, the training crop, the dataset and its
+size, steps, epochs, wall time, hardware and the run's test metrics when present. The same
+summary is written beside the file as ``<stem>.json`` for people to read.
+
+Checkpoints are unpickled here (``torch.load(weights_only=True)``), so only export runs you made.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+from collections.abc import Sequence
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import torch
+from omegaconf import OmegaConf
+
+from brdfgan.errors import exit_on_user_error
+from brdfgan.inference.weights import WeightsError, load_checkpoint_generator, save_weights
+from brdfgan.io.atomic import write_text_atomic
+
+
+def find_checkpoint(run_dir: Path, which: str) -> Path:
+    """``last``/``best`` checkpoint of a run directory, or an explicit path."""
+    if which not in ("last", "best"):
+        return Path(which)
+    directory = run_dir / "checkpoints"
+    if which == "last":
+        path = directory / "last.ckpt"
+    else:
+        candidates = sorted(p for p in directory.glob("*.ckpt") if p.name != "last.ckpt")
+        path = candidates[-1] if candidates else directory / "best.ckpt"
+    if not path.is_file():
+        raise WeightsError(f"{path}: no {which} checkpoint in {run_dir}")
+    return path
+
+
+def training_summary(run_dir: Path, checkpoint: Path, hardware: str | None) -> dict[str, Any]:
+    """What a user of the weights should know about how they were made (JSON-serialisable)."""
+    config = OmegaConf.load(run_dir / ".hydra" / "config.yaml")
+    state = torch.load(checkpoint, map_location="cpu", weights_only=True)
+    data = config.data
+    spec = OmegaConf.to_container(data.prepare.spec, resolve=False) if "prepare" in data else {}
+    started = (run_dir / ".hydra" / "config.yaml").stat().st_mtime
+    summary: dict[str, Any] = {
+        "resolution": int(spec.get("resolution", 256)) if isinstance(spec, dict) else 256,
+        "train_crop": data.get("train_crop"),
+        "dataset": {
+            "dir": Path(str(data.data_dir)).name,
+            "materials": spec.get("materials") if isinstance(spec, dict) else None,
+            "spp": spec.get("spp") if isinstance(spec, dict) else None,
+        },
+        "batch_size": int(data.batch_size),
+        "loss": {k: bool(v) for k, v in config.loss.switches.items() if not str(k).startswith("_")},
+        "epochs": int(state.get("epoch", -1)) + 1,
+        "optimizer_steps": int(state.get("global_step", 0)),
+        "checkpoint": checkpoint.name,
+        "seed": int(config.seed),
+        "wall_time_s": round(checkpoint.stat().st_mtime - started, 1),
+        "hardware": hardware or f"{platform.machine()} CPU, {torch.get_num_threads()} threads",
+        "exported": datetime.now().astimezone().isoformat(timespec="seconds"),
+    }
+    metrics = run_dir / "metrics.json"
+    if metrics.is_file():
+        summary["test_metrics"] = json.loads(metrics.read_text()).get("model", {})
+    return summary
+
+
+def export_weights(
+    run_dir: Path,
+    out: Path,
+    *,
+    checkpoint: str = "last",
+    model_id: str | None = None,
+    half: bool = True,
+    hardware: str | None = None,
+) -> Path:
+    """Export a run's generator to ``out`` (+ ``out.with_suffix('.json')``); returns ``out``."""
+    if not (run_dir / ".hydra" / "config.yaml").is_file():
+        raise WeightsError(f"{run_dir}: not a training run directory (no .hydra/config.yaml)")
+    path = find_checkpoint(run_dir, checkpoint)
+    generator, meta = load_checkpoint_generator(path)
+    summary = training_summary(run_dir, path, hardware)
+    model_id = model_id or meta["model_id"]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    save_weights(out, generator, target=meta["target"], config=meta["config"], model_id=model_id,
+                 extra=summary, half=half)  # fmt: skip
+    card = {"model_id": model_id, "class": meta["target"], "config": meta["config"], **summary}
+    write_text_atomic(out.with_suffix(".json"), json.dumps(card, indent=2) + "\n")
+    return out
+
+
+@exit_on_user_error
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m brdfgan.inference.export_weights", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    parser.add_argument("run_dir", type=Path)
+    parser.add_argument("--checkpoint", default="last", help="last (default), best, or a .ckpt path")
+    parser.add_argument("--out", type=Path, help="default: RUN_DIR/weights.safetensors")
+    parser.add_argument("--model-id", help="default: the run directory's name")
+    parser.add_argument("--full-precision", action="store_true", help="store fp32 (default fp16)")
+    parser.add_argument("--hardware", help="what it was trained on, for the summary")
+    args = parser.parse_args(argv)
+    out = args.out or args.run_dir / "weights.safetensors"
+    export_weights(args.run_dir, out, checkpoint=args.checkpoint, model_id=args.model_id,
+                   half=not args.full_precision, hardware=args.hardware)  # fmt: skip
+    print(out)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

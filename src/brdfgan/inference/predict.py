@@ -1,0 +1,240 @@
+"""Photo → engine-ready material: the pipeline behind ``brdfgan predict``.
+
+For each photo::
+
+    read_photo (linear RGB, EXIF orientation, colour-space checks)
+      → preprocess (square crop on the flash hotspot, linear resize, the training auto exposure)
+      → predict_maps (the generator, tiled with frozen normalisation statistics when large)
+      → write_material (textures, material.glb, material.json, preview.png [, preview.gif/mp4])
+
+A batch keeps going when one photo fails: :func:`predict_batch` returns what succeeded and, for
+each failure, the one-line reason.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal
+
+import torch
+from torch import nn
+
+from brdfgan.errors import one_line
+from brdfgan.inference.export import ExportOptions, write_material
+from brdfgan.inference.photo import PHOTO_EXTENSIONS, Colorspace, read_photo
+from brdfgan.inference.preprocess import Crop, preprocess
+from brdfgan.inference.preview import write_animation, write_preview
+from brdfgan.inference.tiling import TilingConfig, predict_maps
+from brdfgan.inference.weights import WeightsError, load_weights
+
+log = logging.getLogger(__name__)
+
+DEFAULT_WEIGHTS = "default.safetensors"
+# The resolution a weights file was trained at, when its metadata does not say.
+FALLBACK_RESOLUTION = 256
+
+
+class PredictError(ValueError):
+    """A predict request cannot run at all (no weights, no inputs); one line."""
+
+
+@dataclass(frozen=True)
+class PredictOptions:
+    """Everything ``brdfgan predict`` lets the user choose besides inputs and weights."""
+
+    resolution: int | None = None  # None: the resolution the model was trained at
+    crop: Crop | None = None  # None: a square centred on the detected flash hotspot
+    colorspace: Colorspace | None = None  # None: the file format's default (sRGB for JPEG/PNG)
+    export: ExportOptions = field(default_factory=ExportOptions)
+    tiling: TilingConfig = field(default_factory=TilingConfig)
+    preview: bool = True
+    animate: Literal["gif", "mp4"] | None = None
+
+
+@dataclass(frozen=True)
+class Model:
+    """A generator ready for inference and what is known about it."""
+
+    generator: nn.Module
+    model_id: str
+    target: str
+    config: dict[str, Any]
+    extra: dict[str, Any]
+    path: Path
+
+    @property
+    def resolution(self) -> int:
+        return int(self.extra.get("resolution", FALLBACK_RESOLUTION))
+
+
+@dataclass(frozen=True)
+class PhotoResult:
+    photo: Path
+    output: Path
+    warnings: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    succeeded: list[PhotoResult]
+    failed: list[tuple[Path, str]]
+
+
+def default_weights_path() -> Path:
+    """The weights shipped inside the package (``brdfgan/weights/default.safetensors``)."""
+    return Path(str(resources.files("brdfgan") / "weights" / DEFAULT_WEIGHTS))
+
+
+def load_model(path: str | os.PathLike[str] | None = None) -> Model:
+    """Load a ``.safetensors`` weights file (default: the shipped one); never unpickles anything."""
+    path = Path(path) if path is not None else default_weights_path()
+    if path.suffix.lower() != ".safetensors":
+        raise WeightsError(
+            f"{path}: predict loads .safetensors weights only (a pickle-based file could run code); "
+            "convert a training checkpoint with: python -m brdfgan.inference.export_weights RUN_DIR"
+        )
+    if not path.is_file() and path == default_weights_path():
+        raise PredictError(f"{path}: no default weights are installed with this package; pass --weights")
+    generator, meta = load_weights(path)
+    return Model(
+        generator=generator.eval(),
+        model_id=str(meta.get("model_id", path.stem)),
+        target=str(meta.get("target", "")),
+        config=dict(meta.get("config", {})),
+        extra=dict(meta.get("extra", {})),
+        path=path,
+    )
+
+
+def collect_photos(inputs: Sequence[str | os.PathLike[str]]) -> list[Path]:
+    """Photos named on the command line; a directory contributes its photo files (sorted, not
+    recursive). A missing path is kept, so that it is reported as a failure of its own."""
+    photos: list[Path] = []
+    for item in inputs:
+        path = Path(item)
+        if path.is_dir():
+            found = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in PHOTO_EXTENSIONS)
+            if not found:
+                log.warning(
+                    "%s: no photo files (%s) in this directory", path, ", ".join(sorted(PHOTO_EXTENSIONS))
+                )
+            photos += found
+        else:
+            photos.append(path)
+    return photos
+
+
+def output_names(photos: Sequence[Path]) -> list[str]:
+    """One output folder name per photo: the file stem, made unique within the batch."""
+    names: list[str] = []
+    taken: set[str] = set()
+    for photo in photos:
+        base = re.sub(r"[^A-Za-z0-9._-]+", "_", photo.stem).strip("._") or "photo"
+        name, counter = base, 2
+        while name in taken:
+            name, counter = f"{base}-{counter}", counter + 1
+        taken.add(name)
+        names.append(name)
+    return names
+
+
+def predict_photo(
+    path: Path,
+    out_dir: Path,
+    model: Model,
+    options: PredictOptions,
+    *,
+    tile_progress: Callable[[int, int], None] | None = None,
+) -> PhotoResult:
+    """Run the whole pipeline on one photo and write ``out_dir`` (replaced atomically)."""
+    photo = read_photo(path, options.colorspace)
+    resolution = options.resolution or model.resolution
+    prepared = preprocess(photo, resolution, options.crop)
+    with torch.inference_mode():
+        maps = predict_maps(model.generator, prepared.photo[None], options.tiling, progress=tile_progress)[0]
+    tiled = resolution * resolution > options.tiling.max_direct_pixels
+    warnings = photo.warnings + prepared.warnings
+    metadata = {
+        "name": out_dir.name,
+        "model": {
+            "id": model.model_id,
+            "class": model.target,
+            "config": model.config,
+            "weights": model.path.name,
+        },
+        "input": {
+            "file": str(path),
+            "source": photo.source,
+            "bit_depth": photo.bit_depth,
+            "colorspace": photo.colorspace,
+            "exif_orientation": photo.orientation,
+            "size": [photo.width, photo.height],
+        },
+        "crop": {
+            "x": prepared.crop.x,
+            "y": prepared.crop.y,
+            "size": prepared.crop.size,
+            "chosen": "user" if options.crop is not None else "flash hotspot",
+            "hotspot": list(prepared.hotspot) if prepared.hotspot is not None else None,
+        },
+        "resolution": resolution,
+        "resized_from": prepared.resized_from,
+        "exposure_scale": prepared.exposure_scale,
+        "inference": {
+            "tiled": tiled,
+            "tile": options.tiling.tile if tiled else None,
+            "overlap": options.tiling.overlap if tiled else None,
+        },
+        "input_statistics": prepared.stats,
+        "brdf": "Cook-Torrance GGX (Smith, Schlick) + Burley diffuse, metallic workflow, alpha = roughness^2",
+        "warnings": list(warnings),
+    }
+    extra_files: dict[str, Callable[[Path], Any]] = {}
+    if options.preview:
+        extra_files["preview.png"] = lambda target: write_preview(target, prepared.photo, maps)
+    if options.animate is not None:
+        extra_files[f"preview.{options.animate}"] = lambda target: write_animation(target, maps)
+    write_material(out_dir, maps, options.export, metadata, extra_files=extra_files)
+    return PhotoResult(photo=path, output=out_dir, warnings=warnings)
+
+
+def predict_batch(
+    photos: Sequence[Path],
+    out_root: Path,
+    model: Model,
+    options: PredictOptions,
+    *,
+    on_result: Callable[[PhotoResult | tuple[Path, str]], None] | None = None,
+) -> BatchResult:
+    """Predict every photo into ``out_root/<name>/``; a failure is recorded and the batch goes on.
+
+    User errors (unreadable or unsupported files, bad crops, unwritable outputs) are reported
+    with their one-line message; anything else with its exception type, so a bug in one photo
+    never loses the rest of the batch.
+    """
+    succeeded: list[PhotoResult] = []
+    failed: list[tuple[Path, str]] = []
+    names = output_names(photos)
+    for photo, name in zip(photos, names, strict=True):
+        try:
+            result: PhotoResult | tuple[Path, str] = predict_photo(photo, out_root / name, model, options)
+            succeeded.append(result)
+        except (ValueError, OSError) as error:
+            message = one_line(error)
+            if str(photo) not in message:
+                message = f"{photo}: {message}"
+            result = (photo, message)
+            failed.append(result)
+        except Exception as error:  # keep the batch alive and report the bug
+            log.debug("internal error on %s", photo, exc_info=True)
+            result = (photo, f"{photo}: internal error {type(error).__name__}: {one_line(error)}")
+            failed.append(result)
+        if on_result is not None:
+            on_result(result)
+    return BatchResult(succeeded=succeeded, failed=failed)
