@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import math
 import os
 import subprocess
@@ -120,10 +121,28 @@ def test_resume_continues_with_the_same_step_count_and_lr(tiny_data: Path, tmp_p
     assert last.is_file()
     resumed_cfg = compose_train(overrides, tiny_data)
     resumed_cfg.paths.output_dir = str(tmp_path / "interrupted")
-    _, resumed = _fit(resumed_cfg, ckpt_path=str(last))
+    resumed_module, resumed = _fit(resumed_cfg, ckpt_path=str(last))
     assert resumed.global_step == straight.global_step
     for a, b in zip(resumed.optimizers, straight.optimizers, strict=True):
         assert a.param_groups[0]["lr"] == pytest.approx(b.param_groups[0]["lr"])
+    # The interrupted run was configured for 1 epoch; resumed with 3, the schedule follows the
+    # new length (not the checkpoint's), so every learning rate after the resume point is the
+    # straight run's — not 0 from the 1-epoch schedule that had already decayed.
+    schedulers = resumed_module.lr_schedulers()
+    assert all(s.lr_lambdas[0].total_steps == 3 * resumed.datamodule.train_batches_per_epoch
+               for s in (schedulers if isinstance(schedulers, list) else [schedulers]))  # fmt: skip
+
+    def lrs(run: str) -> dict[int, float]:  # every csv of the run: the resumed part is a new version
+        rows = [row for path in (tmp_path / run).rglob("metrics.csv") for row in csv.DictReader(path.open())]
+        column = next(k for k in rows[0] if k.startswith("lr-"))
+        return {int(r["step"]): float(r[column]) for r in rows if r.get(column)}
+
+    straight_lrs, resumed_lrs = lrs("full"), lrs("interrupted")
+    after_resume = [step for step in straight_lrs if step >= straight.global_step // 3]
+    assert after_resume and any(straight_lrs[step] > 0 for step in after_resume)
+    assert [resumed_lrs[step] for step in after_resume] == pytest.approx(
+        [straight_lrs[step] for step in after_resume]
+    )
     assert (tmp_path / "interrupted" / "checkpoints").glob("epoch*.ckpt")
 
 

@@ -12,6 +12,7 @@ there is no discriminator at all — no forward, no step, no optimizer state, no
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -26,6 +27,8 @@ from brdfgan.losses.parameter import parameter_loss
 from brdfgan.losses.rendering import rendering_loss
 from brdfgan.losses.total import GANLoss
 from brdfgan.training.schedule import LinearDecaySchedule
+
+log = logging.getLogger(__name__)
 
 OptimizerFactory = Callable[..., Optimizer]
 
@@ -109,6 +112,23 @@ class SVBRDFGAN(L.LightningModule):
             optimizers.append(self.optimizer_factory(self.discriminator.parameters()))
         schedulers = [{"scheduler": LambdaLR(opt, schedule), "interval": "step"} for opt in optimizers]
         return optimizers, schedulers
+
+    def on_train_start(self) -> None:
+        # A resumed run gets its schedulers' state back, including the schedule length they were
+        # built with (LambdaLR stores the schedule object's fields). The length follows this
+        # run's configuration instead, so a run can be extended or shortened on resume by
+        # changing trainer.max_epochs or model.total_steps; an unchanged configuration gives
+        # the same schedule, and the current learning rate is recomputed for the step reached.
+        schedule = LinearDecaySchedule(self._schedule_steps(), self.constant_lr_fraction)
+        schedulers = self.lr_schedulers()
+        for scheduler in schedulers if isinstance(schedulers, list) else [schedulers]:
+            if scheduler is None or list(scheduler.lr_lambdas) == [schedule] * len(scheduler.lr_lambdas):
+                continue
+            log.info("learning-rate schedule: %s generator steps (the checkpoint had %s)",
+                     schedule.total_steps, scheduler.lr_lambdas[0].total_steps)  # fmt: skip
+            scheduler.lr_lambdas = [schedule] * len(scheduler.lr_lambdas)
+            for group, base_lr in zip(scheduler.optimizer.param_groups, scheduler.base_lrs, strict=True):
+                group["lr"] = base_lr * schedule(scheduler.last_epoch)
 
     def _optimizers(self) -> tuple[Any, Any | None]:
         optimizers = self.optimizers()
