@@ -11,7 +11,7 @@ ifneq ($(LIBLLVM),)
 export DRJIT_LIBLLVM_PATH ?= $(LIBLLVM)
 endif
 
-.PHONY: setup test test-slow demo lint format bench data clean
+.PHONY: setup test test-slow demo demo-renderer lint format bench data clean
 
 setup: $(STAMP)
 
@@ -37,7 +37,14 @@ test: setup
 test-slow: setup
 	$(PY) -m pytest -q -m slow
 
+# The artist's path on the photos the package ships (held-out procedural materials): textures,
+# material.glb, material.json, preview.png and a turntable preview.gif per photo.
 demo: setup
+	$(VENV)/bin/brdfgan predict src/brdfgan/samples --out outputs/demo --animate
+	@echo "results: outputs/demo/<photo>/ (open preview.png, preview.gif, or material.glb in any glTF viewer)"
+
+# The foundation demo: our renderer against Mitsuba 3 on the same maps.
+demo-renderer: setup
 	$(PY) -m brdfgan.demo
 
 lint: setup
@@ -54,6 +61,7 @@ bench: setup
 	$(PY) -m benchmarks.bench_generate
 	$(PY) -m benchmarks.bench_datamodule
 	$(PY) -m benchmarks.bench_evaluate
+	$(PY) -m benchmarks.bench_predict
 
 data: setup
 	$(PY) generate.py

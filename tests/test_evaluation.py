@@ -11,7 +11,9 @@ from pathlib import Path
 import pytest
 import torch
 import yaml
+from safetensors import safe_open
 
+from brdfgan.inference.predict import load_model
 from brdfgan.inference.weights import WeightsError, load_generator, load_weights, save_weights
 from brdfgan.models.generator import Generator
 from brdfgan.report import ReportError, ablation_rows, collect, write_report
@@ -122,6 +124,29 @@ def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> N
 
     bad = _cli("evaluate.py", "data=tiny", "ckpt=/nonexistent.ckpt", cwd=tiny_data)
     assert bad.returncode == 2 and "checkpoint not found" in bad.stderr and "Traceback" not in bad.stderr
+
+    # The run exports to the weights `brdfgan predict` loads: fp16 tensors, architecture and summary.
+    shipped = tiny_data / "shipped" / "smoke.safetensors"
+    exported = subprocess.run([sys.executable, "-m", "brdfgan.inference.export_weights", str(run), "--out",
+                               str(shipped), "--model-id", "smoke-v1", "--hardware", "test CPU"],
+                              capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert exported.returncode == 0, exported.stderr[-2000:]
+    model = load_model(shipped)
+    assert model.model_id == "smoke-v1" and model.resolution == 64  # the tiny dataset's resolution
+    summary = json.loads(shipped.with_suffix(".json").read_text())
+    assert summary["optimizer_steps"] == torch.load(ckpt, weights_only=True)["global_step"]
+    assert summary["loss"] == {"adversarial": True, "feature": True, "parameter": True, "rendering": True}
+    assert (
+        summary["hardware"] == "test CPU"
+        and summary["test_metrics"]["rmse/diffuse"] == metrics["rmse/diffuse"]
+    )
+    with safe_open(str(shipped), framework="pt") as handle:
+        assert all(handle.get_tensor(k).dtype == torch.float16 for k in handle.keys() if "weight" in k)  # noqa: SIM118 (not iterable)
+    photo = torch.rand(1, 3, 64, 64)
+    assert torch.allclose(model.generator(photo), generator.eval()(photo), atol=2e-2)  # fp16 rounding
+    missing = subprocess.run([sys.executable, "-m", "brdfgan.inference.export_weights", str(tiny_data)],
+                             capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert missing.returncode == 2 and "not a training run directory" in missing.stderr
 
 
 @pytest.mark.mitsuba

@@ -1,0 +1,169 @@
+"""`brdfgan predict` end to end at 512², 1024², 2048², 4096²: wall time, peak memory, generator share.
+
+Each resolution runs in a fresh subprocess (so its peak RSS is its own) on a synthetic 4000×3000
+flash photo (JPEG), with the shipped default weights when they are installed, else a randomly
+initialised generator of the same architecture (timings do not depend on the values). Above 1024²
+the generator runs tiled (1024² tiles, frozen statistics), so its memory stays that of one tile.
+The generator's share is the time spent inside ``predict_maps``; the rest is decoding, hotspot
+search, resizing, encoding seven textures, the .glb and the preview.
+
+It also measures the sgemm rate of this machine (4096³ fp32 matmul) and reports the paper
+generator's 512² forward against the floor that rate implies (424 GFLOP, DESIGN.md §4).
+
+    python -m benchmarks.bench_predict [--sizes 512 1024 2048 4096]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+
+PAPER_GFLOP_512 = 424.0
+
+
+def _photo(path: Path) -> Path:
+    import cv2
+    import numpy as np
+
+    height, width = 3000, 4000
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
+    texture = 0.2 + 0.15 * rng.random((height, width, 1), dtype=np.float32) * np.array(
+        [1.0, 0.8, 0.6], np.float32
+    )
+    flash = 0.7 * np.exp(-((xx - 2100) ** 2 + (yy - 1450) ** 2) / (2 * 600.0**2))[..., None]
+    srgb = np.clip(texture + flash, 0, 1) ** (1 / 2.2)
+    cv2.imwrite(str(path), (srgb * 255).astype(np.uint8)[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 92])
+    return path
+
+
+def _weights(directory: Path) -> Path:
+    from brdfgan.inference.predict import default_weights_path
+
+    shipped = default_weights_path()
+    if shipped.is_file():
+        return shipped
+    from brdfgan.inference.weights import save_weights
+    from brdfgan.models.generator import Generator
+
+    generator = Generator(width=16, residual_blocks=4)
+    return save_weights(
+        directory / "random.safetensors",
+        generator,
+        target="brdfgan.models.generator.Generator",
+        config=generator.config(),
+        model_id="random CPU preset",
+        extra={"resolution": 256},
+    )
+
+
+def run_one(photo: Path, weights: Path, size: int, out: Path) -> dict[str, float]:
+    """One predict call in this process; returns seconds and peak RSS (MiB)."""
+    import brdfgan.inference.predict as predict
+
+    spent = {"generator": 0.0}
+    original = predict.predict_maps
+
+    def timed(*args, **kwargs):
+        start = time.perf_counter()
+        result = original(*args, **kwargs)
+        spent["generator"] += time.perf_counter() - start
+        return result
+
+    predict.predict_maps = timed
+    model = predict.load_model(weights)
+    start = time.perf_counter()
+    predict.predict_photo(photo, out / f"p{size}", model, predict.PredictOptions(resolution=size))
+    total = time.perf_counter() - start
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return {"total": total, "generator": spent["generator"], "peak_mib": peak, "model": model.model_id}
+
+
+def sgemm_gflops(size: int = 4096, repeats: int = 3) -> float:
+    a, b = torch.randn(size, size), torch.randn(size, size)
+    a @ b
+    start = time.perf_counter()
+    for _ in range(repeats):
+        a @ b
+    return 2 * size**3 * repeats / (time.perf_counter() - start) / 1e9
+
+
+def paper_forward_512() -> float:
+    from brdfgan.models.generator import Generator
+
+    generator = Generator().eval()
+    photo = torch.rand(1, 3, 512, 512)
+    with torch.inference_mode():
+        generator(photo)
+        start = time.perf_counter()
+        generator(photo)
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[512, 1024, 2048, 4096])
+    parser.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        photo, weights, size, out = args.child
+        print(json.dumps(run_one(Path(photo), Path(weights), int(size), Path(out))))
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        directory = Path(tmp)
+        photo, weights = _photo(directory / "flash.jpg"), _weights(directory)
+        rows = []
+        for size in args.sizes:
+            command = [
+                sys.executable,
+                "-m",
+                "benchmarks.bench_predict",
+                "--child",
+                str(photo),
+                str(weights),
+                str(size),
+                str(directory),
+            ]
+            result = subprocess.run(command, capture_output=True, text=True, check=False)
+            if result.returncode != 0:
+                print(f"{size}²: failed: {result.stderr.strip().splitlines()[-1:]}")
+                continue
+            rows.append((size, json.loads(result.stdout.strip().splitlines()[-1])))
+    threads = torch.get_num_threads()
+    model = rows[0][1]["model"] if rows else "?"
+    print(f"\nbrdfgan predict on a 4000×3000 JPEG, model: {model}, {threads} threads; ratios against 512²\n")
+    print(
+        "| resolution | wall s | generator s | generator share | peak RSS MiB | time ratio | memory ratio |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    base = rows[0][1] if rows else {}
+    for size, row in rows:
+        cells = [
+            f"{size}²",
+            f"{row['total']:.1f}",
+            f"{row['generator']:.1f}",
+            f"{row['generator'] / row['total']:.0%}",
+            f"{row['peak_mib']:.0f}",
+            f"{row['total'] / base['total']:.2f}×",
+            f"{row['peak_mib'] / base['peak_mib']:.2f}×",
+        ]
+        print("| " + " | ".join(cells) + " |")
+    rate = sgemm_gflops()
+    forward = paper_forward_512()
+    floor = PAPER_GFLOP_512 / rate
+    print(
+        f"\nsgemm 4096³: {rate:.0f} GFLOP/s; paper generator at 512²: {forward:.2f} s fp32 eager, "
+        f"floor {floor:.2f} s ({PAPER_GFLOP_512:.0f} GFLOP) → {forward / floor:.2f}× the floor"
+    )
+
+
+if __name__ == "__main__":
+    main()
