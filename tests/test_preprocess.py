@@ -16,6 +16,7 @@ from brdfgan.core.exposure import auto_expose
 from brdfgan.core.svbrdf import linear_to_srgb
 from brdfgan.inference.photo import Photo, PhotoError, read_photo
 from brdfgan.inference.preprocess import (
+    CENTRED_SNAP_FRACTION,
     CLIPPED_WARNING_FRACTION,
     Crop,
     Preprocessed,
@@ -189,9 +190,13 @@ def test_hotspot_crop_policy_properties() -> None:
         assert math.ceil(shortest / 2) <= crop.size <= shortest
         cx, cy = hotspot[0] + 0.5, hotspot[1] + 0.5
         largest_centred = math.floor(2 * min(cx, width - cx, cy, height - cy))
-        if largest_centred >= math.ceil(shortest / 2):
+        centre = (crop.x + (crop.size - 1) / 2, crop.y + (crop.size - 1) / 2)
+        if largest_centred >= CENTRED_SNAP_FRACTION * shortest:
+            # Roughly centred: the whole central square, the hotspot within 5 % of its centre.
+            assert crop.size == shortest
+            assert max(abs(centre[0] - hotspot[0]), abs(centre[1] - hotspot[1])) <= 0.05 * shortest + 1
+        elif largest_centred >= math.ceil(shortest / 2):
             assert crop.size == min(largest_centred, shortest)
-            centre = (crop.x + (crop.size - 1) / 2, crop.y + (crop.size - 1) / 2)
             assert abs(centre[0] - hotspot[0]) <= 1.0 and abs(centre[1] - hotspot[1]) <= 1.0
 
 
@@ -361,3 +366,22 @@ def test_jpeg_end_to_end(tmp_path: Path) -> None:
     assert result.hotspot is not None and distance(result.hotspot, hotspot) < 3.0
     assert result.photo.shape == (3, 64, 64)
     assert float(result.photo.min()) >= 0.0 and float(result.photo.max()) <= 1.0
+
+
+def test_crop_falls_back_to_the_centre_without_a_distinct_flash_highlight() -> None:
+    # A photo lit evenly (no flash highlight) with a bright patch near an edge, like paint on
+    # rusted metal under a bright sky: the patch is texture, the crop stays centred.
+    rng = np.random.default_rng(3)
+    image = 0.2 + 0.02 * rng.random((3, 120, 160))
+    image[:, 5:25, 120:150] = 0.34  # 1.7× the surroundings
+    photo = Photo(Path("patch.png"), torch.tensor(image, dtype=torch.float32), "png", 8, "linear", 1, ())
+    result = preprocess(photo, 64)
+    assert result.crop == Crop(20, 0, 120)
+    assert any("no distinct flash highlight" in w for w in result.warnings)
+    assert result.stats["hotspot_over_centre"] < 2.0
+    # A real flash highlight off-centre is followed (ratio far above the threshold).
+    flashed = flash_photo(120, 160, (100.0, 60.0))
+    photo = Photo(Path("flash.png"), flashed, "png", 8, "linear", 1, ())
+    result = preprocess(photo, 64)
+    assert not any("no distinct" in w for w in result.warnings)
+    assert abs(result.crop.x + (result.crop.size - 1) / 2 - 100) <= 1

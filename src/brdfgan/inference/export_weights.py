@@ -46,13 +46,23 @@ def find_checkpoint(run_dir: Path, which: str) -> Path:
     return path
 
 
+def training_wall_time(run_dir: Path) -> float | None:
+    """Seconds of training summed over the run's sessions (a resume starts a new CSV version):
+    from each version's ``hparams.yaml`` (written at start) to its last ``metrics.csv`` write."""
+    total = 0.0
+    for version in sorted((run_dir / "csv").glob("version_*")):
+        start, end = version / "hparams.yaml", version / "metrics.csv"
+        if start.is_file() and end.is_file():
+            total += max(0.0, end.stat().st_mtime - start.stat().st_mtime)
+    return round(total, 1) if total > 0 else None
+
+
 def training_summary(run_dir: Path, checkpoint: Path, hardware: str | None) -> dict[str, Any]:
     """What a user of the weights should know about how they were made (JSON-serialisable)."""
     config = OmegaConf.load(run_dir / ".hydra" / "config.yaml")
     state = torch.load(checkpoint, map_location="cpu", weights_only=True)
     data = config.data
     spec = OmegaConf.to_container(data.prepare.spec, resolve=False) if "prepare" in data else {}
-    started = (run_dir / ".hydra" / "config.yaml").stat().st_mtime
     summary: dict[str, Any] = {
         "resolution": int(spec.get("resolution", 256)) if isinstance(spec, dict) else 256,
         "train_crop": data.get("train_crop"),
@@ -67,7 +77,7 @@ def training_summary(run_dir: Path, checkpoint: Path, hardware: str | None) -> d
         "optimizer_steps": int(state.get("global_step", 0)),
         "checkpoint": checkpoint.name,
         "seed": int(config.seed),
-        "wall_time_s": round(checkpoint.stat().st_mtime - started, 1),
+        "wall_time_s": training_wall_time(run_dir),
         "hardware": hardware or f"{platform.machine()} CPU, {torch.get_num_threads()} threads",
         "exported": datetime.now().astimezone().isoformat(timespec="seconds"),
     }

@@ -70,6 +70,12 @@ CLIPPED_WARNING_FRACTION = 0.01
 
 # Warn when the hotspot lies farther than this fraction of the crop side from the crop centre.
 OFF_CENTRE_WARNING_FRACTION = 0.1
+# A detected highlight must be this much brighter (mean luminance in the clipping disc) than the
+# image centre to move the crop; otherwise it is texture or environment light, not the flash.
+MIN_HOTSPOT_OVER_CENTRE = 2.0
+# A square centred on the hotspot at least this fraction of the short side counts as "the flash
+# roughly at the centre" (paper §6.1): the whole central square is used, nothing is upscaled.
+CENTRED_SNAP_FRACTION = 0.9
 _STATISTICS_PIXELS = 1_000_000
 
 
@@ -211,8 +217,10 @@ def hotspot_crop(height: int, width: int, hotspot: tuple[float, float]) -> Crop:
     has the flash roughly at the centre of a 1:1 crop). When the hotspot is so close to an edge
     that this square would be smaller than half of ``min(height, width)``, the square keeps that
     minimum side and is shifted into the image instead (the hotspot is then off-centre; a tiny
-    crop of a corner is worse than an off-centre highlight). The side never exceeds
-    ``min(height, width)``.
+    crop of a corner is worse than an off-centre highlight). A centred square of at least
+    :data:`CENTRED_SNAP_FRACTION` of the short side becomes the whole central square (the flash
+    is "roughly at the centre"; nothing is thrown away or upscaled for a pixel or two). The side
+    never exceeds ``min(height, width)``.
     """
     if height < 1 or width < 1:
         raise ValueError(f"image size must be positive, got {width}×{height}")
@@ -223,10 +231,46 @@ def hotspot_crop(height: int, width: int, hotspot: tuple[float, float]) -> Crop:
     cx, cy = hx + 0.5, hy + 0.5
     shortest = min(height, width)
     largest_centred = math.floor(2.0 * min(cx, width - cx, cy, height - cy))
+    if largest_centred >= CENTRED_SNAP_FRACTION * shortest:
+        largest_centred = shortest
     size = min(shortest, max(largest_centred, math.ceil(shortest / 2)))
     x = min(max(math.floor(cx - size / 2 + 0.5), 0), width - size)
     y = min(max(math.floor(cy - size / 2 + 0.5), 0), height - size)
     return Crop(x, y, size)
+
+
+def disc_luminance(linear: Tensor, centre: tuple[float, float]) -> float:
+    """Mean luminance in the clipping-check disc around ``centre`` over the image's median.
+
+    Shape:
+        - linear: ``(3, H, W)``
+    """
+    height, width = linear.shape[-2:]
+    radius = max(CLIP_DISC_MIN_RADIUS, CLIP_DISC_FRACTION * min(height, width))
+    x0, x1 = max(0, math.floor(centre[0] - radius)), min(width, math.ceil(centre[0] + radius) + 1)
+    y0, y1 = max(0, math.floor(centre[1] - radius)), min(height, math.ceil(centre[1] + radius) + 1)
+    window = luminance(linear[:, y0:y1, x0:x1].float())[0]
+    ys = torch.arange(y0, y1, dtype=torch.float32)[:, None]
+    xs = torch.arange(x0, x1, dtype=torch.float32)[None, :]
+    inside = (xs - centre[0]) ** 2 + (ys - centre[1]) ** 2 <= radius * radius
+    median = float(luminance(_subsampled(linear))[0].median())
+    return float(window[inside].mean()) / median if median > 0 else math.inf
+
+
+def flash_centre(linear: Tensor, detected: tuple[float, float]) -> tuple[tuple[float, float], float]:
+    """Where to centre the crop: the detected highlight, or the image centre when the highlight
+    is not clearly brighter than the centre (a phone's flash sits beside the lens, so without a
+    distinct highlight — rough or dark materials, bright environment light — the flash is at
+    the centre). Returns the point and the highlight's brightness over the centre's.
+
+    Shape:
+        - linear: ``(3, H, W)``
+    """
+    height, width = linear.shape[-2:]
+    centre = ((width - 1) / 2.0, (height - 1) / 2.0)
+    at_centre = disc_luminance(linear, centre)
+    ratio = disc_luminance(linear, detected) / at_centre if at_centre > 0 else math.inf
+    return (detected if ratio >= MIN_HOTSPOT_OVER_CENTRE else centre), ratio
 
 
 def clipped_fraction(linear: Tensor, crop: Crop, hotspot: tuple[float, float]) -> float:
@@ -284,8 +328,16 @@ def preprocess(
     height, width = linear.shape[-2:]
     warnings: list[str] = []
 
+    over_centre: float | None = None
     if crop is None:
-        detected = find_hotspot(linear)
+        found = find_hotspot(linear)
+        detected, over_centre = flash_centre(linear, found)
+        if detected != found:
+            warnings.append(
+                f"no distinct flash highlight (the brightest spot, at ({found[0]:.0f}, {found[1]:.0f}), "
+                f"is only {over_centre:.2f}× as bright as the centre): cropped around the image centre; "
+                "pass --crop to choose"
+            )
         crop = hotspot_crop(height, width, detected)
         reported_hotspot: tuple[float, float] | None = detected
     else:
@@ -309,6 +361,8 @@ def preprocess(
 
     stats = _luminance_stats(region)
     stats.update(hotspot_x=float(detected[0]), hotspot_y=float(detected[1]), hotspot_offset=float(offset))
+    if over_centre is not None and math.isfinite(over_centre):
+        stats["hotspot_over_centre"] = float(over_centre)
     if clipped_is_saturated and photo.source != "exr":
         fraction = clipped_fraction(linear, crop, detected)
         stats["clipped_fraction"] = fraction
@@ -376,11 +430,16 @@ def _resize(region: Tensor, resolution: int) -> Tensor:
     return out[0]
 
 
+def _subsampled(image: Tensor) -> Tensor:
+    """A strided view of at most about a million pixels (bounded cost on huge photos)."""
+    size = image.shape[-1] * image.shape[-2]
+    stride = max(1, math.ceil(math.sqrt(size / _STATISTICS_PIXELS)))
+    return image[:, ::stride, ::stride].float()
+
+
 def _luminance_stats(region: Tensor) -> dict[str, float]:
     """Mean/median/p99/max luminance of a strided subsample (bounded cost on huge crops)."""
-    size = region.shape[-1] * region.shape[-2]
-    stride = max(1, math.ceil(math.sqrt(size / _STATISTICS_PIXELS)))
-    lum = luminance(region[:, ::stride, ::stride].float()).flatten()
+    lum = luminance(_subsampled(region)).flatten()
     median, p99 = (float(v) for v in torch.quantile(lum, torch.tensor([0.5, 0.99])))
     return {
         "mean_luminance": float(lum.mean()),

@@ -28,11 +28,20 @@ def atomic_replace(path: str | os.PathLike[str]) -> Iterator[Path]:
         yield temp
         with temp.open("rb+") as handle:
             os.fsync(handle.fileno())
+        # Some writers create their file 0600 (safetensors does); give the result the mode a
+        # plain open() would have, so shared outputs and shipped files are readable by others.
+        os.chmod(temp, _default_file_mode())
         os.replace(temp, path)
     except BaseException:
         temp.unlink(missing_ok=True)
         raise
     fsync_directory(path.parent)
+
+
+def _default_file_mode() -> int:
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
 
 
 def fsync_directory(directory: Path) -> None:
