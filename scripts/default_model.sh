@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Reproduces the shipped default model and the README section "Default model": dataset, GAN,
+# baseline, loss ablation, trivial references, evaluation on the test split, export into the package.
+# About 2.5 hours on the 2-core CPU machine this project was developed on (no GPU).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=.venv/bin/python
+OUT=logs/default_model
+BASELINE=(model=deschaintre2018 model.generator.levels=7 loss=no_adv loss.switches.feature=false)
+# Grid samples, fixed before training: the first crop of the first test material of every family.
+GRID='[test-m000008-c0-r0,test-m000020-c0-r0,test-m000029-c0-r0,test-m000031-c0-r0,test-m000033-c0-r0,test-m000066-c0-r0,test-m000067-c0-r0,test-m000082-c0-r0]'
+
+$PY generate.py dataset=default_model                                    # 672 samples, ~4.5 min
+# The GAN and the baseline: same data, batches, steps (1 750 batches of 4 × 128² crops), one thread each.
+OMP_NUM_THREADS=1 $PY train.py experiment=default_model hydra.run.dir=$OUT/gan &
+OMP_NUM_THREADS=1 $PY train.py experiment=default_model "${BASELINE[@]}" hydra.run.dir=$OUT/baseline &
+wait
+# The five loss variants with the same smaller budget (250 batches each).
+OMP_NUM_THREADS=1 $PY train.py -m experiment=default_model loss=full,no_adv,no_feat,no_param,no_render \
+    trainer.max_epochs=1 data.epoch_samples=1000 task_name=default_model_ablation hydra.sweep.dir=$OUT/ablation
+$PY -m brdfgan.report $OUT/ablation --out $OUT/ablation_report
+$PY -m brdfgan.models.reference data/default_model --out $OUT/references
+$PY evaluate.py data=default_model split=test grid_keys="$GRID" hydra.run.dir=$OUT/evaluation \
+    "ckpt={gan: $OUT/gan/checkpoints/last.ckpt, baseline: $OUT/baseline/checkpoints/last.ckpt, mean_maps: $OUT/references/mean_maps.safetensors, photo_basecolor: $OUT/references/photo_basecolor.safetensors}"
+$PY -m brdfgan.inference.export_weights $OUT/gan --out src/brdfgan/weights/default.safetensors \
+    --model-id brdfgan-default-v1 --hardware "2 vCPU x86_64 (no GPU), 1 thread, shared with the baseline run"
+$PY -m tests.test_shipped_weights                                        # refresh the stored statistics
