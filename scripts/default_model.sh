@@ -20,7 +20,7 @@ OMP_NUM_THREADS=1 $PY train.py -m experiment=default_model loss=full,no_adv,no_f
     trainer.max_epochs=1 data.epoch_samples=1000 task_name=default_model_ablation hydra.sweep.dir=$OUT/ablation
 $PY -m brdfgan.report $OUT/ablation --out $OUT/ablation_report
 $PY -m brdfgan.models.reference data/default_model --out $OUT/references
-$PY evaluate.py data=default_model split=test grid_keys="$GRID" hydra.run.dir=$OUT/evaluation \
+$PY evaluate.py data=default_model split=test grid_keys="$GRID" metrics.downscale_to=128 hydra.run.dir=$OUT/evaluation \
     "ckpt={gan: $OUT/gan/checkpoints/last.ckpt, baseline: $OUT/baseline/checkpoints/last.ckpt, mean_maps: $OUT/references/mean_maps.safetensors, photo_basecolor: $OUT/references/photo_basecolor.safetensors}"
 $PY -m brdfgan.inference.export_weights $OUT/gan --out src/brdfgan/weights/default.safetensors \
     --model-id brdfgan-default-v1 --hardware "2 vCPU x86_64 (no GPU), 1 thread, shared with the baseline run"

@@ -47,13 +47,16 @@ def find_checkpoint(run_dir: Path, which: str) -> Path:
 
 
 def training_wall_time(run_dir: Path) -> float | None:
-    """Seconds of training summed over the run's sessions (a resume starts a new CSV version):
-    from each version's ``hparams.yaml`` (written at start) to its last ``metrics.csv`` write."""
+    """Seconds of training summed over the run's sessions (a resume starts a new CSV version),
+    validation and the final test included: from each version's first file (``hparams.yaml`` is
+    written at start but rewritten at the end, so the folder's own time counts too) to its last
+    ``metrics.csv`` write."""
     total = 0.0
     for version in sorted((run_dir / "csv").glob("version_*")):
         start, end = version / "hparams.yaml", version / "metrics.csv"
         if start.is_file() and end.is_file():
-            total += max(0.0, end.stat().st_mtime - start.stat().st_mtime)
+            began = min(start.stat().st_mtime, version.stat().st_mtime)
+            total += max(0.0, end.stat().st_mtime - began)
     return round(total, 1) if total > 0 else None
 
 
