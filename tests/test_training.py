@@ -116,9 +116,11 @@ def test_resume_continues_with_the_same_step_count_and_lr(tiny_data: Path, tmp_p
 
     first = compose_train([*overrides[:-1], "trainer.max_epochs=1"], tiny_data)
     first.paths.output_dir = str(tmp_path / "interrupted")
-    _fit(first)
+    _, first_trainer = _fit(first)
     last = tmp_path / "interrupted" / "checkpoints" / "last.ckpt"
     assert last.is_file()
+    # last.ckpt holds the final state, whether or not the last epoch improved the metric.
+    assert torch.load(last, weights_only=True)["global_step"] == first_trainer.global_step
     resumed_cfg = compose_train(overrides, tiny_data)
     resumed_cfg.paths.output_dir = str(tmp_path / "interrupted")
     resumed_module, resumed = _fit(resumed_cfg, ckpt_path=str(last))
