@@ -11,9 +11,16 @@ BASELINE=(model=deschaintre2018 model.generator.levels=7 loss=no_adv loss.switch
 GRID='[test-m000008-c0-r0,test-m000020-c0-r0,test-m000029-c0-r0,test-m000031-c0-r0,test-m000033-c0-r0,test-m000066-c0-r0,test-m000067-c0-r0,test-m000082-c0-r0]'
 
 $PY generate.py dataset=default_model                                    # 672 samples, ~4.5 min
-# The GAN and the baseline: same data, batches, steps (1 750 batches of 4 × 128² crops), one thread each.
+# The GAN and the baseline: same data and batches of 4 × 128² crops, one thread each; 5 epochs
+# (1 750 batches), then both resumed to 8 epochs (the schedule follows the new length).
 OMP_NUM_THREADS=1 $PY train.py experiment=default_model hydra.run.dir=$OUT/gan &
 OMP_NUM_THREADS=1 $PY train.py experiment=default_model "${BASELINE[@]}" hydra.run.dir=$OUT/baseline &
+wait
+for run in gan baseline; do
+    extra=(); [ $run = baseline ] && extra=("${BASELINE[@]}")
+    OMP_NUM_THREADS=1 $PY train.py experiment=default_model "${extra[@]}" trainer.max_epochs=8 \
+        ckpt_path=$OUT/$run/checkpoints/last.ckpt hydra.run.dir=$OUT/$run &
+done
 wait
 # The five loss variants with the same smaller budget (250 batches each).
 OMP_NUM_THREADS=1 $PY train.py -m experiment=default_model loss=full,no_adv,no_feat,no_param,no_render \
