@@ -385,3 +385,6 @@ def test_crop_falls_back_to_the_centre_without_a_distinct_flash_highlight() -> N
     result = preprocess(photo, 64)
     assert not any("no distinct" in w for w in result.warnings)
     assert abs(result.crop.x + (result.crop.size - 1) / 2 - 100) <= 1
+    # A highlight found at the centre is kept without a warning, however faint.
+    flat = Photo(Path("flat.png"), torch.full((3, 64, 64), 0.3), "png", 8, "linear", 1, ())
+    assert not any("no distinct" in w for w in preprocess(flat, 32).warnings)

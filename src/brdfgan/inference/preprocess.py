@@ -268,6 +268,10 @@ def flash_centre(linear: Tensor, detected: tuple[float, float]) -> tuple[tuple[f
     """
     height, width = linear.shape[-2:]
     centre = ((width - 1) / 2.0, (height - 1) / 2.0)
+    if math.hypot(detected[0] - centre[0], detected[1] - centre[1]) <= CLIP_DISC_FRACTION * min(
+        height, width
+    ):
+        return detected, 1.0  # the highlight is at the centre already: nothing to decide
     at_centre = disc_luminance(linear, centre)
     ratio = disc_luminance(linear, detected) / at_centre if at_centre > 0 else math.inf
     return (detected if ratio >= MIN_HOTSPOT_OVER_CENTRE else centre), ratio
