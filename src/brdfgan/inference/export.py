@@ -83,6 +83,10 @@ class ExportOptions:
             )
 
 
+# What glTF 2.0 prescribes for material.glb: sRGB base colour, OpenGL normals, 8-bit PNG.
+GLTF_TEXTURES = ExportOptions()
+
+
 @dataclass(frozen=True)
 class Texture:
     """One texture file's content and how to read it back.
@@ -171,6 +175,13 @@ def write_material(
     """
     target = Path(out_dir)
     textures = texture_set(maps, options)
+    # The bit depth changes no value; another format or normal convention (EXR, DirectX) does, and
+    # then the glTF set is computed for itself.
+    same_values = (options.format, options.normal_convention) == (
+        GLTF_TEXTURES.format,
+        GLTF_TEXTURES.normal_convention,
+    )
+    gltf_textures = textures if same_values else texture_set(maps, GLTF_TEXTURES)
     parent = target.parent
     try:
         parent.mkdir(parents=True, exist_ok=True)
@@ -183,7 +194,7 @@ def write_material(
     staging = parent / f".{target.name}.{uuid.uuid4().hex[:12]}.tmp"
     try:
         staging.mkdir()
-        files = _write_files(staging, target.name, textures, options, extra_files or {})
+        files = _write_files(staging, target.name, textures, gltf_textures, options, extra_files or {})
         document = {"format": MATERIAL_JSON_FORMAT, **metadata, "files": files}
         (staging / "material.json").write_text(json.dumps(document, indent=2, sort_keys=False) + "\n")
         _swap_directory(staging, target)
@@ -198,6 +209,7 @@ def _write_files(
     directory: Path,
     name: str,
     textures: Mapping[str, Texture],
+    gltf_textures: Mapping[str, Texture],
     options: ExportOptions,
     extra_files: Mapping[str, Callable[[Path], Any]],
 ) -> dict[str, dict[str, Any]]:
@@ -215,19 +227,11 @@ def _write_files(
         }
         if map_name == "normal":
             files[path.name]["convention"] = options.normal_convention
-    glb_normal = textures["normal"].values
-    if options.normal_convention == "directx":  # glTF wants OpenGL normals
-        glb_normal = glb_normal.copy()
-        glb_normal[..., 1] = 1.0 - glb_normal[..., 1]
-    basecolor = textures["basecolor"].values
-    packed = textures["metallicRoughness"].values
-    if options.format == "exr":  # the glTF set is 8-bit PNG; base colour must be sRGB-encoded
-        basecolor = linear_to_srgb(torch.from_numpy(basecolor)).numpy()
     write_glb(
         directory / "material.glb",
-        basecolor_png=png_bytes(basecolor),
-        normal_png=png_bytes(glb_normal),
-        metallic_roughness_png=png_bytes(packed),
+        basecolor_png=png_bytes(gltf_textures["basecolor"].values),
+        normal_png=png_bytes(gltf_textures["normal"].values),
+        metallic_roughness_png=png_bytes(gltf_textures["metallicRoughness"].values),
         name=name,
     )
     files["material.glb"] = {
