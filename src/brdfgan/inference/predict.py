@@ -158,7 +158,7 @@ def predict_photo(
     prepared = preprocess(photo, resolution, options.crop)
     with torch.inference_mode():
         maps = predict_maps(model.generator, prepared.photo[None], options.tiling, progress=tile_progress)[0]
-    tiled = resolution * resolution > options.tiling.max_direct_pixels
+    tiled = options.tiling.runs_tiled(resolution, resolution)
     warnings = photo.warnings + prepared.warnings
     metadata = {
         "name": out_dir.name,

@@ -113,6 +113,10 @@ class TilingConfig:
                 f"got margin={self.margin}, overlap={self.overlap}, tile={self.tile}"
             )
 
+    def runs_tiled(self, height: int, width: int) -> bool:
+        """Whether :func:`predict_maps` splits an ``height × width`` photo into tiles."""
+        return height * width > self.max_direct_pixels
+
     @property
     def ramp(self) -> int:
         """Width of the raised-cosine transition inside the overlap: ``overlap - 2 * margin``."""
@@ -502,7 +506,7 @@ def predict_maps(
     """
     _check_photo(photo, single=True)
     height, width = photo.shape[-2:]
-    if height * width <= config.max_direct_pixels:
+    if not config.runs_tiled(height, width):
         maps = predict_direct(generator, photo)
         if progress is not None:
             progress(1, 1)
