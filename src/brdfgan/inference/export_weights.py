@@ -65,14 +65,15 @@ def training_summary(run_dir: Path, checkpoint: Path, hardware: str | None) -> d
     config = OmegaConf.load(run_dir / ".hydra" / "config.yaml")
     state = torch.load(checkpoint, map_location="cpu", weights_only=True)
     data = config.data
-    spec = OmegaConf.to_container(data.prepare.spec, resolve=False) if "prepare" in data else {}
+    spec = OmegaConf.to_container(data.prepare.spec, resolve=False) if "prepare" in data else None
+    spec = spec if isinstance(spec, dict) else {}
     summary: dict[str, Any] = {
-        "resolution": int(spec.get("resolution", 256)) if isinstance(spec, dict) else 256,
+        "resolution": int(spec.get("resolution", 256)),
         "train_crop": data.get("train_crop"),
         "dataset": {
             "dir": Path(str(data.data_dir)).name,
-            "materials": spec.get("materials") if isinstance(spec, dict) else None,
-            "spp": spec.get("spp") if isinstance(spec, dict) else None,
+            "materials": spec.get("materials"),
+            "spp": spec.get("spp"),
         },
         "batch_size": int(data.batch_size),
         "loss": {k: bool(v) for k, v in config.loss.switches.items() if not str(k).startswith("_")},
