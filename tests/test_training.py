@@ -14,8 +14,10 @@ import lightning as L
 import pytest
 import torch
 from omegaconf import DictConfig
+from safetensors.torch import save_file
+from torch import nn
 
-from brdfgan.training.run import build
+from brdfgan.training.run import TrainConfigError, build, warm_start
 from brdfgan.training.schedule import LinearDecaySchedule
 from tests.conftest import compose_train
 
@@ -80,6 +82,60 @@ def test_linear_decay_schedule() -> None:
     assert [schedule(s) for s in range(11)] == pytest.approx([1, 1, 1, 1, 1, 1.0, 0.8, 0.6, 0.4, 0.2, 0.0])
     with pytest.raises(ValueError):
         LinearDecaySchedule(0)
+
+
+def _state_dict_file(module: L.LightningModule, path: Path) -> Path:
+    torch.save({"state_dict": module.state_dict(), "global_step": 123}, path)
+    return path
+
+
+def _same(a: nn.Module | list[torch.Tensor], b: nn.Module, atol: float = 0.0) -> bool:
+    first = list(a.state_dict().values()) if isinstance(a, nn.Module) else a
+    return all(torch.allclose(x.float(), y.float(), atol=atol, rtol=0) for x, y in
+               zip(first, b.state_dict().values(), strict=True))  # fmt: skip
+
+
+def test_warm_start_takes_the_weights_and_nothing_else(tmp_path: Path) -> None:
+    torch.manual_seed(1)
+    _, gan, _ = build(compose_train(["loss=full"]))
+    checkpoint = _state_dict_file(gan, tmp_path / "gan.ckpt")
+    content_loss = ["loss=no_adv", "loss.switches.feature=false"]
+    # A GAN checkpoint into a run without a discriminator: the generator only.
+    torch.manual_seed(2)
+    _, content_only, _ = build(compose_train(content_loss))
+    assert not _same(gan.generator, content_only.generator)
+    assert warm_start(content_only, checkpoint) == ["generator"]
+    assert _same(gan.generator, content_only.generator)
+    # Both networks when both sides have one.
+    torch.manual_seed(3)
+    _, other_gan, _ = build(compose_train(["loss=full"]))
+    assert warm_start(other_gan, checkpoint) == ["generator", "discriminator"]
+    assert _same(gan.discriminator, other_gan.discriminator)
+    # A safetensors weights file (fp16) holds the generator; the discriminator stays as it was.
+    safetensors = tmp_path / "g.safetensors"
+    save_file({k: v.half().contiguous() for k, v in gan.generator.state_dict().items()}, str(safetensors))
+    torch.manual_seed(4)
+    _, from_weights, _ = build(compose_train(["loss=no_adv"]))
+    discriminator = [p.clone() for p in from_weights.discriminator.state_dict().values()]
+    assert warm_start(from_weights, safetensors) == ["generator"]
+    assert _same(discriminator, from_weights.discriminator)
+    assert _same(gan.generator, from_weights.generator, atol=1e-3)
+
+
+def test_warm_start_errors_name_the_file(tmp_path: Path) -> None:
+    _, module, _ = build(compose_train(["loss=no_adv", "loss.switches.feature=false"]))
+    _, wider, _ = build(compose_train(["loss=no_adv", "model.generator.width=8"]))
+    narrow = _state_dict_file(wider, tmp_path / "narrow.ckpt")
+    with pytest.raises(TrainConfigError, match=r"init_from: the generator in .*narrow.ckpt does not fit"):
+        warm_start(module, narrow)
+    junk = tmp_path / "junk.ckpt"
+    junk.write_bytes(b"not a checkpoint")
+    with pytest.raises(TrainConfigError, match=r"init_from: .*junk.ckpt is not a checkpoint"):
+        warm_start(module, junk)
+    discriminator_only = tmp_path / "d.ckpt"
+    torch.save({"state_dict": {"discriminator.w": torch.zeros(1)}}, discriminator_only)
+    with pytest.raises(TrainConfigError, match="holds no generator weights"):
+        warm_start(module, discriminator_only)
 
 
 def _fit(cfg: DictConfig, ckpt_path: str | None = None) -> tuple[L.LightningModule, L.Trainer]:
@@ -170,13 +226,17 @@ def test_train_py_runs_the_loop_and_returns_the_metric(tiny_data: Path) -> None:
     ("override", "message"),
     [
         ("ckpt_path=/nonexistent.ckpt", "ckpt_path: checkpoint /nonexistent.ckpt does not exist"),
+        ("init_from=/nonexistent.ckpt", "init_from: /nonexistent.ckpt does not exist"),
+        ("init_from=a.ckpt ckpt_path=b.ckpt", "init_from and ckpt_path: set one"),
         ("model.generator.no_such_arg=1", "no_such_arg"),
         ("seed=abc", "seed"),
     ],
 )
 def test_train_py_bad_input_is_a_clear_error(tmp_path: Path, override: str, message: str) -> None:
     prefix = "+" if "no_such_arg" in override else ""
-    result = _train_cli("experiment=smoke", prefix + override, cwd=tmp_path)
+    for name in ("a.ckpt", "b.ckpt"):
+        (tmp_path / name).write_bytes(b"")
+    result = _train_cli("experiment=smoke", *(prefix + part for part in override.split()), cwd=tmp_path)
     assert result.returncode != 0
     assert message in result.stderr, result.stderr[-2000:]
     assert "Traceback" not in result.stderr

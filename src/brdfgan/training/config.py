@@ -17,6 +17,7 @@ class TrainConfig:
     train: bool = True
     test: bool = True
     ckpt_path: str | None = None
+    init_from: str | None = None
     monitor: str = "val/loss"
     paths: dict[str, Any] = field(default_factory=dict)
     data: dict[str, Any] = field(default_factory=dict)

@@ -13,6 +13,7 @@ from typing import Any
 
 import hydra
 import lightning as L
+import torch
 from omegaconf import DictConfig, OmegaConf
 
 from brdfgan.evaluation.evaluator import evaluate_models, write_results
@@ -41,13 +42,68 @@ def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.
     return datamodule, module, trainer
 
 
+def _network_weights(path: Path) -> dict[str, dict[str, torch.Tensor]]:
+    """The state dicts per network (``generator``, ``discriminator``) stored in a training
+    checkpoint, or the generator of a ``.safetensors`` weights file."""
+    if path.suffix.lower() == ".safetensors":
+        from safetensors.torch import load_file
+
+        return {"generator": {name: value.float() for name, value in load_file(str(path)).items()}}
+    state = torch.load(path, map_location="cpu", weights_only=True)["state_dict"]
+    networks: dict[str, dict[str, torch.Tensor]] = {}
+    for key, value in state.items():
+        network, _, name = key.partition(".")
+        if network in ("generator", "discriminator"):
+            networks.setdefault(network, {})[name] = value
+    return networks
+
+
+def warm_start(module: L.LightningModule, path: str | Path) -> list[str]:
+    """Initialise ``module``'s networks from ``path`` (``init_from``) and return their names.
+
+    Unlike resuming (``ckpt_path``) only weights are taken: the optimizers, the learning-rate
+    schedule, the step count and the loss switches are this run's, so a run can continue another
+    one with a different loss (e.g. a GAN-trained generator fine-tuned without the adversarial
+    term). The generator must fit exactly; the discriminator is taken when both sides have one.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise TrainConfigError(f"init_from: {path} does not exist")
+    try:
+        networks = _network_weights(path)
+    except Exception as error:  # any unreadable file is the same user error
+        raise TrainConfigError(f"init_from: {path} is not a checkpoint or weights file ({error})") from None
+    if "generator" not in networks:
+        raise TrainConfigError(f"init_from: {path} holds no generator weights")
+    loaded = []
+    for name in ("generator", "discriminator"):
+        network = getattr(module, name, None)
+        if network is None or name not in networks:
+            continue
+        try:
+            network.load_state_dict(networks[name])
+        except RuntimeError as error:
+            first = str(error).strip().splitlines()[0]
+            message = f"init_from: the {name} in {path} does not fit this model ({first})"
+            raise TrainConfigError(message) from None
+        loaded.append(name)
+    return loaded
+
+
 def train(cfg: DictConfig) -> float | None:
-    """Fit (optionally resuming from ``ckpt_path``), test the best checkpoint, and return the
-    monitored metric (for sweeps), or ``None`` when it was not logged."""
+    """Fit (optionally resuming from ``ckpt_path`` or starting from ``init_from``'s weights), test
+    the best checkpoint, and return the monitored metric (for sweeps), or ``None`` when it was
+    not logged."""
     if cfg.ckpt_path is not None and not Path(cfg.ckpt_path).is_file():
         raise TrainConfigError(f"ckpt_path: checkpoint {cfg.ckpt_path} does not exist")
+    init_from = cfg.get("init_from")
+    if init_from is not None and cfg.ckpt_path is not None:
+        raise TrainConfigError("init_from and ckpt_path: set one (init_from starts a new run from weights)")
     L.seed_everything(cfg.seed, workers=True)
     datamodule, module, trainer = build(cfg)
+    if init_from is not None:
+        loaded = warm_start(module, init_from)
+        log.info("init_from: %s from %s (new optimizers and schedule)", " and ".join(loaded), init_from)
     log.info("run config:\n%s", OmegaConf.to_yaml(cfg, resolve=True))
     if cfg.train:
         trainer.fit(module, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
