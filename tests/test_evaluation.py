@@ -192,3 +192,38 @@ def test_evaluating_an_empty_split_names_the_folder(tmp_path: Path) -> None:
     assert result.returncode == 2, result.stderr[-2000:]
     assert f"no shards in {tmp_path}/data/deschaintre/test" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def _fake_run(run_dir: Path, overrides: list[str], epoch: int, step: int) -> Path:
+    """A run directory as train.py leaves it: .hydra/config.yaml and checkpoints/last.ckpt."""
+    from omegaconf import OmegaConf
+
+    from tests.conftest import compose_train
+
+    (run_dir / ".hydra").mkdir(parents=True)
+    OmegaConf.save(compose_train(overrides), run_dir / ".hydra" / "config.yaml")
+    checkpoint = run_dir / "checkpoints" / "last.ckpt"
+    checkpoint.parent.mkdir()
+    torch.save({"epoch": epoch, "global_step": step}, checkpoint)
+    return checkpoint
+
+
+def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> None:
+    from brdfgan.inference.export_weights import training_summary
+
+    gan = _fake_run(tmp_path / "gan", ["experiment=default_model"], epoch=6, step=4900)
+    content = ["experiment=default_model_finetune", f"init_from={gan}"]
+    finetune = _fake_run(tmp_path / "finetune", content, epoch=5, step=2100)
+    summary = training_summary(tmp_path / "finetune", finetune, "test CPU")
+    assert summary["optimizer_steps"] == 2100 and summary["epochs"] == 6
+    assert summary["loss"] == {"adversarial": False, "feature": False, "parameter": True, "rendering": True}
+    earlier = summary["init_from"]
+    assert earlier["run"] == str(tmp_path / "gan")
+    assert earlier["optimizer_steps"] == 4900 and earlier["epochs"] == 7
+    assert earlier["loss"]["adversarial"] and "init_from" not in earlier and "hardware" not in earlier
+    # Weights that do not come from a run directory are named only.
+    weights = tmp_path / "w.safetensors"
+    weights.write_bytes(b"")
+    from_weights = ["experiment=default_model_finetune", f"init_from={weights}"]
+    other = _fake_run(tmp_path / "other", from_weights, epoch=0, step=350)
+    assert training_summary(tmp_path / "other", other, None)["init_from"] == {"checkpoint": str(weights)}

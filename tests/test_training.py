@@ -48,6 +48,15 @@ def test_every_loss_and_experiment_composes_and_builds(loss: str, experiment: st
     assert isinstance(trainer, L.Trainer)
 
 
+def test_default_model_finetune_is_stage_one_without_a_discriminator() -> None:
+    stage1 = compose_train(["experiment=default_model"])
+    stage2 = compose_train(["experiment=default_model_finetune"])
+    assert stage2.init_from.endswith("logs/default_model/gan/checkpoints/last.ckpt")
+    assert stage2.data == stage1.data and stage2.model.generator == stage1.model.generator
+    _, module, _ = build(stage2)
+    assert module.discriminator is None and module.loss.switches.parameter and module.loss.switches.rendering
+
+
 @pytest.mark.parametrize("group", ["trainer=gpu", "trainer=ddp", "logger=tensorboard", "logger=wandb"])
 def test_other_groups_compose(group: str) -> None:
     cfg = compose_train([group])

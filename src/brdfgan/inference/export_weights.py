@@ -88,7 +88,23 @@ def training_summary(run_dir: Path, checkpoint: Path, hardware: str | None) -> d
     metrics = run_dir / "metrics.json"
     if metrics.is_file():
         summary["test_metrics"] = json.loads(metrics.read_text()).get("model", {})
+    init_from = OmegaConf.select(config, "init_from", default=None)
+    if init_from is not None:
+        summary["init_from"] = warm_start_summary(Path(str(init_from)))
     return summary
+
+
+def warm_start_summary(checkpoint: Path) -> dict[str, Any]:
+    """The run a warm-started run (``init_from``) began from: its own summary when the file is a
+    checkpoint inside a run directory (``RUN/checkpoints/*.ckpt``), else just the path."""
+    run_dir = checkpoint.parent.parent
+    in_a_run = checkpoint.is_file() and (run_dir / ".hydra" / "config.yaml").is_file()
+    if checkpoint.suffix != ".ckpt" or not in_a_run:
+        return {"checkpoint": str(checkpoint)}
+    earlier = training_summary(run_dir, checkpoint, None)
+    for key in ("hardware", "exported"):  # this machine now / this export: not facts of that run
+        earlier.pop(key)
+    return {"run": str(run_dir), **earlier}
 
 
 def export_weights(
