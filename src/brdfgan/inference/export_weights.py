@@ -1,9 +1,10 @@
 """Turn a training run into a ``.safetensors`` weights file that ``brdfgan predict`` can load.
 
     python -m brdfgan.inference.export_weights RUN_DIR [--checkpoint last|best|PATH]
-        [--out PATH] [--model-id ID] [--half] [--hardware TEXT]
+        [--out PATH] [--model-id ID] [--full-precision] [--hardware TEXT]
+        [--metrics EVAL_DIR/metrics.json [--metrics-model NAME]]
 
-The file holds the generator's tensors (fp16 with ``--half``), the model id, the class and its
+The file holds the generator's tensors (fp16 unless ``--full-precision``), the model id, the class and its
 constructor arguments (the architecture is rebuilt without Hydra or pickle), and a training
 summary in ``extra``: the resolution the model expects, the training crop, the dataset and its
 size, steps, epochs, wall time, hardware and the run's test metrics when present. The same
@@ -60,6 +61,35 @@ def training_wall_time(run_dir: Path) -> float | None:
     return round(total, 1) if total > 0 else None
 
 
+def tested_checkpoint(state: dict[str, Any], monitor: str) -> Path | None:
+    """The checkpoint ``train.py`` tested after fitting (the best by ``monitor``), as recorded by
+    the monitoring ``ModelCheckpoint`` in a checkpoint's callback states."""
+    for callback in state.get("callbacks", {}).values():
+        if (
+            isinstance(callback, dict)
+            and callback.get("monitor") == monitor
+            and callback.get("best_model_path")
+        ):
+            return Path(callback["best_model_path"])
+    return None
+
+
+def run_test_metrics(
+    run_dir: Path, checkpoint: Path, state: dict[str, Any], monitor: str
+) -> dict[str, Any] | None:
+    """The run's own test metrics (``metrics.json``) when they belong to ``checkpoint``: train.py
+    tests the best checkpoint, which may not be the one exported (e.g. ``last``)."""
+    metrics, tested = run_dir / "metrics.json", tested_checkpoint(state, monitor)
+    if not metrics.is_file() or tested is None or not tested.is_file():
+        return None
+    # last.ckpt and the best epoch's file hold the same weights when they are the same step.
+    same = tested.resolve() == checkpoint.resolve()
+    if not same:
+        tested_step = torch.load(tested, map_location="cpu", weights_only=True).get("global_step")
+        same = tested_step == state.get("global_step")
+    return json.loads(metrics.read_text()).get("model", {}) if same else None
+
+
 def training_summary(run_dir: Path, checkpoint: Path, hardware: str | None) -> dict[str, Any]:
     """What a user of the weights should know about how they were made (JSON-serialisable)."""
     config = OmegaConf.load(run_dir / ".hydra" / "config.yaml")
@@ -85,9 +115,9 @@ def training_summary(run_dir: Path, checkpoint: Path, hardware: str | None) -> d
         "hardware": hardware or f"{platform.machine()} CPU, {torch.get_num_threads()} threads",
         "exported": datetime.now().astimezone().isoformat(timespec="seconds"),
     }
-    metrics = run_dir / "metrics.json"
-    if metrics.is_file():
-        summary["test_metrics"] = json.loads(metrics.read_text()).get("model", {})
+    test_metrics = run_test_metrics(run_dir, checkpoint, state, str(config.get("monitor", "val/loss")))
+    if test_metrics is not None:
+        summary["test_metrics"] = test_metrics
     init_from = OmegaConf.select(config, "init_from", default=None)
     if init_from is not None:
         summary["init_from"] = warm_start_summary(Path(str(init_from)))
@@ -115,13 +145,20 @@ def export_weights(
     model_id: str | None = None,
     half: bool = True,
     hardware: str | None = None,
+    metrics: tuple[Path, str] | None = None,
 ) -> Path:
-    """Export a run's generator to ``out`` (+ ``out.with_suffix('.json')``); returns ``out``."""
+    """Export a run's generator to ``out`` (+ ``out.with_suffix('.json')``); returns ``out``.
+
+    ``metrics``: ``(metrics.json of an evaluate.py run, model name in it)`` to record as the test
+    metrics instead of the run's own (which exist only when the exported checkpoint was tested).
+    """
     if not (run_dir / ".hydra" / "config.yaml").is_file():
         raise WeightsError(f"{run_dir}: not a training run directory (no .hydra/config.yaml)")
     path = find_checkpoint(run_dir, checkpoint)
     generator, meta = load_checkpoint_generator(path)
     summary = training_summary(run_dir, path, hardware)
+    if metrics is not None:
+        summary["test_metrics"] = evaluation_metrics(*metrics)
     model_id = model_id or meta["model_id"]
     out.parent.mkdir(parents=True, exist_ok=True)
     save_weights(out, generator, target=meta["target"], config=meta["config"], model_id=model_id,
@@ -129,6 +166,18 @@ def export_weights(
     card = {"model_id": model_id, "class": meta["target"], "config": meta["config"], **summary}
     write_text_atomic(out.with_suffix(".json"), json.dumps(card, indent=2) + "\n")
     return out
+
+
+def evaluation_metrics(path: Path, model: str) -> dict[str, float]:
+    """One model's results from an ``evaluate.py`` ``metrics.json``."""
+    try:
+        results = json.loads(path.read_text())
+    except (OSError, ValueError) as error:
+        raise WeightsError(f"{path}: cannot read evaluation metrics ({error})") from None
+    if not isinstance(results, dict) or not isinstance(results.get(model), dict):
+        names = ", ".join(results) if isinstance(results, dict) else "none"
+        raise WeightsError(f"{path}: no model {model!r} in these metrics (models: {names})")
+    return results[model]
 
 
 @exit_on_user_error
@@ -141,10 +190,21 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--model-id", help="default: the run directory's name")
     parser.add_argument("--full-precision", action="store_true", help="store fp32 (default fp16)")
     parser.add_argument("--hardware", help="what it was trained on, for the summary")
+    parser.add_argument("--metrics", type=Path, help="an evaluate.py metrics.json to record as test metrics")
+    parser.add_argument("--metrics-model", help="the model's name in --metrics (default: the only one)")
     args = parser.parse_args(argv)
+    metrics = None
+    if args.metrics is not None:
+        name = args.metrics_model
+        if name is None:
+            models = list(json.loads(args.metrics.read_text())) if args.metrics.is_file() else []
+            if len(models) != 1:
+                parser.error(f"--metrics-model: {args.metrics} holds {len(models)} models; name one")
+            name = models[0]
+        metrics = (args.metrics, name)
     out = args.out or args.run_dir / "weights.safetensors"
     export_weights(args.run_dir, out, checkpoint=args.checkpoint, model_id=args.model_id,
-                   half=not args.full_precision, hardware=args.hardware)  # fmt: skip
+                   half=not args.full_precision, hardware=args.hardware, metrics=metrics)  # fmt: skip
     print(out)
 
 
