@@ -13,7 +13,7 @@ import torch
 import yaml
 from safetensors import safe_open
 
-from brdfgan.inference.export_weights import tested_checkpoint
+from brdfgan.inference.export_weights import tested_checkpoint as checkpoint_tested_by_train
 from brdfgan.inference.predict import load_model
 from brdfgan.inference.weights import WeightsError, load_generator, load_weights, save_weights
 from brdfgan.models.generator import Generator
@@ -139,7 +139,7 @@ def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> N
     assert summary["loss"] == {"adversarial": True, "feature": True, "parameter": True, "rendering": True}
     assert summary["hardware"] == "test CPU"
     # train.py's metrics are recorded when it tested the exported step (both cases: the unit test below).
-    best = tested_checkpoint(torch.load(ckpt, weights_only=True), "val/loss")
+    best = checkpoint_tested_by_train(torch.load(ckpt, weights_only=True), "val/loss")
     if best is not None and torch.load(best, weights_only=True)["global_step"] == summary["optimizer_steps"]:
         assert summary["test_metrics"]["rmse/diffuse"] == metrics["rmse/diffuse"]
     else:
@@ -198,7 +198,7 @@ def test_evaluating_an_empty_split_names_the_folder(tmp_path: Path) -> None:
     assert "Traceback" not in result.stderr
 
 
-def _fake_run(run_dir: Path, overrides: list[str], epoch: int, step: int) -> Path:
+def _fake_training_run(run_dir: Path, overrides: list[str], epoch: int, step: int) -> Path:
     """A run directory as train.py leaves it: .hydra/config.yaml and checkpoints/last.ckpt."""
     from omegaconf import OmegaConf
 
@@ -215,9 +215,9 @@ def _fake_run(run_dir: Path, overrides: list[str], epoch: int, step: int) -> Pat
 def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> None:
     from brdfgan.inference.export_weights import training_summary
 
-    gan = _fake_run(tmp_path / "gan", ["experiment=default_model"], epoch=6, step=4900)
+    gan = _fake_training_run(tmp_path / "gan", ["experiment=default_model"], epoch=6, step=4900)
     content = ["experiment=default_model_finetune", f"init_from={gan}"]
-    finetune = _fake_run(tmp_path / "finetune", content, epoch=5, step=2100)
+    finetune = _fake_training_run(tmp_path / "finetune", content, epoch=5, step=2100)
     summary = training_summary(tmp_path / "finetune", finetune, "test CPU")
     assert summary["optimizer_steps"] == 2100 and summary["epochs"] == 6
     assert summary["loss"] == {"adversarial": False, "feature": False, "parameter": True, "rendering": True}
@@ -229,7 +229,7 @@ def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> 
     weights = tmp_path / "w.safetensors"
     weights.write_bytes(b"")
     from_weights = ["experiment=default_model_finetune", f"init_from={weights}"]
-    other = _fake_run(tmp_path / "other", from_weights, epoch=0, step=350)
+    other = _fake_training_run(tmp_path / "other", from_weights, epoch=0, step=350)
     assert training_summary(tmp_path / "other", other, None)["init_from"] == {"checkpoint": str(weights)}
 
 
@@ -237,7 +237,7 @@ def test_exported_test_metrics_belong_to_the_exported_checkpoint(tmp_path: Path)
     from brdfgan.inference.export_weights import evaluation_metrics, training_summary
 
     run = tmp_path / "run"
-    last = _fake_run(run, ["experiment=smoke"], epoch=5, step=60)
+    last = _fake_training_run(run, ["experiment=smoke"], epoch=5, step=60)
     (run / "metrics.json").write_text(json.dumps({"model": {"rmse/normal": 0.5}}))
 
     def tested(best: Path, best_step: int) -> None:
