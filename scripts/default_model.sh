@@ -27,9 +27,11 @@ wait
 OMP_NUM_THREADS=2 $PY train.py experiment=default_model_finetune hydra.run.dir=$OUT/gan_finetune
 OMP_NUM_THREADS=2 $PY train.py experiment=default_model "${BASELINE[@]}" trainer.max_epochs=13 \
     ckpt_path=$OUT/baseline/checkpoints/last.ckpt hydra.run.dir=$OUT/baseline
-# The five loss variants with the same smaller budget (250 batches each).
-OMP_NUM_THREADS=1 $PY train.py -m experiment=default_model loss=full,no_adv,no_feat,no_param,no_render \
-    trainer.max_epochs=1 data.epoch_samples=1000 task_name=default_model_ablation hydra.sweep.dir=$OUT/ablation
+# The five loss variants with the same smaller budget (250 batches each), three seeds (the seed
+# sets the initialisation, the rendering-loss draws and the data order).
+OMP_NUM_THREADS=2 $PY train.py -m experiment=default_model loss=full,no_adv,no_feat,no_param,no_render \
+    seed=0,1,2 'data.seed=${seed}' trainer.max_epochs=1 data.epoch_samples=1000 \
+    task_name=default_model_ablation hydra.sweep.dir=$OUT/ablation
 $PY -m brdfgan.report $OUT/ablation --out $OUT/ablation_report
 $PY -m brdfgan.models.reference data/default_model --out $OUT/references
 $PY evaluate.py data=default_model split=test grid_keys="$GRID" metrics.downscale_to=128 hydra.run.dir=$OUT/evaluation \
