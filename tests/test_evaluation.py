@@ -260,3 +260,10 @@ def test_exported_test_metrics_belong_to_the_exported_checkpoint(tmp_path: Path)
     assert evaluation_metrics(evaluation, "shipped") == {"rmse/normal": 0.25}
     with pytest.raises(WeightsError, match=r"no model 'gan' in these metrics \(models: shipped, baseline\)"):
         evaluation_metrics(evaluation, "gan")
+    with pytest.raises(WeightsError, match="holds several models; name one with --metrics-model"):
+        evaluation_metrics(evaluation)
+    evaluation.write_text(json.dumps({"only": {"rmse/normal": 0.2}}))
+    assert evaluation_metrics(evaluation) == {"rmse/normal": 0.2}
+    evaluation.write_text("not json")
+    with pytest.raises(WeightsError, match="cannot read evaluation metrics"):
+        evaluation_metrics(evaluation)

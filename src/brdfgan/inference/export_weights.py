@@ -4,10 +4,11 @@
         [--out PATH] [--model-id ID] [--full-precision] [--hardware TEXT]
         [--metrics EVAL_DIR/metrics.json [--metrics-model NAME]]
 
-The file holds the generator's tensors (fp16 unless ``--full-precision``), the model id, the class and its
-constructor arguments (the architecture is rebuilt without Hydra or pickle), and a training
-summary in ``extra``: the resolution the model expects, the training crop, the dataset and its
-size, steps, epochs, wall time, hardware and the run's test metrics when present. The same
+The file holds the generator's tensors (fp16 unless ``--full-precision``), the model id, the
+class and its constructor arguments (the architecture is rebuilt without Hydra or pickle), and a
+training summary in ``extra``: the resolution the model expects, the training crop, the dataset
+and its size, steps, epochs, wall time, hardware, the run a warm-started run began from, and
+test metrics (the run's own when it tested the exported step, or ``--metrics``). The same
 summary is written beside the file as ``<stem>.json`` for people to read.
 
 Checkpoints are unpickled here (``torch.load(weights_only=True)``), so only export runs you made.
@@ -145,12 +146,13 @@ def export_weights(
     model_id: str | None = None,
     half: bool = True,
     hardware: str | None = None,
-    metrics: tuple[Path, str] | None = None,
+    metrics: tuple[Path, str | None] | None = None,
 ) -> Path:
     """Export a run's generator to ``out`` (+ ``out.with_suffix('.json')``); returns ``out``.
 
-    ``metrics``: ``(metrics.json of an evaluate.py run, model name in it)`` to record as the test
-    metrics instead of the run's own (which exist only when the exported checkpoint was tested).
+    ``metrics``: ``(metrics.json of an evaluate.py run, model name in it or None for its only
+    model)`` to record as the test metrics instead of the run's own (which exist only when the
+    exported checkpoint was tested).
     """
     if not (run_dir / ".hydra" / "config.yaml").is_file():
         raise WeightsError(f"{run_dir}: not a training run directory (no .hydra/config.yaml)")
@@ -168,12 +170,16 @@ def export_weights(
     return out
 
 
-def evaluation_metrics(path: Path, model: str) -> dict[str, float]:
-    """One model's results from an ``evaluate.py`` ``metrics.json``."""
+def evaluation_metrics(path: Path, model: str | None = None) -> dict[str, float]:
+    """One model's results from an ``evaluate.py`` ``metrics.json`` (``None``: its only model)."""
     try:
         results = json.loads(path.read_text())
     except (OSError, ValueError) as error:
         raise WeightsError(f"{path}: cannot read evaluation metrics ({error})") from None
+    if model is None and isinstance(results, dict) and len(results) == 1:
+        model = next(iter(results))
+    if model is None:
+        raise WeightsError(f"{path}: holds several models; name one with --metrics-model")
     if not isinstance(results, dict) or not isinstance(results.get(model), dict):
         names = ", ".join(results) if isinstance(results, dict) else "none"
         raise WeightsError(f"{path}: no model {model!r} in these metrics (models: {names})")
@@ -193,15 +199,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--metrics", type=Path, help="an evaluate.py metrics.json to record as test metrics")
     parser.add_argument("--metrics-model", help="the model's name in --metrics (default: the only one)")
     args = parser.parse_args(argv)
-    metrics = None
-    if args.metrics is not None:
-        name = args.metrics_model
-        if name is None:
-            models = list(json.loads(args.metrics.read_text())) if args.metrics.is_file() else []
-            if len(models) != 1:
-                parser.error(f"--metrics-model: {args.metrics} holds {len(models)} models; name one")
-            name = models[0]
-        metrics = (args.metrics, name)
+    metrics = (args.metrics, args.metrics_model) if args.metrics is not None else None
     out = args.out or args.run_dir / "weights.safetensors"
     export_weights(args.run_dir, out, checkpoint=args.checkpoint, model_id=args.model_id,
                    half=not args.full_precision, hardware=args.hardware, metrics=metrics)  # fmt: skip
