@@ -91,8 +91,13 @@ def run_test_metrics(
     return json.loads(metrics.read_text()).get("model", {}) if same else None
 
 
-def training_summary(run_dir: Path, checkpoint: Path, hardware: str | None) -> dict[str, Any]:
-    """What a user of the weights should know about how they were made (JSON-serialisable)."""
+def training_summary(
+    run_dir: Path, checkpoint: Path, hardware: str | None, test_metrics: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """What a user of the weights should know about how they were made (JSON-serialisable).
+
+    ``test_metrics``: recorded as given; ``None`` looks for the run's own (:func:`run_test_metrics`).
+    """
     config = OmegaConf.load(run_dir / ".hydra" / "config.yaml")
     state = torch.load(checkpoint, map_location="cpu", weights_only=True)
     data = config.data
@@ -116,7 +121,8 @@ def training_summary(run_dir: Path, checkpoint: Path, hardware: str | None) -> d
         "hardware": hardware or f"{platform.machine()} CPU, {torch.get_num_threads()} threads",
         "exported": datetime.now().astimezone().isoformat(timespec="seconds"),
     }
-    test_metrics = run_test_metrics(run_dir, checkpoint, state, str(config.get("monitor", "val/loss")))
+    if test_metrics is None:
+        test_metrics = run_test_metrics(run_dir, checkpoint, state, str(config.get("monitor", "val/loss")))
     if test_metrics is not None:
         summary["test_metrics"] = test_metrics
     init_from = OmegaConf.select(config, "init_from", default=None)
@@ -158,9 +164,8 @@ def export_weights(
         raise WeightsError(f"{run_dir}: not a training run directory (no .hydra/config.yaml)")
     path = find_checkpoint(run_dir, checkpoint)
     generator, meta = load_checkpoint_generator(path)
-    summary = training_summary(run_dir, path, hardware)
-    if metrics is not None:
-        summary["test_metrics"] = evaluation_metrics(*metrics)
+    test_metrics = evaluation_metrics(*metrics) if metrics is not None else None
+    summary = training_summary(run_dir, path, hardware, test_metrics)
     model_id = model_id or meta["model_id"]
     out.parent.mkdir(parents=True, exist_ok=True)
     save_weights(out, generator, target=meta["target"], config=meta["config"], model_id=model_id,
