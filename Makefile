@@ -11,7 +11,7 @@ ifneq ($(LIBLLVM),)
 export DRJIT_LIBLLVM_PATH ?= $(LIBLLVM)
 endif
 
-.PHONY: setup test test-slow demo demo-renderer lint format bench data clean
+.PHONY: setup test test-slow faults demo demo-renderer lint format bench data clean
 
 setup: $(STAMP)
 
@@ -37,6 +37,11 @@ test: setup
 test-slow: setup
 	$(PY) -m pytest -q -m slow
 
+# Fault injection against the real commands (kills, full disks, corrupt files): a table of
+# scenario | expected | result; minutes. Disk-full rows mount small tmpfs folders (root).
+faults: setup
+	$(PY) -m faults
+
 # The artist's path on the photos the package ships (held-out procedural materials): textures,
 # material.glb, material.json, preview.png and a turntable preview.gif per photo.
 demo: setup
@@ -48,12 +53,12 @@ demo-renderer: setup
 	$(PY) -m brdfgan.demo
 
 lint: setup
-	$(PY) -m ruff check src tests benchmarks *.py
-	$(PY) -m ruff format --check src tests benchmarks *.py
+	$(PY) -m ruff check src tests benchmarks faults *.py
+	$(PY) -m ruff format --check src tests benchmarks faults *.py
 
 format: setup
-	$(PY) -m ruff format src tests benchmarks *.py
-	$(PY) -m ruff check --fix src tests benchmarks *.py
+	$(PY) -m ruff format src tests benchmarks faults *.py
+	$(PY) -m ruff check --fix src tests benchmarks faults *.py
 
 bench: setup
 	$(PY) -m benchmarks.bench_renderer

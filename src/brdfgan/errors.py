@@ -2,11 +2,16 @@
 
 Every module raises a ``ValueError`` subclass naming the offending file or key; entry points wrap
 their work in :func:`exit_on_user_error` so those become ``error: <message>`` on stderr, exit 2.
+A full disk is not the user's mistake in the command but needs no traceback either: it becomes
+``error: <path>: no space left on device``, exit 1 (:class:`DiskFullError`, raised by the atomic
+writers of :mod:`brdfgan.io.atomic`, or any ``OSError`` with ``ENOSPC``/``EDQUOT``).
 """
 
 from __future__ import annotations
 
+import errno
 import functools
+import os
 import sys
 from collections.abc import Callable
 from typing import ParamSpec, TypeVar
@@ -15,6 +20,54 @@ P = ParamSpec("P")
 R = TypeVar("R")
 
 USER_ERROR_EXIT_CODE = 2
+DISK_FULL_EXIT_CODE = 1
+INTERRUPTED_EXIT_CODE = 130
+
+# errno values that mean "the filesystem has no room for this write".
+DISK_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT})
+
+
+class UserError(ValueError):
+    """Something the user can fix (a file, a key, a value); the message names it."""
+
+
+class DiskFullError(OSError):
+    """A write failed because the filesystem is full; ``filename`` is the file being written.
+
+    Raised after the partial file was removed, so nothing half-written is left behind.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        super().__init__(errno.ENOSPC, "no space left on device", os.fspath(path))
+
+    def __str__(self) -> str:
+        return f"{self.filename}: no space left on device"
+
+
+def is_disk_full(error: BaseException) -> bool:
+    """Whether ``error`` (or an error it was raised from) is a full filesystem."""
+    seen: set[int] = set()
+    current: BaseException | None = error
+    while current is not None and id(current) not in seen:
+        seen.add(id(current))
+        if isinstance(current, OSError) and current.errno in DISK_FULL_ERRNOS:
+            return True
+        current = current.__cause__ or current.__context__
+    return False
+
+
+def disk_full_message(error: BaseException) -> str:
+    """``<path>: no space left on device`` for a disk-full error (the innermost path known)."""
+    current: BaseException | None = error
+    path = None
+    seen: set[int] = set()
+    while current is not None and id(current) not in seen:
+        seen.add(id(current))
+        if isinstance(current, OSError) and current.errno in DISK_FULL_ERRNOS and current.filename:
+            path = current.filename
+            break
+        current = current.__cause__ or current.__context__
+    return f"{path}: no space left on device" if path else "no space left on device"
 
 
 def one_line(error: BaseException) -> str:
@@ -22,21 +75,33 @@ def one_line(error: BaseException) -> str:
     return " ".join(str(error).split()) or type(error).__name__
 
 
-def exit_on_user_error(function: Callable[P, R]) -> Callable[P, R]:
+def exit_on_user_error(
+    function: Callable[P, R] | None = None, *, interrupted: str = "interrupted"
+) -> Callable[P, R] | Callable[[Callable[P, R]], Callable[P, R]]:
     """Run ``function``; a ``ValueError`` (our error classes derive from it), Hydra's
-    instantiation/config errors or a ``KeyboardInterrupt`` end the process with one line."""
-    from hydra.errors import HydraException
-    from omegaconf.errors import OmegaConfBaseException
+    instantiation/config errors, a full disk or a ``KeyboardInterrupt`` end the process with one
+    line. ``interrupted``: what an interrupt prints (each command says what it kept)."""
 
-    @functools.wraps(function)
-    def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
-        try:
-            return function(*args, **kwargs)
-        except (ValueError, HydraException, OmegaConfBaseException) as error:
-            print(f"error: {one_line(error)}", file=sys.stderr)
-            raise SystemExit(USER_ERROR_EXIT_CODE) from None
-        except KeyboardInterrupt:
-            print("interrupted: complete shards are kept; re-run the same command to finish", file=sys.stderr)
-            raise SystemExit(130) from None
+    def decorate(inner: Callable[P, R]) -> Callable[P, R]:
+        from hydra.errors import HydraException
+        from omegaconf.errors import OmegaConfBaseException
 
-    return wrapper
+        @functools.wraps(inner)
+        def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
+            try:
+                return inner(*args, **kwargs)
+            except KeyboardInterrupt:
+                print(interrupted, file=sys.stderr)
+                raise SystemExit(INTERRUPTED_EXIT_CODE) from None
+            except BaseException as error:
+                if is_disk_full(error):
+                    print(f"error: {disk_full_message(error)}", file=sys.stderr)
+                    raise SystemExit(DISK_FULL_EXIT_CODE) from None
+                if isinstance(error, ValueError | HydraException | OmegaConfBaseException):
+                    print(f"error: {one_line(error)}", file=sys.stderr)
+                    raise SystemExit(USER_ERROR_EXIT_CODE) from None
+                raise
+
+        return wrapper
+
+    return decorate if function is None else decorate(function)

@@ -2,6 +2,8 @@
 
 A reader (or a resumed job) sees either the old file or the complete new one, never a partial
 one; temporary names start with ``.`` and end with ``.tmp`` so globs for real files skip them.
+A full disk while writing removes the temporary file and raises
+:class:`~brdfgan.errors.DiskFullError` naming the target, so the caller can report one line.
 """
 
 from __future__ import annotations
@@ -11,6 +13,8 @@ import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+from brdfgan.errors import DiskFullError, is_disk_full
 
 
 def temp_path(path: Path) -> Path:
@@ -32,8 +36,10 @@ def atomic_replace(path: str | os.PathLike[str]) -> Iterator[Path]:
         # plain open() would have, so shared outputs and shipped files are readable by others.
         os.chmod(temp, _default_file_mode())
         os.replace(temp, path)
-    except BaseException:
+    except BaseException as error:
         temp.unlink(missing_ok=True)
+        if is_disk_full(error) and not isinstance(error, DiskFullError):
+            raise DiskFullError(path) from error
         raise
     fsync_directory(path.parent)
 
