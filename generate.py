@@ -1,13 +1,17 @@
 """Generate a synthetic SVBRDF dataset: ``python generate.py [dataset=paper] [shard=N] [plan=true]``.
 
 Thin entry point: the config (``conf/generate.yaml``) becomes a
-:class:`brdfgan.data.generation.DatasetSpec`; :func:`brdfgan.data.generation.run_generation`
-does the work. See the config file for multi-process and SLURM use.
+:class:`brdfgan.data.generation.DatasetSpec` (every value checked, naming its key, before
+anything is written); :func:`brdfgan.data.generation.run_generation` does the work. See the
+config file for multi-process and SLURM use. A bad value, a bad environment file or a full disk
+ends with one ``error:`` line; Ctrl-C or SIGTERM with one line too, keeping complete shards.
 """
 
 from __future__ import annotations
 
 import logging
+import signal
+from types import FrameType
 
 import hydra
 from omegaconf import DictConfig, OmegaConf
@@ -17,13 +21,29 @@ from brdfgan.errors import exit_on_user_error
 log = logging.getLogger("generate")
 
 
-@hydra.main(version_base="1.3", config_path="conf", config_name="generate")
-@exit_on_user_error
-def main(cfg: DictConfig) -> None:
-    from brdfgan.data.contact_sheet import write_contact_sheet
-    from brdfgan.data.generation import dataset_ready, plan_shards, run_generation
+def _interrupt_on_sigterm() -> None:
+    """Make SIGTERM (``kill PID``, a scheduler ending the job) stop the run the way Ctrl-C does:
+    the shard being written is dropped, complete ones stay, one line is printed. A handler a
+    launcher installed already (submitit's, for requeueing) is left alone."""
 
-    spec = hydra.utils.instantiate(cfg.dataset, _convert_="all")
+    def interrupt(signum: int, frame: FrameType | None) -> None:
+        raise KeyboardInterrupt
+
+    try:
+        if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+            signal.signal(signal.SIGTERM, interrupt)
+    except ValueError:  # not the main thread (an in-process launcher): keep the default
+        pass
+
+
+@hydra.main(version_base="1.3", config_path="conf", config_name="generate")
+@exit_on_user_error(interrupted="interrupted: complete shards are kept; re-run the same command to finish")
+def main(cfg: DictConfig) -> None:
+    _interrupt_on_sigterm()
+    from brdfgan.data.contact_sheet import write_contact_sheet
+    from brdfgan.data.generation import dataset_ready, plan_shards, run_generation, spec_from_config
+
+    spec = spec_from_config(cfg.dataset)
     shard = OmegaConf.to_object(cfg.shard) if isinstance(cfg.shard, DictConfig | list) else cfg.shard
     if cfg.plan:
         jobs = plan_shards(spec)

@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+import re
+import typing
 from pathlib import Path
 
 import hydra
 import pytest
 from hydra import compose, initialize_config_dir
+from hydra.errors import InstantiationException
+from omegaconf import DictConfig, OmegaConf
 
 from brdfgan.data.datamodule import ShardDataModule
-from brdfgan.data.generation import DatasetSpec, plan_shards
+from brdfgan.data.generation import DatasetConfigError, DatasetSpec, plan_shards, spec_from_config
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
@@ -49,3 +55,79 @@ def test_data_configs_instantiate_a_datamodule(name: str) -> None:
     assert prepare is not None and prepare.keywords["out_dir"] == f"./data/{name}"
     generated = hydra.utils.instantiate(_compose([f"dataset={name}"]).dataset, _convert_="all")
     assert prepare.keywords["spec"] == generated
+
+
+def _numeric_keys(node: DictConfig, prefix: str) -> list[str]:
+    """Every int/float leaf under ``node`` as typed on the command line (bools are not numbers)."""
+    keys = []
+    for name, value in node.items():
+        key = f"{prefix}.{name}"
+        if isinstance(value, DictConfig):
+            keys += _numeric_keys(value, key)
+        elif isinstance(value, int | float) and not isinstance(value, bool):
+            keys.append(key)
+    return keys
+
+
+# Composed once; each case edits a copy, as a command-line override would.
+BASE = _compose(["dataset=default"])
+# Any integer is a usable seed; every other number of the spec has a range.
+NUMERIC_KEYS = [key for key in _numeric_keys(BASE.dataset, "dataset") if key != "dataset.seed"]
+
+
+def _spec_with(**values: object) -> DatasetSpec:
+    cfg = copy.deepcopy(BASE)
+    for key, value in values.items():
+        OmegaConf.update(cfg, key, value)
+    return spec_from_config(cfg.dataset)
+
+
+def _spec_numeric_fields(cls: type, prefix: str) -> set[str]:
+    hints = typing.get_type_hints(cls)
+    keys = set()
+    for field in dataclasses.fields(cls):
+        kind = hints[field.name]
+        if kind in (int, float):
+            keys.add(f"{prefix}.{field.name}")
+        elif dataclasses.is_dataclass(kind):
+            keys |= _spec_numeric_fields(kind, f"{prefix}.{field.name}")
+    return keys
+
+
+def test_the_config_walk_covers_every_numeric_field_of_the_spec_classes() -> None:
+    assert set(NUMERIC_KEYS) == _spec_numeric_fields(DatasetSpec, "dataset") - {"dataset.seed"}
+
+
+@pytest.mark.parametrize("key", NUMERIC_KEYS)
+@pytest.mark.parametrize("bad", [-1, "abc"])
+def test_every_numeric_value_is_checked_at_composition_naming_its_key(key: str, bad: object) -> None:
+    # -1 is out of range for every one of them; 'abc' is a typo that must not reach a comparison.
+    with pytest.raises(DatasetConfigError, match=re.escape(f"{key}={bad!r}")):
+        _spec_with(**{key: bad})
+
+
+@pytest.mark.parametrize("low_key", [key for key in NUMERIC_KEYS if key.endswith(("_min", "_min_k"))])
+def test_an_inverted_min_max_pair_is_refused(low_key: str) -> None:
+    high_key = low_key.replace("_min", "_max")
+    high = OmegaConf.select(BASE, high_key)
+    low = high * 1.5  # in range on its own, above its maximum
+    message = f"{low_key}={low:g} > {high_key}={high:g}"
+    with pytest.raises(DatasetConfigError, match=re.escape(message)):
+        _spec_with(**{low_key: low})
+
+
+def test_the_issue_example_names_both_keys() -> None:
+    with pytest.raises(DatasetConfigError) as error:
+        _spec_with(**{"dataset.flash.temperature_min_k": 9000, "dataset.flash.temperature_max_k": 1000})
+    assert str(error.value).startswith(
+        "dataset.flash.temperature_min_k=9000 > dataset.flash.temperature_max_k=1000"
+    )
+
+
+def test_other_instantiation_errors_keep_hydras_message() -> None:
+    # An unknown key inside a nested spec is not a value error: Hydra's message (naming the key) stays.
+    cfg = copy.deepcopy(BASE)
+    OmegaConf.set_struct(cfg, False)
+    cfg.dataset.flash.no_such_key = 1
+    with pytest.raises(InstantiationException, match="no_such_key"):
+        spec_from_config(cfg.dataset)

@@ -30,3 +30,30 @@ def test_flash_sampling_ranges_and_seeding() -> None:
     draws = [sampling.sample(torch.Generator().manual_seed(s)) for s in range(200)]
     assert all(0.5 <= i <= 4.0 and 4000 <= t <= 6500 for i, t in draws)
     assert sampling.sample(torch.Generator().manual_seed(3)) == draws[3]
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"intensity_min": -3}, "dataset.flash.intensity_min=-3: must be > 0"),
+        ({"intensity_min": 5.0}, "dataset.flash.intensity_min=5 > dataset.flash.intensity_max=4"),
+        (
+            {"temperature_min_k": 9000, "temperature_max_k": 1000},
+            "dataset.flash.temperature_min_k=9000 > dataset.flash.temperature_max_k=1000",
+        ),
+        ({"temperature_min_k": 1000}, r"dataset.flash.temperature_min_k=1000: must be in \[1667, 25000\]"),
+        ({"temperature_max_k": 30000}, r"dataset.flash.temperature_max_k=30000: must be in \[1667, 25000\]"),
+        ({"intensity_max": "abc"}, "dataset.flash.intensity_max='abc': must be a number"),
+        ({"intensity_max": float("inf")}, "dataset.flash.intensity_max=inf: must be a finite number"),
+    ],
+)
+def test_flash_sampling_rejects_bad_ranges_naming_the_key(change: dict[str, object], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        FlashSampling(**change)  # type: ignore[arg-type]
+
+
+def test_a_constant_flash_is_allowed() -> None:
+    sampling = FlashSampling(
+        intensity_min=2.0, intensity_max=2.0, temperature_min_k=5000, temperature_max_k=5000
+    )
+    assert sampling.sample(torch.Generator().manual_seed(0)) == pytest.approx((2.0, 5000.0))

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
+import re
 import subprocess
 import sys
+import tarfile
 from collections import Counter
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -29,8 +33,18 @@ from brdfgan.data.generation import (
     run_generation,
     split_materials,
 )
-from brdfgan.data.lighting import LightingConfig, LightingDraw
-from brdfgan.data.shards import iter_shard, list_shards, read_manifest, shard_path
+from brdfgan.data.lighting import LightingConfig, LightingDraw, LightingError
+from brdfgan.data.shards import (
+    digest_path,
+    iter_shard,
+    list_shards,
+    read_digest,
+    read_manifest,
+    shard_path,
+    verify_shard,
+    write_manifest,
+)
+from brdfgan.io.images import write_image
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -171,6 +185,93 @@ def test_resume_after_a_crash_finishes_without_duplicates(tmp_path: Path) -> Non
     assert not again.written and len(again.skipped) == len(plan_shards(spec))
 
 
+def corrupt_png_in_place(shard: Path) -> str:
+    """Flip bytes inside the first photo's PNG data; the tar headers stay intact. Returns the member."""
+    with tarfile.open(shard) as tar:
+        member = next(info for info in tar if info.name.endswith(".input.png"))
+    with shard.open("r+b") as handle:
+        handle.seek(member.offset_data + member.size // 2)
+        chunk = handle.read(16)
+        handle.seek(member.offset_data + member.size // 2)
+        handle.write(bytes(b ^ 0xFF for b in chunk))
+    return member.name
+
+
+def test_manifest_and_records_hold_the_sha256_of_every_shard(tmp_path: Path) -> None:
+    spec = tiny_spec()
+    run_generation(spec, tmp_path, progress=False, photographer=torch_photographer)
+    for split in SPLITS:
+        entries = read_manifest(tmp_path, split)["shards"]
+        assert [e["name"] for e in entries] == [p.name for p in list_shards(tmp_path, split)]
+        for entry in entries:
+            shard = tmp_path / split / entry["name"]
+            assert entry["sha256"] == hashlib.sha256(shard.read_bytes()).hexdigest()
+            assert read_digest(shard) == entry["sha256"]
+
+
+@pytest.mark.parametrize("record", ["manifest and beside the shard", "manifest only", "beside the shard"])
+def test_a_png_corrupted_in_place_is_found_rewritten_and_reported(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, record: str
+) -> None:
+    spec = tiny_spec()
+    run_generation(spec, tmp_path, progress=False, photographer=torch_photographer)
+    clean = shard_hashes(tmp_path)
+    shard = shard_path(tmp_path, "train", 1)
+    corrupt_png_in_place(shard)
+    assert verify_shard(shard) == plan_shards(spec)[1].sample_count(spec)  # the headers cannot tell
+    if record == "manifest only":
+        digest_path(shard).unlink()
+    elif record == "beside the shard":
+        (tmp_path / "train" / "manifest.json").unlink()
+
+    counting = TorchPhotographer(spec)
+    with caplog.at_level(logging.WARNING, logger="brdfgan.data.generation"):
+        summary = run_generation(spec, tmp_path, progress=False, photographer=lambda _: counting)
+    assert summary.repaired == [shard] and summary.written == [shard]
+    assert counting.calls == plan_shards(spec)[1].sample_count(spec)  # only that shard is redone
+    assert any(str(shard) in r.getMessage() and "SHA-256" in r.getMessage() for r in caplog.records)
+    assert f"rewrote damaged: {shard.name}" in summary.describe()
+    assert shard_hashes(tmp_path) == clean  # seeded: the rewrite is the original, byte for byte
+    assert read_digest(shard) == clean[f"train/{shard.name}"]
+    assert dataset_ready(spec, tmp_path)
+
+
+def test_a_dataset_made_before_digests_were_recorded_is_kept_and_protected_from_then_on(
+    tmp_path: Path,
+) -> None:
+    spec = tiny_spec()
+    run_generation(spec, tmp_path, progress=False, photographer=torch_photographer)
+    clean = shard_hashes(tmp_path)
+    for split in SPLITS:  # the layout of older versions: no records, manifests without sha256
+        manifest = read_manifest(tmp_path, split)
+        manifest["shards"] = [{k: v for k, v in e.items() if k != "sha256"} for e in manifest["shards"]]
+        write_manifest(tmp_path, split, manifest)
+        for shard in list_shards(tmp_path, split):
+            digest_path(shard).unlink()
+
+    counting = TorchPhotographer(spec)
+    summary = run_generation(spec, tmp_path, progress=False, photographer=lambda _: counting)
+    assert counting.calls == 0 and not summary.repaired  # complete shards are trusted once...
+    assert read_manifest(tmp_path, "train")["shards"][0]["sha256"] == clean["train/train-000000.tar"]
+    corrupt_png_in_place(shard_path(tmp_path, "val", 0))  # ... and checked from then on
+    summary = run_generation(spec, tmp_path, progress=False, photographer=torch_photographer)
+    assert summary.repaired == [shard_path(tmp_path, "val", 0)]
+    assert shard_hashes(tmp_path) == clean
+
+
+def test_a_corrupt_environment_file_fails_before_anything_is_written(tmp_path: Path) -> None:
+    envs = tmp_path / "envs"
+    envs.mkdir()
+    for k in range(2):
+        write_image(envs / f"good{k}.exr", np.full((8, 16, 3), 0.5, np.float32), exr_precision="float")
+    good = (envs / "good0.exr").read_bytes()
+    (envs / "bad.exr").write_bytes(good[: len(good) // 2])  # cut short, as by an interrupted copy
+    spec = tiny_spec(lighting=LightingConfig(train_count=1, test_count=1, folder=str(envs), resolution=8))
+    with pytest.raises(LightingError, match=re.escape(str(envs / "bad.exr"))):
+        run_generation(spec, tmp_path / "out", progress=False, photographer=torch_photographer)
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_directory_of_another_spec_is_refused(tmp_path: Path) -> None:
     run_generation(tiny_spec(materials=3, val_fraction=0.0), tmp_path, progress=False,
                    photographer=torch_photographer)  # fmt: skip
@@ -182,17 +283,21 @@ def test_a_directory_of_another_spec_is_refused(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        ({"materials": 0}, "dataset.materials must be a positive integer"),
-        ({"spp": 10}, "dataset.spp must be a perfect square"),
-        ({"resolution": 128}, "must not exceed dataset.material_resolution"),
-        ({"test_fraction": 1.5}, r"dataset.test_fraction must lie in \[0, 1\)"),
+        ({"materials": 0}, "dataset.materials=0: must be an integer >= 1"),
+        ({"spp": 10}, "dataset.spp=10: must be a perfect square"),
+        ({"resolution": 128}, "dataset.resolution=128 > dataset.material_resolution=64"),
+        ({"test_fraction": 1.5}, r"dataset.test_fraction=1.5: must be in \[0, 1\)"),
+        ({"test_fraction": 0.5, "val_fraction": 0.5}, r"dataset.test_fraction=0.5 \+ dataset.val_fraction"),
+        ({"fov_deg": 0.5}, r"dataset.fov_deg=0.5: must be in \[1, 170\)"),
+        ({"spp": "abc"}, "dataset.spp='abc': must be an integer"),
         ({"families": ("wood_planks", "woood")}, "unknown material family 'woood'"),
         ({"materials": 2, "test_fraction": 0.5, "val_fraction": 0.4}, "leaves no training material"),
     ],
 )
-def test_bad_specs_are_one_line_errors(change: dict[str, object], message: str) -> None:
+def test_bad_specs_fail_on_construction_naming_the_key(change: dict[str, object], message: str) -> None:
+    # At construction, i.e. when generate.py composes its config: before dataset.json exists.
     with pytest.raises(ValueError, match=message):
-        split_materials(tiny_spec(**change))
+        tiny_spec(**change)
 
 
 def test_unwritable_output_is_a_clear_error(tmp_path: Path) -> None:
@@ -238,7 +343,8 @@ def _generate_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
     ("override", "message"),
     [
         ("dataset.families=[woood]", "unknown material family 'woood'"),
-        ("dataset.materials=-1", "dataset.materials must be a positive integer"),
+        ("dataset.materials=-1", "dataset.materials=-1: must be an integer >= 1"),
+        ("dataset.flash.intensity_min=-3", "error: dataset.flash.intensity_min=-3: must be > 0"),
         ("dataset.lighting.folder=EMPTY", "EMPTY: no .exr or .hdr environment maps"),
         ("dataset.no_such_key=1", "no_such_key"),
     ],
@@ -249,7 +355,9 @@ def test_cli_bad_input_is_one_line_and_writes_nothing(tmp_path: Path, override: 
     override = override.replace("EMPTY", str(empty))
     message = message.replace("EMPTY", str(empty))
     prefix = "+" if "no_such_key" in override else ""
-    result = _generate_cli("dataset=tiny", f"out_dir={tmp_path / 'out'}", prefix + override, cwd=tmp_path)
+    result = _generate_cli(
+        "dataset=tiny", f"out_dir={tmp_path / 'out'}", *(prefix + o for o in override.split()), cwd=tmp_path
+    )
     assert result.returncode != 0
     errors = [line for line in result.stderr.splitlines() if line.strip()]
     assert any(message in line for line in errors), result.stderr

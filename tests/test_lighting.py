@@ -79,13 +79,33 @@ def test_kind_mix_and_spec_json() -> None:
     assert hash(spec) == hash(room_spec(0, 1))
 
 
-def test_config_rejects_bad_values() -> None:
-    with pytest.raises(ValueError, match="env_to_flash"):
-        LightingConfig(env_to_flash_min=1.0, env_to_flash_max=0.5)
-    with pytest.raises(ValueError, match="no environment source"):
-        LightingConfig(sunsky_fraction=0.0, room_fraction=0.0)
-    with pytest.raises(ValueError, match="resolution"):
-        LightingConfig(resolution=2)
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (
+            {"env_to_flash_min": 1.0, "env_to_flash_max": 0.5},
+            "dataset.lighting.env_to_flash_min=1 > dataset.lighting.env_to_flash_max=0.5",
+        ),
+        ({"env_to_flash_min": 0.0}, "dataset.lighting.env_to_flash_min=0: must be > 0"),
+        ({"sunsky_fraction": 0.0, "room_fraction": 0.0}, "no environment source"),
+        ({"sunsky_fraction": -0.5}, "dataset.lighting.sunsky_fraction=-0.5: must be >= 0"),
+        ({"resolution": 2}, "dataset.lighting.resolution=2: must be an integer >= 4"),
+        ({"test_count": 0}, "dataset.lighting.test_count=0: must be an integer >= 1"),
+        ({"file_test_fraction": 1.0}, r"dataset.lighting.file_test_fraction=1: must be in \(0, 1\)"),
+        ({"train_count": "abc"}, "dataset.lighting.train_count='abc'"),
+    ],
+)
+def test_config_rejects_bad_values_naming_the_key(change: dict[str, object], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        LightingConfig(**change)  # type: ignore[arg-type]
+
+
+def test_a_folder_may_stand_in_for_the_procedural_pools(tmp_path: Path) -> None:
+    for k in range(2):
+        write_image(tmp_path / f"env{k}.exr", _lat_long(8, k), exr_precision="float")
+    config = LightingConfig(train_count=0, test_count=0, folder=str(tmp_path), resolution=8)
+    pools = build_environment_pools(config, seed=0)
+    assert len(pools.train) == len(pools.test) == 1
 
 
 def test_user_files_are_split_disjointly(tmp_path: Path) -> None:
@@ -107,6 +127,24 @@ def test_folder_with_one_file_cannot_be_split(tmp_path: Path) -> None:
     write_image(tmp_path / "only.exr", _lat_long(8))
     with pytest.raises(LightingError, match="at least 2"):
         build_environment_pools(LightingConfig(folder=str(tmp_path)), seed=0)
+
+
+@pytest.mark.parametrize("damage", ["truncated", "garbage", "black sky"])
+def test_every_user_file_is_decoded_when_the_pools_are_built(tmp_path: Path, damage: str) -> None:
+    for k in range(3):
+        write_image(tmp_path / f"env{k}.exr", _lat_long(8, k), exr_precision="float")
+    bad = tmp_path / "env1.exr"
+    if damage == "truncated":  # an interrupted copy: the header is intact, the pixels are not
+        bad.write_bytes(bad.read_bytes()[:-200])
+    elif damage == "garbage":
+        bad.write_bytes(b"\x76\x2f\x31\x01" + bytes(300))  # EXR magic, nothing valid after it
+    else:  # lights nothing above the horizon: it could never be balanced against the flash
+        sky = _lat_long(8)
+        sky[:5] = 0.0  # rows 0-4 are the ones whose interpolation reaches above the horizon
+        write_image(bad, sky, exr_precision="float")
+    config = LightingConfig(train_count=1, test_count=1, folder=str(tmp_path), resolution=8)
+    with pytest.raises(LightingError, match=re.escape(str(bad.resolve()))):
+        build_environment_pools(config, seed=0)
 
 
 def test_empty_and_missing_folders_raise(tmp_path: Path) -> None:

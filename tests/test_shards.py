@@ -18,11 +18,15 @@ from brdfgan.data.shards import (
     Sample,
     ShardError,
     decode_sample,
+    digest_path,
     encode_sample,
     list_shards,
+    read_digest,
     read_manifest,
+    sha256_file,
     shard_path,
     verify_shard,
+    write_digest,
     write_manifest,
     write_shard,
 )
@@ -189,6 +193,29 @@ def test_write_shard_layout_and_info(tmp_path: Path) -> None:
         assert (m.mtime, m.uid, m.gid, m.uname, m.gname, m.mode) == (0, 0, 0, "", "", 0o644)
         assert m.isreg() and not m.pax_headers
     assert verify_shard(info.path) == 3
+
+
+def test_digest_records_sit_beside_the_shard_in_sha256sum_format(tmp_path: Path) -> None:
+    info = write_shard(shard_path(tmp_path, "train", 3), [make_sample(0)])
+    assert read_digest(info.path) is None  # nothing recorded yet
+    record = write_digest(info.path, sha256_file(info.path))
+    assert record == digest_path(info.path) == tmp_path / "train" / "train-000003.tar.sha256"
+    assert record.read_text() == f"{info.sha256}  train-000003.tar\n"  # `sha256sum -c` reads this
+    assert read_digest(info.path) == info.sha256
+    assert list_shards(tmp_path, "train") == [info.path]  # the record is not a shard
+    with pytest.raises(ValueError, match="not a lowercase hex SHA-256"):
+        write_digest(info.path, "abc")
+
+
+@pytest.mark.parametrize(
+    "text", ["garbage\n", f"{'0' * 64}  train-000004.tar\n", f"{'0' * 63}  train-000003.tar\n", ""]
+)
+def test_a_malformed_digest_record_names_itself(tmp_path: Path, text: str) -> None:
+    shard = shard_path(tmp_path, "train", 3)
+    shard.parent.mkdir(parents=True)
+    digest_path(shard).write_text(text)
+    with pytest.raises(ShardError, match=r"train-000003\.tar\.sha256: malformed checksum record"):
+        read_digest(shard)
 
 
 def test_write_shard_is_byte_deterministic(tmp_path: Path) -> None:

@@ -33,6 +33,7 @@ from brdfgan.core.svbrdf import (
     normalize_normal,
     srgb_to_linear,
 )
+from brdfgan.data.spec_checks import in_range, number, ordered
 
 
 @dataclass(frozen=True)
@@ -54,8 +55,15 @@ class CropSampling:
     rotate: bool = True
 
     def __post_init__(self) -> None:
-        if not 0.0 < self.scale_min <= self.scale_max <= 1.0:
-            raise ValueError(f"need 0 < scale_min <= scale_max <= 1, got {self.scale_min}, {self.scale_max}")
+        key = "dataset.crop"  # where a crop spec is configured; messages name the key as typed
+        ordered(
+            f"{key}.scale_min",
+            number(f"{key}.scale_min", self.scale_min),
+            f"{key}.scale_max",
+            number(f"{key}.scale_max", self.scale_max),
+        )
+        in_range(f"{key}.scale_min", self.scale_min, 0.0, 1.0, low_open=True)  # log-uniform
+        in_range(f"{key}.scale_max", self.scale_max, 0.0, 1.0, low_open=True)
 
     def sample(self, generator: torch.Generator) -> CropTransform:
         u = torch.rand(4, generator=generator, dtype=torch.float64).tolist()

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import torch
 
+from brdfgan.data.spec_checks import in_range, number, ordered
+
 MIN_TEMPERATURE_K = 1667.0
 MAX_TEMPERATURE_K = 25000.0
 # XYZ → linear sRGB (IEC 61966-2-1, D65 white).
@@ -53,12 +55,32 @@ def blackbody_rgb(temperature_k: float) -> tuple[float, float, float]:
 
 @dataclass(frozen=True)
 class FlashSampling:
-    """Ranges of the random flash: radiant intensity (W/sr, log-uniform) and colour temperature."""
+    """Ranges of the random flash: radiant intensity (W/sr, log-uniform) and colour temperature
+    (uniform, within the range of :func:`planckian_xy`). Checked on construction, naming the keys
+    under ``dataset.flash``, the only place a flash spec is configured."""
 
     intensity_min: float = 0.5
     intensity_max: float = 4.0
     temperature_min_k: float = 4000.0
     temperature_max_k: float = 6500.0
+
+    def __post_init__(self) -> None:
+        key = "dataset.flash"
+        ordered(
+            f"{key}.intensity_min",
+            number(f"{key}.intensity_min", self.intensity_min),
+            f"{key}.intensity_max",
+            number(f"{key}.intensity_max", self.intensity_max),
+        )
+        in_range(f"{key}.intensity_min", self.intensity_min, 0.0, low_open=True)  # log-uniform
+        ordered(
+            f"{key}.temperature_min_k",
+            number(f"{key}.temperature_min_k", self.temperature_min_k),
+            f"{key}.temperature_max_k",
+            number(f"{key}.temperature_max_k", self.temperature_max_k),
+        )
+        for name in ("temperature_min_k", "temperature_max_k"):  # where the locus fit holds
+            in_range(f"{key}.{name}", getattr(self, name), MIN_TEMPERATURE_K, MAX_TEMPERATURE_K)
 
     def sample(self, generator: torch.Generator) -> tuple[float, float]:
         """``(intensity, temperature_k)``."""

@@ -64,21 +64,23 @@ from brdfgan.data.shards import (
     ShardError,
     ShardInfo,
     list_shards,
+    read_digest,
+    read_manifest,
+    sha256_file,
     shard_path,
     verify_shard,
+    write_digest,
     write_manifest,
     write_shard,
 )
+from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer
+from brdfgan.errors import DiskFullError, is_disk_full
 from brdfgan.io.atomic import write_text_atomic
 
 log = logging.getLogger(__name__)
 
 SPLITS = ("train", "val", "test")
 SPEC_FILE = "dataset.json"
-
-
-class DatasetConfigError(ValueError):
-    """A dataset spec or output directory is unusable; the message names the key or path."""
 
 
 @dataclass(frozen=True)
@@ -106,7 +108,7 @@ class DatasetSpec:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "families", tuple(self.families))
-        positive = (
+        for key in (
             "materials",
             "material_resolution",
             "resolution",
@@ -115,28 +117,30 @@ class DatasetSpec:
             "eval_renders",
             "materials_per_shard",
             "spp",
-        )
-        for key in positive:
-            value = getattr(self, key)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise DatasetConfigError(f"dataset.{key} must be a positive integer, got {value!r}")
+        ):
+            integer(f"dataset.{key}", getattr(self, key), minimum=1)
         if math.isqrt(self.spp) ** 2 != self.spp:
             raise DatasetConfigError(
-                f"dataset.spp must be a perfect square (stratified sampler; paper: 196 = 14²), got {self.spp}"
+                f"dataset.spp={self.spp}: must be a perfect square (stratified sampler; paper: 196 = 14²)"
             )
         if self.resolution > self.material_resolution:
             raise DatasetConfigError(
-                f"dataset.resolution ({self.resolution}) must not exceed dataset.material_resolution "
-                f"({self.material_resolution}): crops are cut from the material maps"
+                f"dataset.resolution={self.resolution} > dataset.material_resolution="
+                f"{self.material_resolution}: crops are cut from the material maps"
             )
-        for key in ("test_fraction", "val_fraction"):
-            value = getattr(self, key)
-            if not 0.0 <= value < 1.0:
-                raise DatasetConfigError(f"dataset.{key} must lie in [0, 1), got {value!r}")
-        if self.test_fraction + self.val_fraction >= 1.0:
-            raise DatasetConfigError("dataset.test_fraction + dataset.val_fraction must be below 1")
-        if not 1.0 <= self.fov_deg < 170.0:
-            raise DatasetConfigError(f"dataset.fov_deg must lie in [1, 170), got {self.fov_deg!r}")
+        test = in_range("dataset.test_fraction", self.test_fraction, 0.0, 1.0, high_open=True)
+        val = in_range("dataset.val_fraction", self.val_fraction, 0.0, 1.0, high_open=True)
+        if test + val >= 1.0:
+            raise DatasetConfigError(
+                f"dataset.test_fraction={test:g} + dataset.val_fraction={val:g}: must be below 1"
+            )
+        counts = held_out_counts(self.materials, test, val)
+        if counts["test"] + counts["val"] >= self.materials:
+            raise DatasetConfigError(
+                f"dataset.materials={self.materials} leaves no training material after the "
+                f"{counts['test']} test and {counts['val']} validation ones"
+            )
+        in_range("dataset.fov_deg", self.fov_deg, 1.0, 170.0, high_open=True)
         resolve_families(self.families)  # unknown names fail here, before any work
 
     def to_json(self) -> dict[str, Any]:
@@ -145,6 +149,24 @@ class DatasetSpec:
 
     def renders_per_crop(self, split: str) -> int:
         return self.train_renders if split == "train" else self.eval_renders
+
+
+def spec_from_config(config: Any) -> DatasetSpec:
+    """The spec of a Hydra ``dataset`` node (``conf/dataset/*.yaml``). A value rejected by one of
+    the spec classes is re-raised as that class's own one-line error (``dataset.flash.… must
+    be …``) instead of Hydra's multi-line wrapper around it."""
+    import hydra
+    from hydra.errors import InstantiationException
+
+    try:
+        spec = hydra.utils.instantiate(config, _convert_="all")
+    except InstantiationException as error:
+        if isinstance(error.__cause__, ValueError):
+            raise error.__cause__ from None
+        raise
+    if not isinstance(spec, DatasetSpec):
+        raise DatasetConfigError(f"dataset: builds a {type(spec).__name__}, expected a DatasetSpec")
+    return spec
 
 
 @dataclass(frozen=True)
@@ -166,20 +188,20 @@ def derive_seed(*parts: int | str) -> int:
     return int.from_bytes(digest, "little") & (2**63 - 1)
 
 
+def held_out_counts(materials: int, test_fraction: float, val_fraction: float) -> dict[str, int]:
+    """Materials of the ``test`` and ``val`` splits: at least one for a non-zero fraction."""
+    return {
+        name: (max(1, round(materials * fraction)) if fraction > 0 else 0)
+        for name, fraction in (("test", test_fraction), ("val", val_fraction))
+    }
+
+
 def split_materials(spec: DatasetSpec) -> dict[str, tuple[int, ...]]:
     """Material indices per split, each sorted. Disjoint and covering ``range(materials)``."""
     order = torch.randperm(
         spec.materials, generator=torch.Generator().manual_seed(derive_seed(spec.seed, "split"))
     )
-    counts = {
-        name: (max(1, round(spec.materials * fraction)) if fraction > 0 else 0)
-        for name, fraction in (("test", spec.test_fraction), ("val", spec.val_fraction))
-    }
-    if counts["test"] + counts["val"] >= spec.materials:
-        raise DatasetConfigError(
-            f"dataset.materials={spec.materials} leaves no training material after the "
-            f"{counts['test']} test and {counts['val']} validation ones"
-        )
+    counts = held_out_counts(spec.materials, spec.test_fraction, spec.val_fraction)
     test = order[: counts["test"]]
     val = order[counts["test"] : counts["test"] + counts["val"]]
     train = order[counts["test"] + counts["val"] :]
@@ -300,12 +322,16 @@ class GenerationSummary:
     samples: int = 0
     seconds: float = 0.0
     manifests: list[Path] = field(default_factory=list)
+    # Shards that existed but were corrupt, truncated or no longer matched their recorded SHA-256
+    # (all rewritten; they are in ``written`` too).
+    repaired: list[Path] = field(default_factory=list)
 
     def describe(self) -> str:
         rate = self.samples / self.seconds * 3600.0 if self.seconds > 0 and self.samples else 0.0
         return (
             f"{len(self.written)} shard(s) written, {len(self.skipped)} already complete, "
             f"{self.samples} samples in {self.seconds:.1f} s ({rate:.0f} samples/h) -> {self.out_dir}"
+            + (f"; rewrote damaged: {', '.join(p.name for p in self.repaired)}" if self.repaired else "")
             + (f"; manifests: {', '.join(p.parent.name for p in self.manifests)}" if self.manifests else "")
         )
 
@@ -340,6 +366,8 @@ def prepare_output_dir(spec: DatasetSpec, out_dir: str | os.PathLike[str]) -> Pa
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as error:
+        if is_disk_full(error):  # not a permission problem: one line, exit 1, like any full disk
+            raise DiskFullError(root) from error
         raise DatasetConfigError(
             f"{root}: output directory is not writable ({error.strerror or error})"
         ) from None
@@ -373,17 +401,45 @@ def _write_json_atomic(path: Path, content: Mapping[str, Any]) -> None:
     write_text_atomic(path, json.dumps(content, indent=2, sort_keys=True) + "\n")
 
 
-def _shard_complete(path: Path, expected: int) -> bool:
+def recorded_digests(root: Path, split: str) -> dict[str, str]:
+    """Shard name -> SHA-256 as the split's manifest records it (empty without a readable
+    manifest, or for one written before digests were recorded)."""
+    try:
+        manifest = read_manifest(root, split)
+    except ShardError:
+        return {}  # none yet, or unreadable: finalize_manifests rewrites it
+    entries = manifest.get("shards")
+    return {
+        entry["name"]: entry["sha256"]
+        for entry in (entries if isinstance(entries, list) else [])
+        if isinstance(entry, dict) and all(isinstance(entry.get(k), str) for k in ("name", "sha256"))
+    }
+
+
+def shard_problem(path: Path, expected: int, manifest_sha256: str | None) -> str | None:
+    """Why the shard at ``path`` must be (re)written, or ``None`` when it is complete: readable
+    tar headers with ``expected`` samples, and bytes whose SHA-256 is the one recorded beside it
+    and in the manifest (``manifest_sha256``). A complete shard with no record at all (made
+    before digests were kept, or the process died between the shard and its record) passed
+    the checks that existed then: its digest is recorded now and it is kept, rather than
+    regenerating a whole old dataset."""
     if not path.exists():
-        return False
+        return "missing"
     try:
         count = verify_shard(path)
+        if count != expected:
+            return f"{path}: holds {count} samples, expected {expected}"
+        recorded = {digest for digest in (read_digest(path), manifest_sha256) if digest is not None}
     except ShardError as error:
-        log.warning("%s", error)
-        return False
-    if count != expected:
-        log.warning("%s: holds %d samples, expected %d; it will be rewritten", path, count, expected)
-    return count == expected
+        return str(error)
+    actual = sha256_file(path)
+    if not recorded:
+        write_digest(path, actual)
+        log.info("%s: no recorded SHA-256 (made before they were recorded); recorded it", path)
+        return None
+    if recorded != {actual}:
+        return f"{path}: SHA-256 differs from the recorded one (the file was modified or corrupted)"
+    return None
 
 
 def select_jobs(jobs: Sequence[ShardJob], shards: int | Sequence[int] | None) -> list[ShardJob]:
@@ -415,13 +471,18 @@ def run_generation(
     root = prepare_output_dir(spec, out_dir)
     jobs = plan_shards(spec)
     summary = GenerationSummary(out_dir=root)
+    manifest_digests = {split: recorded_digests(root, split) for split in SPLITS}
     todo = []
     for job in select_jobs(jobs, shards):
         path = shard_path(root, job.split, job.index)
-        if _shard_complete(path, job.sample_count(spec)):
+        problem = shard_problem(path, job.sample_count(spec), manifest_digests[job.split].get(path.name))
+        if problem is None:
             summary.skipped.append(path)
-        else:
-            todo.append(job)
+            continue
+        if problem != "missing":
+            log.warning("%s; it will be rewritten", problem)
+            summary.repaired.append(path)
+        todo.append(job)
     if todo:
         photograph = (photographer or MitsubaPhotographer)(spec)
         with tqdm(
@@ -438,8 +499,20 @@ def run_generation(
                             yield sample
 
                 for stale in path.parent.glob(f".{path.name}.*.tmp"):
-                    stale.unlink(missing_ok=True)  # left by a killed run
+                    stale.unlink(missing_ok=True)  # left by a killed run (the shard's or its record's)
+                try:
+                    before = {read_digest(path), manifest_digests[job.split].get(path.name)} - {None}
+                except ShardError:
+                    before = set()  # a malformed record: replaced below
                 info: ShardInfo = write_shard(path, samples())
+                # Recorded at once: from here on a rerun can tell this shard's bytes from corruption.
+                write_digest(info.path, info.sha256)
+                if before and before != {info.sha256}:
+                    log.warning(
+                        "%s: the rewritten shard's SHA-256 differs from the one recorded before "
+                        "(other library versions than the run that made it?); recorded the new one",
+                        path,
+                    )
                 summary.written.append(info.path)
                 summary.samples += job.sample_count(spec)
     summary.manifests = finalize_manifests(spec, root, jobs)
@@ -464,7 +537,12 @@ def finalize_manifests(spec: DatasetSpec, root: Path, jobs: Sequence[ShardJob]) 
             "materials": sum(len(job.materials) for job in split_jobs),
             "renders_per_crop": spec.renders_per_crop(split),
             "shards": [
-                {"name": p.name, "samples": job.sample_count(spec), "bytes": p.stat().st_size}
+                {
+                    "name": p.name,
+                    "samples": job.sample_count(spec),
+                    "bytes": p.stat().st_size,
+                    "sha256": _shard_digest(p),
+                }
                 for p, job in zip(paths, split_jobs, strict=True)
             ],
             "material_indices": [m for job in split_jobs for m in job.materials],
@@ -473,6 +551,19 @@ def finalize_manifests(spec: DatasetSpec, root: Path, jobs: Sequence[ShardJob]) 
         }
         written.append(write_manifest(root, split, manifest))
     return written
+
+
+def _shard_digest(path: Path) -> str:
+    """The recorded SHA-256 of a shard; one not made by this run (another process, an old
+    version) and lacking a valid record gets it computed and recorded now."""
+    try:
+        digest = read_digest(path)
+    except ShardError:
+        digest = None
+    if digest is None:
+        digest = sha256_file(path)
+        write_digest(path, digest)
+    return digest
 
 
 def dataset_ready(spec: DatasetSpec, out_dir: str | os.PathLike[str]) -> bool:

@@ -48,6 +48,7 @@ import torch
 
 from brdfgan.core.exposure import LUMINANCE_WEIGHTS
 from brdfgan.data.flash import blackbody_rgb
+from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, number, ordered
 
 EnvironmentKind = Literal["sunsky", "room", "file"]
 ParamValue = float | str
@@ -609,21 +610,28 @@ class LightingConfig:
     env_to_flash_max: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.train_count < 0 or self.test_count < 0:
-            raise ValueError(f"pool sizes must be >= 0, got {self.train_count}/{self.test_count}")
-        if self.sunsky_fraction < 0 or self.room_fraction < 0:
-            raise ValueError("sunsky_fraction and room_fraction must be >= 0")
-        if self.sunsky_fraction + self.room_fraction == 0 and self.folder is None:
-            raise ValueError("no environment source: both fractions are 0 and no folder is given")
-        if not 0.0 < self.file_test_fraction < 1.0:
-            raise ValueError(f"file_test_fraction must lie in (0, 1), got {self.file_test_fraction}")
-        if self.resolution < 4:
-            raise ValueError(f"resolution must be >= 4, got {self.resolution}")
-        if not 0.0 < self.env_to_flash_min <= self.env_to_flash_max:
-            raise ValueError(
-                f"need 0 < env_to_flash_min <= env_to_flash_max, got {self.env_to_flash_min}, "
-                f"{self.env_to_flash_max}"
+        key = "dataset.lighting"  # where a lighting spec is configured; messages name the key
+        # Without a folder the procedural pools are all there is, and neither may be empty.
+        least = 0 if self.folder is not None else 1
+        integer(f"{key}.train_count", self.train_count, minimum=least)
+        integer(f"{key}.test_count", self.test_count, minimum=least)
+        sunsky = in_range(f"{key}.sunsky_fraction", self.sunsky_fraction, 0.0)
+        room = in_range(f"{key}.room_fraction", self.room_fraction, 0.0)
+        if sunsky + room == 0 and self.folder is None:
+            raise DatasetConfigError(
+                f"no environment source: {key}.sunsky_fraction and {key}.room_fraction are both 0 "
+                f"and no {key}.folder is given"
             )
+        fraction = self.file_test_fraction
+        in_range(f"{key}.file_test_fraction", fraction, 0.0, 1.0, low_open=True, high_open=True)
+        integer(f"{key}.resolution", self.resolution, minimum=4)
+        ordered(
+            f"{key}.env_to_flash_min",
+            number(f"{key}.env_to_flash_min", self.env_to_flash_min),
+            f"{key}.env_to_flash_max",
+            number(f"{key}.env_to_flash_max", self.env_to_flash_max),
+        )
+        in_range(f"{key}.env_to_flash_min", self.env_to_flash_min, 0.0, low_open=True)  # log-uniform
 
 
 @dataclass(frozen=True)
@@ -685,8 +693,11 @@ def build_environment_pools(config: LightingConfig, seed: int) -> EnvironmentPoo
     Procedural environments are numbered per kind across both pools (training first), so a test
     environment is never a training one. User files are shuffled by the seed and split.
 
+    Every user file is read and checked here (:func:`check_environment_file`), so a corrupt one
+    fails before any work instead of when a render first draws it, possibly hours in.
+
     Raises:
-        LightingError: the folder is unusable or holds fewer than 2 files.
+        LightingError: the folder is unusable, holds fewer than 2 files or a file is unusable.
     """
     train: list[EnvironmentSpec] = []
     test: list[EnvironmentSpec] = []
@@ -704,6 +715,8 @@ def build_environment_pools(config: LightingConfig, seed: int) -> EnvironmentPoo
                 f"{config.folder}: needs at least 2 environment maps to split into train and test, "
                 f"found {len(files)}"
             )
+        for spec in files:
+            check_environment_file(spec, config.resolution)
         order = _kind_rng(seed, "file", 0).permutation(len(files))
         n_test = min(max(1, round(len(files) * config.file_test_fraction)), len(files) - 1)
         test += [files[i] for i in order[:n_test]]
@@ -711,6 +724,19 @@ def build_environment_pools(config: LightingConfig, seed: int) -> EnvironmentPoo
     if not train or not test:
         raise ValueError(f"empty environment pool: {len(train)} train, {len(test)} test")
     return EnvironmentPools(tuple(train), tuple(test))
+
+
+def check_environment_file(spec: EnvironmentSpec, resolution: int) -> None:
+    """Decode a ``file`` environment as the renders will (through the :func:`load_environment`
+    cache, so the first renders reuse it) and check that it lights the sample.
+
+    Raises:
+        LightingError: naming the file: unreadable, corrupt, not 2:1, non-finite, or black above
+            the horizon (it could not be balanced against the flash).
+    """
+    environment = load_environment(spec, resolution)
+    if not environment.plane_irradiance() > 0.0:
+        raise LightingError(f"{spec.param('path')}: puts no light on the sample (black above the horizon)")
 
 
 @lru_cache(maxsize=32)

@@ -6,6 +6,7 @@ Layout::
         train/
             manifest.json            written by the generator (content is the caller's)
             train-000000.tar
+            train-000000.tar.sha256  the shard's SHA-256, recorded when it was completed
             train-000001.tar
             ...
         test/
@@ -30,6 +31,10 @@ Writing is byte-deterministic: the same samples give the same file, byte for byt
 OpenCV/zlib versions (fixed PNG compression level, sorted compact JSON, tar headers with zero
 times and owners). A shard is written to a hidden temporary file next to its target and moved
 into place with :func:`os.replace`, so a reader (or ``glob("*.tar")``) never sees a partial shard.
+Its SHA-256 is then recorded beside it (:func:`write_digest`, ``sha256sum``'s format, so
+``sha256sum -c *.sha256`` checks a split by hand): the tar headers :func:`verify_shard` reads
+cannot reveal a PNG corrupted in place, a checksum can. One small file per shard, rather than one
+shared file, because shards are made by concurrent processes and machines.
 """
 
 from __future__ import annotations
@@ -70,11 +75,15 @@ __all__ = [
     "ShardError",
     "ShardInfo",
     "decode_sample",
+    "digest_path",
     "encode_sample",
     "list_shards",
+    "read_digest",
     "read_manifest",
+    "sha256_file",
     "shard_path",
     "verify_shard",
+    "write_digest",
     "write_manifest",
     "write_shard",
 ]
@@ -89,6 +98,8 @@ SAMPLE_MEMBERS: tuple[str, ...] = (
     "meta.json",
 )
 MANIFEST_NAME = "manifest.json"
+DIGEST_SUFFIX = ".sha256"
+_HEX_DIGEST = re.compile(r"[0-9a-f]{64}")
 # zlib level 1: noisy 16-bit renders barely compress further (< 2 % smaller at level 9, measured
 # at 512²) while encoding takes up to 2× longer; decoding costs the same for every level ≥ 1.
 PNG_COMPRESSION = 1
@@ -308,7 +319,7 @@ def write_shard(path: str | os.PathLike[str], samples: Iterable[Sample]) -> Shar
             files = encode_sample(sample)
             for member in SAMPLE_MEMBERS:
                 _add_member(tar, f"{sample.key}.{member}", files[member])
-    return ShardInfo(path=path, count=len(keys), bytes=path.stat().st_size, sha256=_sha256(path))
+    return ShardInfo(path=path, count=len(keys), bytes=path.stat().st_size, sha256=sha256_file(path))
 
 
 def _add_member(tar: tarfile.TarFile, name: str, data: bytes) -> None:
@@ -323,12 +334,45 @@ def _add_member(tar: tarfile.TarFile, name: str, data: bytes) -> None:
     tar.addfile(info, io.BytesIO(data))  # BytesIO shares the bytes, no copy
 
 
-def _sha256(path: Path) -> str:
+def sha256_file(path: str | os.PathLike[str]) -> str:
+    """The SHA-256 (hex) of a file's bytes, read in 1 MiB chunks."""
     digest = hashlib.sha256()
-    with path.open("rb") as handle:
+    with Path(path).open("rb") as handle:
         while chunk := handle.read(1 << 20):
             digest.update(chunk)
     return digest.hexdigest()
+
+
+def digest_path(shard: str | os.PathLike[str]) -> Path:
+    """Where a shard's SHA-256 is recorded: ``<shard>.sha256`` beside it."""
+    shard = Path(shard)
+    return shard.with_name(shard.name + DIGEST_SUFFIX)
+
+
+def write_digest(shard: str | os.PathLike[str], sha256: str) -> Path:
+    """Record ``sha256`` as the digest of ``shard`` (atomically, ``sha256sum``'s line format)."""
+    if not _HEX_DIGEST.fullmatch(sha256):
+        raise ValueError(f"not a lowercase hex SHA-256: {sha256!r}")
+    return write_text_atomic(digest_path(shard), f"{sha256}  {Path(shard).name}\n")
+
+
+def read_digest(shard: str | os.PathLike[str]) -> str | None:
+    """The recorded SHA-256 of ``shard``, or ``None`` when none was recorded.
+
+    Raises:
+        ShardError: naming the record, when it is unreadable or not a digest of this shard.
+    """
+    path = digest_path(shard)
+    try:
+        text = path.read_text(encoding="ascii")
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError) as error:
+        raise ShardError(f"{path}: unreadable checksum record ({error})") from error
+    digest, _, name = text.strip().partition("  ")
+    if not _HEX_DIGEST.fullmatch(digest) or name != Path(shard).name:
+        raise ShardError(f"{path}: malformed checksum record (expected '<sha256>  {Path(shard).name}')")
+    return digest
 
 
 def verify_shard(path: str | os.PathLike[str], *, decode: bool = False) -> int:
