@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import errno
 import math
+import os
 from pathlib import Path
 
 import cv2
@@ -19,6 +21,7 @@ from brdfgan.core.svbrdf import (
     srgb_to_linear,
     validate_maps,
 )
+from brdfgan.errors import DiskFullError
 from brdfgan.io.images import ImageIOError, read_image, write_image
 from brdfgan.io.maps import MapIOError, map_paths, read_maps, write_maps
 
@@ -290,8 +293,9 @@ def test_failed_write_keeps_existing_file(tmp_path: Path, ext: str) -> None:
 
 
 @pytest.mark.parametrize("ext", [".png", ".exr"])
+@pytest.mark.parametrize("code", [errno.EIO, errno.ENOSPC])
 def test_failure_after_temp_file_written_cleans_up(
-    tmp_path: Path, ext: str, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, ext: str, code: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     path = tmp_path / f"good{ext}"
     write_image(path, np.full((4, 4, 1), 0.25))
@@ -299,11 +303,15 @@ def test_failure_after_temp_file_written_cleans_up(
 
     def failing_replace(src: object, dst: object) -> None:
         assert Path(str(src)).exists()  # the temp file really was written before the failure
-        raise OSError(28, "No space left on device")
+        raise OSError(code, os.strerror(code))
 
     monkeypatch.setattr("brdfgan.io.images.os.replace", failing_replace)
-    with pytest.raises(ImageIOError, match=rf"good\{ext}: cannot write file \(No space left"):
+    with pytest.raises(ImageIOError if code == errno.EIO else DiskFullError) as error:
         write_image(path, np.full((4, 4, 1), 0.75))
+    if code == errno.EIO:
+        assert f"good{ext}: cannot write file (Input/output error)" in str(error.value)
+    else:  # a full disk is reported as such, naming the file and not its hidden temporary
+        assert str(error.value) == f"{path}: no space left on device"
     assert path.read_bytes() == before
     assert files_in(tmp_path) == [path.name]
 
@@ -353,3 +361,29 @@ def test_read_jpeg_and_gray16(tmp_path: Path) -> None:
     gray = np.arange(16, dtype=np.uint16).reshape(4, 4) * 4000
     cv2.imwrite(str(tmp_path / "gray16.png"), gray)
     np.testing.assert_allclose(read_image(tmp_path / "gray16.png")[..., 0], gray / 65535, atol=1e-7)
+
+
+def test_truncated_exr_library_messages_stay_off_stdout(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    # OpenEXR's C++ code prints "Warning: Exception raised reading pixel data ..." to stdout (fd 1)
+    # on a file cut in the pixel data; `brdfgan predict`'s stdout is the list of output folders.
+    rng = np.random.default_rng(0)
+    full = write_image(
+        tmp_path / "full.exr", rng.random((64, 64, 3)).astype(np.float32), exr_precision="float"
+    )
+    data = full.read_bytes()
+    cut = tmp_path / "cut.exr"
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    capfd.readouterr()
+    with pytest.raises(ImageIOError) as error:
+        read_image(cut)
+    captured = capfd.readouterr()
+    assert captured.out == "" and captured.err == ""
+    message = str(error.value)
+    # The library's own diagnosis is folded into the one-line error instead.
+    assert message.startswith(f"{cut}: corrupt or unreadable EXR file: ") and "\n" not in message
+    assert "EXR_ERR" in message or "scanline" in message, message
+    assert read_image(full).shape == (64, 64, 3)  # descriptors are restored: later reads still work
+    print("after")
+    assert capfd.readouterr().out == "after\n"

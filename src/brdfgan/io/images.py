@@ -7,19 +7,34 @@ what you get (see :mod:`brdfgan.io.maps` for the per-map conventions).
 
 Writes are atomic: the image is written to a hidden temporary file in the target directory and
 moved over the target with :func:`os.replace`, so a reader never sees a half-written file and a
-failed write leaves any existing file untouched.
+failed write leaves any existing file untouched. A full disk raises
+:class:`~brdfgan.errors.DiskFullError` naming the target.
+
+OpenEXR's C++ library prints its own messages (e.g. "Warning: Exception raised reading pixel data
+..." on stdout, the chunk error on stderr) on a corrupt file. ``brdfgan predict``'s stdout is the
+list of output folders, so reads capture both file descriptors: on failure the library's first
+line becomes part of the one-line :class:`ImageIOError`, on success anything it said goes to stderr.
 """
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import errno
+import io
 import os
+import sys
+import tempfile
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Literal
 
 import cv2
 import numpy as np
 import OpenEXR
+
+from brdfgan.errors import DiskFullError, is_disk_full
 
 __all__ = [
     "EXR_EXTENSIONS",
@@ -105,6 +120,8 @@ def write_image(
         os.replace(temp, path)
     except BaseException as error:
         temp.unlink(missing_ok=True)
+        if is_disk_full(error):
+            raise DiskFullError(path) from error
         if isinstance(error, OSError):
             raise ImageIOError(f"{path}: cannot write file ({error.strerror or error})") from error
         raise
@@ -147,12 +164,57 @@ def _read_cv2(path: Path) -> np.ndarray:
     return image.astype(np.float32) / np.float32(scale)
 
 
-def _read_exr(path: Path) -> np.ndarray:
+@contextlib.contextmanager
+def captured_native_output(lines: list[str]) -> Iterator[None]:
+    """Capture what a native library prints inside the block, at both levels it can print at.
+
+    C/C++ code writes to file descriptors 1 and 2, which Python-level redirection does not reach,
+    so the descriptors themselves are pointed at a temporary file; pybind11 modules print through
+    ``sys.stdout``/``sys.stderr``, which are swapped for a buffer (OpenEXR's "Warning: Exception
+    raised reading pixel data" comes that way). ``lines`` receives the captured lines (stripped,
+    non-empty) when the block ends, also when it raises.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):  # a replaced or closed stream has nothing to flush
+            stream.flush()
+    python_level = io.StringIO()
+    with tempfile.TemporaryFile() as sink:
+        saved = os.dup(1), os.dup(2)
+        try:
+            os.dup2(sink.fileno(), 1)
+            os.dup2(sink.fileno(), 2)
+            with contextlib.redirect_stdout(python_level), contextlib.redirect_stderr(python_level):
+                yield
+        finally:
+            # C stdio (and C++ std::cout, synchronised with it) buffers output to a file: flush
+            # it into the sink now, or it would surface on the real stdout later.
+            _libc_fflush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
+            sink.seek(0)
+            text = sink.read().decode("utf-8", "replace") + python_level.getvalue()
+            lines += [line.strip() for line in text.splitlines() if line.strip()]
+
+
+def _libc_fflush() -> None:
     try:
-        with OpenEXR.File(str(path), separate_channels=True) as exr:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):  # no C library to talk to: nothing buffered there either
+        pass
+
+
+def _read_exr(path: Path) -> np.ndarray:
+    library_output: list[str] = []
+    try:
+        with captured_native_output(library_output), OpenEXR.File(str(path), separate_channels=True) as exr:
             channels = {name: channel.pixels for name, channel in exr.channels().items()}
     except (RuntimeError, OSError, ValueError) as error:
-        raise ImageIOError(f"{path}: corrupt or unreadable EXR file") from error
+        detail = _exr_detail(path, library_output) or " ".join(str(error).split())
+        raise ImageIOError(f"{path}: corrupt or unreadable EXR file: {detail}") from error
+    for line in library_output:  # a successful read that still had something to say
+        print(f"OpenEXR: {line}", file=sys.stderr)
     names = set(channels)
     if {"R", "G", "B"} <= names:
         order = ["R", "G", "B", "A"] if "A" in names else ["R", "G", "B"]
@@ -168,6 +230,12 @@ def _read_exr(path: Path) -> np.ndarray:
     if any(plane.ndim != 2 or plane.shape != planes[0].shape for plane in planes):
         raise ImageIOError(f"{path}: EXR channels have different sizes (subsampled channels unsupported)")
     return np.stack(planes, axis=-1).astype(np.float32)
+
+
+def _exr_detail(path: Path, library_output: list[str]) -> str:
+    """The library's most specific line: its error (which repeats the path) rather than its warning."""
+    specific = [line for line in library_output if not line.startswith("Warning:")] or library_output
+    return specific[0].removeprefix(f"{path}: ").removeprefix(f"{path}:").strip() if specific else ""
 
 
 def _check_array(path: Path, array: np.ndarray) -> np.ndarray:
@@ -220,4 +288,7 @@ def _write_exr(path: Path, temp: Path, image: np.ndarray, precision: str) -> Non
         with OpenEXR.File(header, channels) as exr:
             exr.write(str(temp))
     except (RuntimeError, ValueError) as error:
+        # OpenEXR reports a failed write(2) as a RuntimeError carrying only the strerror text.
+        if os.strerror(errno.ENOSPC) in str(error) or os.strerror(errno.EDQUOT) in str(error):
+            raise DiskFullError(path) from error
         raise ImageIOError(f"{path}: EXR write failed ({error})") from error
