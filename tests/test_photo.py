@@ -271,6 +271,31 @@ def test_exr_negative_values_are_clamped_with_warning(tmp_path: Path) -> None:
     assert any("negative" in warning and "clamped" in warning for warning in photo.warnings)
 
 
+@pytest.mark.parametrize(
+    ("name", "values"),
+    [("black.jpg", 0.0), ("black.png", 0.0), ("black.exr", 0.0), ("negative.exr", -0.25)],
+)
+def test_black_or_negative_photo_is_rejected(tmp_path: Path, name: str, values: float) -> None:
+    # Auto exposure multiplies a photo without light by 0: the network would see a flat black
+    # input and the batch would write a made-up material; like grayscale, it is an error.
+    path = tmp_path / name
+    if path.suffix == ".exr":
+        write_image(path, np.full((40, 40, 3), values, dtype=np.float32), exr_precision="float")
+    else:
+        save_pil(path, np.zeros((40, 40, 3), dtype=np.uint8))
+
+    with pytest.raises(PhotoError) as error:
+        read_photo(path)
+
+    assert_photo_error(error, path, "is black", "nothing to estimate")
+    # One lit pixel is a (very dark) photo, not an error.
+    if path.suffix == ".exr":
+        image = np.full((40, 40, 3), values, dtype=np.float32)
+        image[20, 20] = 0.5
+        write_image(path, image, exr_precision="float")
+        assert float(read_photo(path).linear.max()) == 0.5
+
+
 @pytest.mark.parametrize("channels", ["Y", "YA"])
 def test_grayscale_exr_is_rejected(tmp_path: Path, channels: str) -> None:
     # read_image replicates Y+A to RGBA: the header's channel names tell it is grayscale.

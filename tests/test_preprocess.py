@@ -340,12 +340,37 @@ def test_preprocess_warns_when_hotspot_is_off_centre() -> None:
     assert not any("away from the crop centre" in w for w in centred.warnings)
 
 
-def test_preprocess_black_photo() -> None:
-    result = preprocess(make_photo(torch.zeros(3, 40, 40)), 16)
+def test_preprocess_black_crop_is_an_error() -> None:
+    # read_photo refuses black photos; a black region of a lit one reaches preprocess.
+    image = torch.zeros(3, 40, 80)
+    image[:, :, 40:] = 0.5
+    photo = make_photo(image)
+    with pytest.raises(
+        PhotoError, match=r"photo\.png: the given crop \(0,0,32\) is black: nothing to estimate"
+    ):
+        preprocess(photo, 16, Crop(0, 0, 32))
+    with pytest.raises(PhotoError, match=r"the automatic crop .* is black"):
+        preprocess(make_photo(torch.zeros(3, 40, 40)), 16)
+    assert preprocess(photo, 16, Crop(40, 0, 32)).exposure_scale > 0
 
-    assert result.exposure_scale == 0.0
-    assert torch.equal(result.photo, torch.zeros(3, 16, 16))
-    assert any("black" in w for w in result.warnings)
+
+def test_no_nan_in_the_highlight_message_of_a_mostly_black_photo() -> None:
+    # Median luminance 0 (a lit spot on black): both brightness measures used to divide by the
+    # median, giving inf / inf and "only nan× as bright as the centre".
+    yy, xx = torch.meshgrid(torch.arange(128.0), torch.arange(160.0), indexing="ij")
+    spot = 0.8 * torch.exp(-((xx - 20) ** 2 + (yy - 20) ** 2) / (2 * 6.0**2))
+    image = torch.where(spot < 0.05, 0.0, spot).expand(3, -1, -1).clone()
+    result = preprocess(make_photo(image), 64)
+    assert not any("nan" in w.lower() for w in result.warnings), result.warnings
+    # The only light there is counts as the flash: the crop follows it, not the black centre.
+    assert not any("no distinct flash highlight" in w for w in result.warnings)
+    assert result.crop == Crop(0, 0, 64)
+    # A lit centre with a dark spot elsewhere gives a finite ratio in the message, never NaN.
+    dim = torch.full((3, 120, 160), 0.2)
+    dim[:, 5:25, 120:150] = 0.3
+    result = preprocess(make_photo(dim), 64)
+    message = next(w for w in result.warnings if "no distinct flash highlight" in w)
+    assert "1.50× as bright" in message and "nan" not in message
 
 
 @pytest.mark.parametrize("resolution", [0, -4, 2.5, True])

@@ -151,8 +151,9 @@ def read_photo(path: str | os.PathLike[str], colorspace: Colorspace | None = Non
 
     Raises:
         PhotoError: the file is missing, unreadable, not an image, truncated, smaller than
-            :data:`MIN_PHOTO_SIZE` on a side, grayscale, has a (non-opaque) alpha channel, is CMYK,
-            holds NaN/Inf (EXR), or has an unsupported extension. One line, naming the file.
+            :data:`MIN_PHOTO_SIZE` on a side, grayscale, black (no positive value: all zero, or
+            all negative in an EXR), has a (non-opaque) alpha channel, is CMYK, holds NaN/Inf
+            (EXR), or has an unsupported extension. One line, naming the file.
 
     Shape:
         - output ``Photo.linear``: ``(3, H, W)`` float32, H and W after EXIF orientation
@@ -278,6 +279,14 @@ def _subsample(image: np.ndarray) -> np.ndarray:
     return image[::stride, ::stride]
 
 
+def _check_not_black(path: Path, image: np.ndarray, *, clamped: bool = False) -> None:
+    """A photo without a single positive value has no light to estimate anything from; the
+    auto exposure would multiply it by 0 and the network would see a flat black input."""
+    if not (image > 0).any():
+        what = "every value is zero or negative" if clamped else "every pixel is 0"
+        raise PhotoError(path, f"is black ({what}): nothing to estimate; a lit flash photo is needed")
+
+
 def _identical_channels_warning(sample: np.ndarray) -> str | None:
     if np.array_equal(sample[..., 0], sample[..., 1]) and np.array_equal(sample[..., 1], sample[..., 2]):
         return (
@@ -328,6 +337,7 @@ def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
         stored = _decode_png(path, data)
     assert stored is not None
     stored = _drop_opaque_alpha(path, stored, warnings)
+    _check_not_black(path, stored)
     expected_ext = JPEG_PHOTO_EXTENSIONS if source == "jpeg" else PNG_PHOTO_EXTENSIONS
     if path.suffix.lower() not in expected_ext:
         warnings.append(f"the file holds a {source.upper()} image although its extension is {path.suffix!r}")
@@ -460,6 +470,7 @@ def _read_exr_photo(path: Path, colorspace: Colorspace) -> Photo:
     if not finite.all():
         count = int((~finite).sum())
         raise PhotoError(path, f"contains {count} NaN or infinite values")
+    _check_not_black(path, image, clamped=True)
     negative = image < 0
     if negative.any():
         # Slightly negative values are common in EXR (out-of-gamut colours after a colour-space
@@ -544,6 +555,7 @@ def _read_raw_photo(path: Path) -> Photo:
     if rgb.ndim != 3 or rgb.shape[2] != 3:
         raise PhotoError(path, f"RAW decoder returned shape {rgb.shape}, expected (H, W, 3)")
     _check_size(path, rgb.shape[1], rgb.shape[0])
+    _check_not_black(path, rgb)
     warnings: list[str] = []
     warning = _identical_channels_warning(_subsample(rgb))
     if warning:

@@ -18,7 +18,7 @@ DESIGN.md §2). :func:`preprocess` does the same to a :class:`~brdfgan.inference
    the same. The image mean, which sets the exposure, is preserved by the box average.
 
 Warnings: a clipped flash hotspot (LDR sources only: for EXR there is no saturation level), a
-hotspot far from the crop centre, upscaling, an all-black crop.
+hotspot far from the crop centre, upscaling. An all-black crop is an error (nothing to estimate).
 
 Memory stays bounded on 24 MP photos: the hotspot search runs on a copy downscaled to at most
 :data:`HOTSPOT_WORKING_SIZE` pixels, statistics on a strided subsample, and only the cropped region
@@ -240,7 +240,7 @@ def hotspot_crop(height: int, width: int, hotspot: tuple[float, float]) -> Crop:
 
 
 def disc_luminance(linear: Tensor, centre: tuple[float, float]) -> float:
-    """Mean luminance in the clipping-check disc around ``centre`` over the image's median.
+    """Mean luminance in the clipping-check disc around ``centre``.
 
     Shape:
         - linear: ``(3, H, W)``
@@ -253,8 +253,7 @@ def disc_luminance(linear: Tensor, centre: tuple[float, float]) -> float:
     ys = torch.arange(y0, y1, dtype=torch.float32)[:, None]
     xs = torch.arange(x0, x1, dtype=torch.float32)[None, :]
     inside = (xs - centre[0]) ** 2 + (ys - centre[1]) ** 2 <= radius * radius
-    median = float(luminance(_subsampled(linear))[0].median())
-    return float(window[inside].mean()) / median if median > 0 else math.inf
+    return float(window[inside].mean())
 
 
 def flash_centre(linear: Tensor, detected: tuple[float, float]) -> tuple[tuple[float, float], float]:
@@ -272,8 +271,15 @@ def flash_centre(linear: Tensor, detected: tuple[float, float]) -> tuple[tuple[f
         height, width
     ):
         return detected, 1.0  # the highlight is at the centre already: nothing to decide
-    at_centre = disc_luminance(linear, centre)
-    ratio = disc_luminance(linear, detected) / at_centre if at_centre > 0 else math.inf
+    at_centre, at_detected = disc_luminance(linear, centre), disc_luminance(linear, detected)
+    # Never 0/0 (NaN, which would also print as "nan×"): a dark detected spot is no highlight, a
+    # lit spot over a black centre is one however bright it is.
+    if not at_detected > 0:
+        ratio = 0.0
+    elif not at_centre > 0:
+        ratio = math.inf
+    else:
+        ratio = at_detected / at_centre
     return (detected if ratio >= MIN_HOTSPOT_OVER_CENTRE else centre), ratio
 
 
@@ -318,7 +324,7 @@ def preprocess(
             the clipped-hotspot check. It is never run for EXR photos (HDR has no saturation).
 
     Raises:
-        PhotoError: the crop does not fit in the photo (one line, naming the file).
+        PhotoError: the crop does not fit in the photo, or it is black (one line, naming the file).
         ValueError: ``resolution`` is not a positive integer.
 
     Shape:
@@ -386,7 +392,12 @@ def preprocess(
     ldr, scale = auto_expose(resized.clamp(min=0.0))
     exposure_scale = float(scale)
     if exposure_scale == 0.0:
-        warnings.append("the cropped photo is black: nothing to estimate")
+        # read_photo refuses black photos; a black region of a lit one (a user crop) gets here.
+        where = "the given crop" if reported_hotspot is None else "the automatic crop"
+        raise PhotoError(
+            photo.path,
+            f"{where} ({crop.x},{crop.y},{crop.size}) is black: nothing to estimate; pass another --crop",
+        )
     stats["exposure_scale"] = exposure_scale
     stats["output_clipped_fraction"] = float((ldr >= 1.0).any(dim=0).float().mean())
     return Preprocessed(
