@@ -7,6 +7,7 @@ import json
 import logging
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tarfile
@@ -197,9 +198,16 @@ def corrupt_png_in_place(shard: Path) -> str:
     return member.name
 
 
-def test_manifest_and_records_hold_the_sha256_of_every_shard(tmp_path: Path) -> None:
-    spec = tiny_spec()
-    run_generation(spec, tmp_path, progress=False, photographer=torch_photographer)
+@pytest.fixture(scope="module")
+def made_once(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The dataset of ``tiny_spec()``, generated once; tests that damage it work on a copy."""
+    root = tmp_path_factory.mktemp("made_once")
+    run_generation(tiny_spec(), root, progress=False, photographer=torch_photographer)
+    return root
+
+
+def test_manifest_and_records_hold_the_sha256_of_every_shard(made_once: Path) -> None:
+    tmp_path = made_once
     for split in SPLITS:
         entries = read_manifest(tmp_path, split)["shards"]
         assert [e["name"] for e in entries] == [p.name for p in list_shards(tmp_path, split)]
@@ -211,10 +219,10 @@ def test_manifest_and_records_hold_the_sha256_of_every_shard(tmp_path: Path) -> 
 
 @pytest.mark.parametrize("record", ["manifest and beside the shard", "manifest only", "beside the shard"])
 def test_a_png_corrupted_in_place_is_found_rewritten_and_reported(
-    tmp_path: Path, caplog: pytest.LogCaptureFixture, record: str
+    made_once: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture, record: str
 ) -> None:
     spec = tiny_spec()
-    run_generation(spec, tmp_path, progress=False, photographer=torch_photographer)
+    shutil.copytree(made_once, tmp_path, dirs_exist_ok=True)
     clean = shard_hashes(tmp_path)
     shard = shard_path(tmp_path, "train", 1)
     corrupt_png_in_place(shard)
@@ -237,10 +245,10 @@ def test_a_png_corrupted_in_place_is_found_rewritten_and_reported(
 
 
 def test_a_dataset_made_before_digests_were_recorded_is_kept_and_protected_from_then_on(
-    tmp_path: Path,
+    made_once: Path, tmp_path: Path
 ) -> None:
     spec = tiny_spec()
-    run_generation(spec, tmp_path, progress=False, photographer=torch_photographer)
+    shutil.copytree(made_once, tmp_path, dirs_exist_ok=True)
     clean = shard_hashes(tmp_path)
     for split in SPLITS:  # the layout of older versions: no records, manifests without sha256
         manifest = read_manifest(tmp_path, split)
