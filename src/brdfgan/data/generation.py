@@ -21,7 +21,9 @@ The protocol, and where each step lives:
    ``<split>/<split>-NNNNNN.tar`` — :mod:`brdfgan.data.shards`. A shard is the unit of work
    and a pure function of (spec, split, shard index): re-running skips complete shards, so a
    killed run resumes without duplicates, and any subset of shards can run in another process or
-   on another machine (``generate.py shard=…``).
+   on another machine (``generate.py shard=…``). Each shard's SHA-256 is recorded the moment it
+   is complete (beside it, then in the split's manifest); a rerun checks complete shards against
+   it and rewrites, byte for byte, any that were corrupted since, naming them.
 
 Every random draw comes from a generator seeded by a hash of (dataset seed, material index), so
 the bytes of a shard do not depend on which process made it, or in which order.
@@ -416,20 +418,23 @@ def recorded_digests(root: Path, split: str) -> dict[str, str]:
     }
 
 
+def _recorded(path: Path, manifest_sha256: str | None) -> set[str]:
+    """The SHA-256 values recorded for a shard: beside it and in its split's manifest."""
+    return {digest for digest in (read_digest(path), manifest_sha256) if digest is not None}
+
+
 def shard_problem(path: Path, expected: int, manifest_sha256: str | None) -> str | None:
-    """Why the shard at ``path`` must be (re)written, or ``None`` when it is complete: readable
-    tar headers with ``expected`` samples, and bytes whose SHA-256 is the one recorded beside it
-    and in the manifest (``manifest_sha256``). A complete shard with no record at all (made
-    before digests were kept, or the process died between the shard and its record) passed
-    the checks that existed then: its digest is recorded now and it is kept, rather than
-    regenerating a whole old dataset."""
-    if not path.exists():
-        return "missing"
+    """Why the existing shard at ``path`` must be rewritten, or ``None`` when it is complete:
+    readable tar headers with ``expected`` samples, and bytes whose SHA-256 is the one recorded
+    beside it and in the manifest (``manifest_sha256``). A complete shard with no record at all
+    (made before digests were kept, or the process died between the shard and its record)
+    passed every check that existed then: its digest is recorded now and it is kept, rather
+    than regenerating a whole old dataset."""
     try:
         count = verify_shard(path)
         if count != expected:
             return f"{path}: holds {count} samples, expected {expected}"
-        recorded = {digest for digest in (read_digest(path), manifest_sha256) if digest is not None}
+        recorded = _recorded(path, manifest_sha256)
     except ShardError as error:
         return str(error)
     actual = sha256_file(path)
@@ -475,13 +480,15 @@ def run_generation(
     todo = []
     for job in select_jobs(jobs, shards):
         path = shard_path(root, job.split, job.index)
+        if not path.exists():
+            todo.append(job)
+            continue
         problem = shard_problem(path, job.sample_count(spec), manifest_digests[job.split].get(path.name))
         if problem is None:
             summary.skipped.append(path)
             continue
-        if problem != "missing":
-            log.warning("%s; it will be rewritten", problem)
-            summary.repaired.append(path)
+        log.warning("%s; it will be rewritten", problem)
+        summary.repaired.append(path)
         todo.append(job)
     if todo:
         photograph = (photographer or MitsubaPhotographer)(spec)
@@ -501,7 +508,7 @@ def run_generation(
                 for stale in path.parent.glob(f".{path.name}.*.tmp"):
                     stale.unlink(missing_ok=True)  # left by a killed run (the shard's or its record's)
                 try:
-                    before = {read_digest(path), manifest_digests[job.split].get(path.name)} - {None}
+                    before = _recorded(path, manifest_digests[job.split].get(path.name))
                 except ShardError:
                     before = set()  # a malformed record: replaced below
                 info: ShardInfo = write_shard(path, samples())
