@@ -30,13 +30,16 @@ from torch import Tensor, nn
 
 from brdfgan.core.svbrdf import NORMAL, validate_maps
 from brdfgan.inference.tiling import (
+    TILED_BUFFER_CHANNELS,
     TilingConfig,
+    activation_bytes_per_pixel,
     blend_window,
     frozen_instance_norm,
     norm_statistics,
     padded_size,
     predict_direct,
     predict_maps,
+    predict_memory,
     predict_tiled,
     reflect_pad,
     stats_photo,
@@ -422,3 +425,18 @@ def test_baseline_with_global_track_runs_tiled() -> None:
     # track's per-tile means differ from the whole photo's, so unlike the Generator it is not exact.
     direct = predict_maps(baseline, photo)
     assert pixel_error(maps, direct).mean() < 5e-2
+
+
+def test_memory_estimate_follows_the_widest_layer_and_tiles_bound_the_network() -> None:
+    # Width 16: the first InstanceNorm reads and writes 16 float32 channels at full resolution,
+    # 128 B/px, doubled for what stays alive beside it; twice the width, twice the bytes.
+    narrow, wide = Generator(width=16, residual_blocks=1), Generator(width=32, residual_blocks=1)
+    assert activation_bytes_per_pixel(narrow) == 256.0
+    assert activation_bytes_per_pixel(wide) == 512.0
+    config = TilingConfig()  # photos above 1024² run as 1024² tiles
+    direct = predict_memory(narrow, 1024, 1024, config, 256.0)
+    assert direct == 256 * 1024 * 1024
+    tiled = [predict_memory(narrow, side, side, config, 256.0) for side in (2048, 4096)]
+    # Tiled, the network costs one tile whatever the size; only the full-size buffers grow.
+    assert tiled[1] - tiled[0] == TILED_BUFFER_CHANNELS * 4 * (4096**2 - 2048**2)
+    assert tiled[0] - TILED_BUFFER_CHANNELS * 4 * 2048**2 == direct

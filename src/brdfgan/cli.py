@@ -8,7 +8,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from brdfgan.errors import USER_ERROR_EXIT_CODE, one_line
+from brdfgan.errors import DISK_FULL_EXIT_CODE, INTERRUPTED_EXIT_CODE, USER_ERROR_EXIT_CODE, one_line
 
 # Exit status when the command ran but at least one photo of the batch failed.
 PARTIAL_FAILURE_EXIT_CODE = 1
@@ -144,7 +144,14 @@ def predict_command(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from brdfgan.inference.export import ExportOptions
-    from brdfgan.inference.predict import PredictOptions, collect_photos, load_model, predict_batch
+    from brdfgan.inference.predict import (
+        PredictOptions,
+        check_memory,
+        collect_photos,
+        interrupts_raise,
+        load_model,
+        predict_batch,
+    )
 
     try:
         model = load_model(args.weights)
@@ -158,6 +165,7 @@ def predict_command(args: argparse.Namespace) -> int:
             preview=not args.no_preview,
             animate=args.animate,
         )
+        check_memory(model, options)  # before any photo is read or anything large allocated
     except ValueError as error:
         print(f"error: {one_line(error)}", file=sys.stderr)
         return USER_ERROR_EXIT_CODE
@@ -178,16 +186,25 @@ def predict_command(args: argparse.Namespace) -> int:
         bar.update(1)
 
     try:
-        outcome = predict_batch(photos, args.out, model, options, on_result=report)
+        # SIGTERM too: the photo in progress then leaves no hidden staging folder behind.
+        with interrupts_raise():
+            outcome = predict_batch(photos, args.out, model, options, on_result=report)
     except KeyboardInterrupt:
         bar.close()
         print(
             "interrupted: finished photos are complete; the one in progress was not written", file=sys.stderr
         )
-        return 130
+        return INTERRUPTED_EXIT_CODE
     bar.close()
     for result in outcome.succeeded:
         print(result.output)
+    if outcome.stopped is not None:  # a full disk; its error line was printed as it happened
+        print(
+            f"stopped: {len(outcome.succeeded)} of {len(photos)} photo(s) written; free some space and "
+            "run again",
+            file=sys.stderr,
+        )
+        return DISK_FULL_EXIT_CODE
     if outcome.failed:
         print(f"{len(outcome.failed)} of {len(photos)} photo(s) failed:", file=sys.stderr)
         for _, message in outcome.failed:

@@ -19,15 +19,30 @@ specular              RGB      specular F0 0.04·(1 − m) + b·m; PNG sRGB-enco
 ``material.glb`` always embeds 8-bit PNG base colour, OpenGL normal and metallicRoughness textures
 (what glTF 2.0 prescribes), whatever the format options of the loose files.
 
-Atomicity: everything is written into a hidden temporary directory beside the target, which then
-replaces ``OUT/<name>`` with two renames; a failure at any point leaves the previous result (if
-any) untouched and removes the temporary directory.
+Atomicity: everything is written into a hidden staging directory beside the target,
+``.<name>.<owner>.tmp``, which then takes the place of ``OUT/<name>``. On Linux the two directories
+are exchanged in one ``renameat2(RENAME_EXCHANGE)``, so a complete ``OUT/<name>`` exists at every
+instant; elsewhere (or on a filesystem that refuses the exchange) the old result is first renamed
+to ``.<name>.<owner>.old``, leaving a moment without ``OUT/<name>``. A failure or an interrupt
+leaves the previous result (if any) in place and removes the staging directory.
+
+A kill (``kill -9``, power loss) cannot clean up, so the owner in those names, ``<pid>-<start>-<random>``
+with ``<start>`` a hash of the process's start time and the boot, says whether the process that
+made them is still running. :func:`recover_outputs` (run by every ``predict`` before it writes)
+removes the hidden directories of processes that are gone, and puts back a ``.<name>.<owner>.old``
+whose ``OUT/<name>`` is missing (a kill between the two renames of the fallback).
 """
 
 from __future__ import annotations
 
+import ctypes
+import errno
+import functools
+import hashlib
 import json
+import logging
 import os
+import re
 import shutil
 import uuid
 from collections.abc import Callable, Mapping
@@ -49,14 +64,22 @@ from brdfgan.core.svbrdf import (
     srgb_to_linear,
     validate_maps,
 )
+from brdfgan.errors import DiskFullError, is_disk_full
 from brdfgan.inference.gltf import write_glb
 from brdfgan.io.images import write_image
+
+log = logging.getLogger(__name__)
 
 NormalConvention = Literal["opengl", "directx"]
 TextureFormat = Literal["png", "exr"]
 NORMAL_CONVENTIONS: tuple[str, ...] = ("opengl", "directx")
 TEXTURE_FORMATS: tuple[str, ...] = ("png", "exr")
 MATERIAL_JSON_FORMAT = "brdfgan-material/1"
+
+# ``.<name>.<pid>-<start token>-<random>.tmp`` (staging) or ``.old`` (a previous result being retired).
+HIDDEN_OUTPUT_PATTERN = re.compile(
+    r"^\.(?P<name>.+)\.(?P<pid>[0-9]+)-(?P<token>[0-9a-f]{8})-[0-9a-f]{8}\.(?P<kind>tmp|old)$"
+)
 
 
 class ExportError(ValueError):
@@ -191,18 +214,51 @@ def write_material(
         ) from None
     if target.exists() and not target.is_dir():
         raise ExportError(f"{target}: exists and is not a directory")
-    staging = parent / f".{target.name}.{uuid.uuid4().hex[:12]}.tmp"
+    owner = _owner()
+    staging = parent / f".{target.name}.{owner}.tmp"
     try:
         staging.mkdir()
         files = _write_files(staging, target.name, textures, gltf_textures, options, extra_files or {})
         document = {"format": MATERIAL_JSON_FORMAT, **metadata, "files": files}
         (staging / "material.json").write_text(json.dumps(document, indent=2, sort_keys=False) + "\n")
-        _swap_directory(staging, target)
+        _swap_directory(staging, target, owner)
     except OSError as error:
+        if is_disk_full(error):
+            # The folder is what the user asked for; the file that hit the limit is a hidden temporary.
+            raise DiskFullError(target) from None
         raise ExportError(f"{target}: cannot write the outputs ({error.strerror or error})") from None
     finally:
+        # Also on KeyboardInterrupt (SIGINT, and SIGTERM while predict runs): nothing hidden stays.
         shutil.rmtree(staging, ignore_errors=True)
     return target
+
+
+def recover_outputs(out_root: str | os.PathLike[str]) -> list[str]:
+    """Clean up after killed runs in ``out_root``: hidden staging and retired directories whose
+    owning process is gone are removed, except a retired ``.<name>.<owner>.old`` whose
+    ``<name>`` is missing, which is renamed back (the kill came between the two renames).
+    Directories of running processes are left alone. Logs (a restore as a warning) and returns
+    one line per action."""
+    root = Path(out_root)
+    if not root.is_dir():
+        return []
+    actions: list[str] = []
+    for entry in sorted(root.iterdir()):
+        match = HIDDEN_OUTPUT_PATTERN.match(entry.name)
+        if match is None or entry.is_symlink() or not entry.is_dir():
+            continue
+        if _owner_running(int(match["pid"]), match["token"]):
+            continue
+        target = root / match["name"]
+        if match["kind"] == "old" and not os.path.lexists(target):
+            os.rename(entry, target)
+            actions.append(f"{target}: restored the previous result (a run was killed while replacing it)")
+            log.warning("%s", actions[-1])
+        else:
+            shutil.rmtree(entry, ignore_errors=True)
+            actions.append(f"{entry}: removed (left by process {match['pid']}, which is no longer running)")
+            log.info("%s", actions[-1])
+    return actions
 
 
 def _write_files(
@@ -251,19 +307,102 @@ def _write_files(
     return files
 
 
-def _swap_directory(staging: Path, target: Path) -> None:
-    """Replace ``target`` by ``staging`` with renames; the old result survives any failure."""
-    if not target.exists():
-        os.replace(staging, target)
+def _swap_directory(staging: Path, target: Path, owner: str) -> None:
+    """Put ``staging`` in the place of ``target``; the old result survives any failure.
+
+    Afterwards ``staging`` holds the old result (exchange) or is gone; the caller removes it.
+    """
+    if not os.path.lexists(target):
+        os.rename(staging, target)  # one atomic step: nothing to keep
         return
-    retired = target.parent / f".{target.name}.{uuid.uuid4().hex[:12]}.old"
-    os.replace(target, retired)
+    if exchange_paths(staging, target):
+        return
+    # No atomic exchange here: retire the old result under a name recover_outputs knows.
+    retired = target.parent / f".{target.name}.{owner}.old"
+    os.rename(target, retired)
     try:
-        os.replace(staging, target)
-    except OSError:
-        os.replace(retired, target)
+        os.rename(staging, target)
+    except BaseException:  # also an interrupt between the renames: put the old result back
+        os.rename(retired, target)
         raise
     shutil.rmtree(retired, ignore_errors=True)
+
+
+# Linux renameat2(2): flags and the "relative to the working directory" file descriptor.
+_RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+@functools.cache
+def _renameat2() -> Callable[..., int] | None:
+    try:
+        function = ctypes.CDLL(None, use_errno=True).renameat2  # Linux with glibc >= 2.28
+    except (AttributeError, OSError):
+        return None
+    function.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    function.restype = ctypes.c_int
+    return function
+
+
+def exchange_paths(a: Path, b: Path) -> bool:
+    """Swap two existing paths atomically (``renameat2(RENAME_EXCHANGE)``). ``False`` when this
+    system or filesystem cannot (then nothing changed); an ``OSError`` for any other failure."""
+    function = _renameat2()
+    if function is None:
+        return False
+    if function(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP):  # no kernel or filesystem support
+        return False
+    raise OSError(code, os.strerror(code), os.fspath(b))
+
+
+# --- owners of hidden directories ---------------------------------------------------------------
+
+
+def _owner() -> str:
+    """``<pid>-<start token>-<random>`` for a hidden directory of this process."""
+    pid = os.getpid()
+    return f"{pid}-{_start_token(pid) or '00000000'}-{uuid.uuid4().hex[:8]}"
+
+
+def _start_token(pid: int) -> str | None:
+    """A hash of the process's start time and the boot id: a PID is reused, this pair is not.
+
+    ``None`` when there is no such process; ``"00000000"`` for a running process when the system
+    has no ``/proc`` to read start times from (the PID alone then decides).
+    """
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except FileNotFoundError:
+        if Path("/proc/self/stat").exists():
+            return None
+        return "00000000" if _pid_exists(pid) else None
+    except OSError:
+        return None
+    # Field 22 is the start time in clock ticks since boot; the command name (field 2) is in
+    # parentheses and may itself contain spaces or parentheses, so count from the last ')'.
+    start = stat.rsplit(")", 1)[1].split()[19]
+    try:
+        boot = Path("/proc/sys/kernel/random/boot_id").read_text().strip()
+    except OSError:
+        boot = ""
+    return hashlib.sha1(f"{boot}:{start}".encode()).hexdigest()[:8]
+
+
+def _pid_exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
+
+
+def _owner_running(pid: int, token: str) -> bool:
+    return _start_token(pid) == token
 
 
 def _hwc(chw: Tensor) -> np.ndarray:

@@ -8,15 +8,23 @@ For each photo::
       → write_material (textures, material.glb, material.json, preview.png [, preview.gif/mp4])
 
 A batch keeps going when one photo fails: :func:`predict_batch` returns what succeeded and, for
-each failure, the one-line reason.
+each failure, the one-line reason; only a full disk stops it (every later photo would fail the
+same way). Before writing it cleans up after killed runs into the same folder
+(:func:`~brdfgan.inference.export.recover_outputs`), and while it runs SIGTERM interrupts it like
+Ctrl-C, so that the staging folder of the photo in progress is removed (:func:`interrupts_raise`).
+:func:`check_memory` refuses a resolution whose estimated memory exceeds what is available.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import os
 import re
-from collections.abc import Callable, Sequence
+import signal
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -25,12 +33,12 @@ from typing import Any, Literal
 import torch
 from torch import nn
 
-from brdfgan.errors import one_line
-from brdfgan.inference.export import ExportOptions, write_material
+from brdfgan.errors import disk_full_message, is_disk_full, one_line
+from brdfgan.inference.export import ExportOptions, recover_outputs, write_material
 from brdfgan.inference.photo import PHOTO_EXTENSIONS, Colorspace, read_photo
 from brdfgan.inference.preprocess import Crop, preprocess
 from brdfgan.inference.preview import write_animation, write_preview
-from brdfgan.inference.tiling import TilingConfig, predict_maps
+from brdfgan.inference.tiling import TilingConfig, activation_bytes_per_pixel, predict_maps, predict_memory
 from brdfgan.inference.weights import WeightsError, load_weights
 
 log = logging.getLogger(__name__)
@@ -38,6 +46,12 @@ log = logging.getLogger(__name__)
 DEFAULT_WEIGHTS = "default.safetensors"
 # The resolution a weights file was trained at, when its metadata does not say.
 FALLBACK_RESOLUTION = 256
+# Peak memory per output pixel outside the network: the resized photo, the maps and the texture
+# arrays being encoded. Measured as the growth of peak resident memory per pixel of tiled runs
+# (1024² → 2048², --tile 512, shipped weights): 207 B/px writing PNG, 296 B/px writing EXR.
+EXPORT_BYTES_PER_PIXEL = 320
+# The generator's input, (3, N, N) float32, stays alive while the network runs.
+INPUT_BYTES_PER_PIXEL = 12
 
 
 class PredictError(ValueError):
@@ -84,6 +98,7 @@ class PhotoResult:
 class BatchResult:
     succeeded: list[PhotoResult]
     failed: list[tuple[Path, str]]
+    stopped: str | None = None  # why the batch ended before its last photo (a full disk)
 
 
 def default_weights_path() -> Path:
@@ -142,6 +157,121 @@ def output_names(photos: Sequence[Path]) -> list[str]:
         taken.add(name)
         names.append(name)
     return names
+
+
+def estimate_memory(
+    model: Model, resolution: int, tiling: TilingConfig, activation_bytes: float | None = None
+) -> int:
+    """Peak bytes one photo at ``resolution``² needs beyond what the process holds already: the
+    larger of the network phase (input photo plus :func:`~brdfgan.inference.tiling.predict_memory`)
+    and the export phase (:data:`EXPORT_BYTES_PER_PIXEL`). The photo file's own decoded size is
+    not counted: it does not depend on ``resolution``."""
+    if activation_bytes is None:
+        activation_bytes = activation_bytes_per_pixel(model.generator)
+    pixels = resolution * resolution
+    network = INPUT_BYTES_PER_PIXEL * pixels + predict_memory(
+        model.generator, resolution, resolution, tiling, activation_bytes
+    )
+    return max(EXPORT_BYTES_PER_PIXEL * pixels, network)
+
+
+def available_memory() -> int | None:
+    """Bytes this process can still allocate: ``MemAvailable`` (or the free pages where there is
+    no ``/proc/meminfo``), capped by a cgroup v2 memory limit. ``None`` when unknown."""
+    available: int | None = None
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                available = int(line.split()[1]) * 1024  # the file says kB and means KiB
+    except (OSError, ValueError, IndexError):
+        pass
+    if available is None:
+        try:
+            available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (ValueError, OSError, AttributeError):
+            return None
+    try:  # a container's limit, which /proc/meminfo does not show
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        used = Path("/sys/fs/cgroup/memory.current").read_text().strip()
+        if limit != "max":
+            available = min(available, int(limit) - int(used))
+    except (OSError, ValueError):
+        pass
+    return available
+
+
+def check_memory(model: Model, options: PredictOptions, available: int | None = None) -> None:
+    """Raise a one-line :class:`PredictError` when the photos' resolution needs more memory than
+    ``available`` (default: :func:`available_memory`), before anything large is allocated.
+
+    The message gives the estimate and a way out: ``--tile`` when the network's untiled pass is
+    what does not fit, a smaller ``--resolution`` (the largest that fits) when the full-size maps
+    themselves do not.
+    """
+    available = available_memory() if available is None else available
+    if available is None:
+        return
+    resolution = options.resolution or model.resolution
+    activation = activation_bytes_per_pixel(model.generator)
+    needed = estimate_memory(model, resolution, options.tiling, activation)
+    if needed <= available:
+        return
+    default = TilingConfig()
+    if estimate_memory(model, resolution, default, activation) <= available:
+        advice = f"use --tile {default.tile} (tiles keep the network's memory at one {default.tile}² pass)"
+    else:
+        low, high = 0, resolution  # the largest resolution that fits, by bisection
+        while high - low > 1:
+            middle = (low + high) // 2
+            if estimate_memory(model, middle, options.tiling, activation) <= available:
+                low = middle
+            else:
+                high = middle
+        fits = low // 64 * 64 if low >= 64 else low
+        advice = f"use a smaller --resolution (at most about {fits})" if fits else "not enough memory"
+    raise PredictError(
+        f"--resolution {resolution} needs ~{_gib(needed)} GiB of memory, {_gib(available)} GiB are "
+        f"available; {advice}"
+    )
+
+
+def _gib(size: int) -> str:
+    gib = size / 2**30
+    return f"{gib:.1f}" if gib < 10 else f"{math.ceil(gib)}"
+
+
+@contextmanager
+def interrupts_raise() -> Iterator[None]:
+    """Inside the block SIGTERM, like SIGINT, raises ``KeyboardInterrupt``, once.
+
+    A terminated process runs no ``finally`` blocks; an exception does, so the staging folder of
+    the photo in progress is removed. Signals after the first are ignored until the block ends,
+    so that cleanup is not cut short. Only default handlers are replaced (one a launcher or an
+    embedding program installed is its own business, an ignored signal stays ignored), and the
+    previous ones are restored afterwards. Outside the main thread, where Python cannot set
+    handlers, nothing changes.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    interrupted = False
+
+    def handler(_signum: int, _frame: object) -> None:
+        nonlocal interrupted
+        if interrupted:
+            return
+        interrupted = True
+        raise KeyboardInterrupt
+
+    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
+    replaced = [number for number, default in defaults.items() if signal.getsignal(number) is default]
+    for number in replaced:
+        signal.signal(number, handler)
+    try:
+        yield
+    finally:
+        for number in replaced:
+            signal.signal(number, defaults[number])
 
 
 def predict_photo(
@@ -216,16 +346,29 @@ def predict_batch(
 
     User errors (unreadable or unsupported files, bad crops, unwritable outputs) are reported
     with their one-line message; anything else with its exception type, so a bug in one photo
-    never loses the rest of the batch.
+    never loses the rest of the batch. A full disk ends the batch: the result then says so in
+    ``stopped`` (``<path>: no space left on device``). Hidden folders left by killed runs in
+    ``out_root`` are cleaned up first. Interrupts (``KeyboardInterrupt``) propagate; run inside
+    :func:`interrupts_raise` to get the same for SIGTERM.
     """
     succeeded: list[PhotoResult] = []
     failed: list[tuple[Path, str]] = []
     names = output_names(photos)
+    try:
+        recover_outputs(out_root)
+    except OSError as error:  # not fatal: the photos may still be writable
+        log.warning("%s: cannot clean up after earlier runs (%s)", out_root, error.strerror or error)
     for photo, name in zip(photos, names, strict=True):
         try:
             result: PhotoResult | tuple[Path, str] = predict_photo(photo, out_root / name, model, options)
             succeeded.append(result)
         except (ValueError, OSError) as error:
+            if is_disk_full(error):
+                message = disk_full_message(error)
+                failed.append((photo, message))
+                if on_result is not None:
+                    on_result((photo, message))
+                return BatchResult(succeeded=succeeded, failed=failed, stopped=message)
             message = one_line(error)
             if str(photo) not in message:
                 message = f"{photo}: {message}"

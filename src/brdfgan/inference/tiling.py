@@ -359,6 +359,66 @@ def stats_photo(model: nn.Module, padded: Tensor, stats_resolution: int) -> Tens
     return _pad_for(model, small.clamp(0.0, 1.0))
 
 
+# --- memory ----------------------------------------------------------------------------------------
+
+# Full-size float buffers of a tiled run, in values per pixel: the padded photo (3), the blended
+# output (8) and the temporaries of renormalising its normals (at most 8).
+TILED_BUFFER_CHANNELS = 3 + 8 + 8
+
+
+def activation_bytes_per_pixel(generator: nn.Module) -> float:
+    """Peak memory of one untiled forward pass per input pixel, measured on a small input.
+
+    Forward hooks record the bytes every leaf module reads and writes during one pass over the
+    smallest photo of at least 64² the model accepts; the largest sum is doubled for what stays
+    alive beside them (the residual stream, reflection-padding copies, convolution workspaces) and
+    divided by the pixel count. Every activation of a fully convolutional network scales with the
+    pixel count, so the ratio holds at any size. Checked against how the peak resident memory of
+    untiled ``brdfgan predict`` runs grows with the pixel count (CPU, float32; the photo and maps
+    included): estimated 256 B/px vs 265 measured for the shipped weights (width 16, 1024² →
+    2048²), 1024 vs 967 for the paper generator (width 64, 512² → 1024²). (A pass on the ``meta``
+    device would cost no compute, but its one-off set-up takes longer than this pass.)
+    """
+    height, width = padded_size(generator, 64, 64)
+    device, dtype = _model_placement(generator, torch.empty(0))
+    largest = 0
+
+    def hook(_module: nn.Module, args: tuple[object, ...], output: object) -> None:
+        nonlocal largest
+        tensors = [t for t in (*args, output) if isinstance(t, Tensor)]
+        largest = max(largest, sum(t.numel() * t.element_size() for t in tensors))
+
+    leaves = [module for module in generator.modules() if not list(module.children())]
+    handles = [module.register_forward_hook(hook) for module in leaves]
+    channels = int(getattr(generator, "in_channels", PHOTO_CHANNELS))
+    try:
+        with _inference(generator):
+            generator(torch.full((1, channels, height, width), 0.5, device=device, dtype=dtype))
+    finally:
+        for handle in handles:
+            handle.remove()
+    return 2.0 * largest / (height * width)
+
+
+def predict_memory(
+    generator: nn.Module, height: int, width: int, config: TilingConfig, activation_bytes: float
+) -> int:
+    """Bytes :func:`predict_maps` needs for an ``height × width`` photo (beyond the photo itself).
+
+    Untiled: the activations of the whole padded photo. Tiled: the full-size buffers plus the
+    activations of the larger of one tile and the statistics pass. ``activation_bytes`` is
+    :func:`activation_bytes_per_pixel` of ``generator``.
+    """
+    full_h, full_w = padded_size(generator, height, width)
+    if not config.runs_tiled(height, width):
+        return math.ceil(activation_bytes * full_h * full_w)
+    tile_pixels = min(config.tile, full_h) * min(config.tile, full_w)
+    scale = min(1.0, config.stats_resolution / max(full_h, full_w))
+    stats_pixels = math.ceil(full_h * scale) * math.ceil(full_w * scale)
+    buffers = TILED_BUFFER_CHANNELS * 4 * full_h * full_w  # float32, the photo's dtype
+    return math.ceil(buffers + activation_bytes * max(tile_pixels, stats_pixels))
+
+
 # --- prediction ------------------------------------------------------------------------------------
 
 
