@@ -25,6 +25,7 @@ import io
 import os
 import sys
 import tempfile
+import threading
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -164,6 +165,9 @@ def _read_cv2(path: Path) -> np.ndarray:
     return image.astype(np.float32) / np.float32(scale)
 
 
+_CAPTURE_LOCK = threading.Lock()
+
+
 @contextlib.contextmanager
 def captured_native_output(lines: list[str]) -> Iterator[None]:
     """Capture what a native library prints inside the block, at both levels it can print at.
@@ -172,13 +176,16 @@ def captured_native_output(lines: list[str]) -> Iterator[None]:
     so the descriptors themselves are pointed at a temporary file; pybind11 modules print through
     ``sys.stdout``/``sys.stderr``, which are swapped for a buffer (OpenEXR's "Warning: Exception
     raised reading pixel data" comes that way). ``lines`` receives the captured lines (stripped,
-    non-empty) when the block ends, also when it raises.
+    non-empty) when the block ends, also when it raises. The descriptors and ``sys.stdout`` belong
+    to the whole process, so captures are serialised (two threads restoring each other's
+    descriptors would leave fd 1 on a deleted file); what another thread prints meanwhile is
+    captured too.
     """
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):  # a replaced or closed stream has nothing to flush
             stream.flush()
     python_level = io.StringIO()
-    with tempfile.TemporaryFile() as sink:
+    with _CAPTURE_LOCK, tempfile.TemporaryFile() as sink:
         saved = os.dup(1), os.dup(2)
         try:
             os.dup2(sink.fileno(), 1)
@@ -199,10 +206,8 @@ def captured_native_output(lines: list[str]) -> Iterator[None]:
 
 
 def _libc_fflush() -> None:
-    try:
+    with contextlib.suppress(OSError, AttributeError):  # no C library: nothing buffered there either
         ctypes.CDLL(None).fflush(None)
-    except (OSError, AttributeError):  # no C library to talk to: nothing buffered there either
-        pass
 
 
 def _read_exr(path: Path) -> np.ndarray:
