@@ -10,11 +10,14 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from brdfgan.errors import exit_on_user_error
+from brdfgan.errors import exit_on_user_error, run_hydra_app
+from brdfgan.evaluation.config import register_configs
+
+register_configs()
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="evaluate")
-@exit_on_user_error
+@exit_on_user_error(interrupted="interrupted: nothing was written for the model being evaluated")
 def main(cfg: DictConfig) -> None:
     from brdfgan.evaluation.run import evaluate
 
@@ -22,4 +25,4 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_hydra_app(main)

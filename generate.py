@@ -16,8 +16,11 @@ from types import FrameType
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
-from brdfgan.errors import exit_on_user_error
+from brdfgan.config_check import check_config
+from brdfgan.data.generate_config import register_configs
+from brdfgan.errors import exit_on_user_error, run_hydra_app
 
+register_configs()
 log = logging.getLogger("generate")
 
 
@@ -43,6 +46,7 @@ def main(cfg: DictConfig) -> None:
     from brdfgan.data.contact_sheet import write_contact_sheet
     from brdfgan.data.generation import dataset_ready, plan_shards, run_generation, spec_from_config
 
+    check_config(cfg, ["dataset"])  # types, naming the key; the spec checks ranges
     spec = spec_from_config(cfg.dataset)
     shard = OmegaConf.to_object(cfg.shard) if isinstance(cfg.shard, DictConfig | list) else cfg.shard
     if cfg.plan:
@@ -62,4 +66,4 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_hydra_app(main)

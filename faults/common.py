@@ -36,7 +36,7 @@ class Scenario:
 
 def command_env(**extra: str) -> dict[str, str]:
     """The environment of a scenario's command: this one, unbuffered, with ``extra``."""
-    env = dict(os.environ, PYTHONUNBUFFERED="1", HYDRA_FULL_ERROR="0")
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
     env.update(extra)
     return env
 

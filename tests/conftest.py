@@ -10,6 +10,8 @@ from omegaconf import DictConfig, OmegaConf
 from torch import Tensor
 
 from brdfgan.core.svbrdf import join_maps, normalize_normal
+from brdfgan.data.generate_config import register_configs as register_generate_configs
+from brdfgan.evaluation.config import register_configs as register_evaluate_configs
 from brdfgan.training.config import register_configs
 
 
@@ -30,6 +32,8 @@ def random_maps(
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 register_configs()
+register_generate_configs()
+register_evaluate_configs()
 
 
 def compose_train(overrides: list[str], root: Path | None = None) -> DictConfig:

@@ -20,9 +20,9 @@ from brdfgan.data.generation import DatasetConfigError, DatasetSpec, plan_shards
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
-def _compose(overrides: list[str]):  # type: ignore[no-untyped-def]
+def _compose(overrides: list[str], config_name: str = "generate"):  # type: ignore[no-untyped-def]
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return compose(config_name="generate", overrides=overrides)
+        return compose(config_name=config_name, overrides=overrides)
 
 
 @pytest.mark.parametrize("name", ["default", "tiny", "paper"])
@@ -44,7 +44,7 @@ def test_paper_dataset_follows_the_paper_protocol() -> None:
 
 @pytest.mark.parametrize("name", ["default", "tiny", "paper", "deschaintre"])
 def test_data_configs_instantiate_a_datamodule(name: str) -> None:
-    cfg = _compose([f"+data={name}"])
+    cfg = _compose([f"data={name}"], config_name="train")
     module = hydra.utils.instantiate(cfg.data, _convert_="all")
     assert isinstance(module, ShardDataModule)
     if name in ("paper", "deschaintre"):

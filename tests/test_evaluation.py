@@ -54,7 +54,7 @@ def test_bad_weights_are_clear_errors(tmp_path: Path) -> None:
         load_weights(garbage)
     generator, _ = tiny_generator()
     evil = save_weights(tmp_path / "evil.safetensors", generator, target="os.system", config={}, model_id="x")
-    with pytest.raises(WeightsError, match="is not a brdfgan model"):
+    with pytest.raises(WeightsError, match=r"evil\.safetensors: not a brdfgan model config \(os\.system\)"):
         load_weights(evil)
     with pytest.raises(WeightsError, match=r"expected a \.safetensors weights file or a \.ckpt"):
         load_generator(tmp_path / "model.pt")

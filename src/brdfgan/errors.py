@@ -105,3 +105,25 @@ def exit_on_user_error(
         return wrapper
 
     return decorate if function is None else decorate(function)
+
+
+def run_hydra_app(app: Callable[[], object]) -> None:
+    """Run a ``@hydra.main`` entry point so that composition errors are one line too.
+
+    Hydra reports a bad override (``seed=abc``, an unknown key) itself, over several lines,
+    before the task function — and so before :func:`exit_on_user_error` — runs. With
+    ``HYDRA_FULL_ERROR=1`` it re-raises instead, and the error becomes ``error: <message>``,
+    exit 2, here. Errors inside the task are the task wrapper's business; a bug's traceback
+    is never swallowed.
+    """
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    os.environ["HYDRA_FULL_ERROR"] = "1"
+    try:
+        app()
+    except (HydraException, OmegaConfBaseException) as error:
+        # "Error merging override seed=abc" says where; its cause says what is wrong.
+        cause = f": {one_line(error.__cause__)}" if error.__cause__ is not None else ""
+        print(f"error: {one_line(error)}{cause}", file=sys.stderr)
+        raise SystemExit(USER_ERROR_EXIT_CODE) from None

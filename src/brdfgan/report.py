@@ -20,6 +20,7 @@ from pathlib import Path
 import yaml
 
 from brdfgan.errors import exit_on_user_error
+from brdfgan.runs import RunFolder
 
 COLUMNS = (("full", "proposed"), ("no_render", "−L_r"), ("no_param", "−L_p"), ("no_feat", "−L_f"),
            ("no_adv", "−L_a"))  # fmt: skip
@@ -32,11 +33,15 @@ class ReportError(ValueError):
     """No usable runs; the message names the directory."""
 
 
-def _loss_choice(run: Path) -> tuple[str, int]:
-    config = yaml.safe_load((run / ".hydra" / "config.yaml").read_text())
-    hydra_cfg = yaml.safe_load((run / ".hydra" / "hydra.yaml").read_text())
-    choice = hydra_cfg["hydra"]["runtime"]["choices"].get("loss", "full")
-    return choice, int(config.get("seed", 0))
+def _loss_choice(run: RunFolder) -> tuple[str, int]:
+    # Plain YAML reading: a run folder is data; nothing in it is instantiated.
+    try:
+        config = yaml.safe_load(run.config_path.read_text())
+        hydra_cfg = yaml.safe_load(run.hydra_path.read_text())
+        choice = hydra_cfg["hydra"]["runtime"]["choices"].get("loss", "full")
+        return str(choice), int(config.get("seed", 0))
+    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError, ValueError) as error:
+        raise ReportError(f"{run.path}: unreadable run config ({type(error).__name__}: {error})") from None
 
 
 def collect(directories: list[Path]) -> dict[str, dict[int, dict[str, float]]]:
@@ -46,11 +51,14 @@ def collect(directories: list[Path]) -> dict[str, dict[int, dict[str, float]]]:
         if not directory.is_dir():
             raise ReportError(f"{directory}: not a directory")
         for metrics_file in sorted(directory.rglob("metrics.json")):
-            run = metrics_file.parent
-            if not (run / ".hydra" / "config.yaml").is_file():
+            run = RunFolder(metrics_file.parent)
+            if not run.is_run():
                 continue
             loss, seed = _loss_choice(run)
-            values = json.loads(metrics_file.read_text())
+            try:
+                values = json.loads(metrics_file.read_text())
+            except (OSError, ValueError) as error:
+                raise ReportError(f"{metrics_file}: unreadable metrics ({error})") from None
             # train.py writes {"model": {...}}: one model per run.
             runs[loss][seed] = values["model"] if isinstance(values.get("model"), dict) else values
     if not runs:

@@ -11,9 +11,10 @@ import hydra
 import torch
 from omegaconf import DictConfig, OmegaConf
 
+from brdfgan.config_check import check_config
 from brdfgan.data.shards import Sample, iter_shard, list_shards
 from brdfgan.evaluation.evaluator import evaluate_models, markdown_table, write_grid, write_results
-from brdfgan.inference.weights import load_generator
+from brdfgan.runs import load_generator, model_name
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +45,7 @@ def _models(ckpt: Any) -> dict[str, str]:
     if isinstance(ckpt, Mapping):
         return {str(k): str(v) for k, v in ckpt.items()}
     paths = [ckpt] if isinstance(ckpt, str) else list(ckpt)
-    return {Path(p).resolve().parent.parent.name if p.endswith(".ckpt") else Path(p).stem: p for p in paths}
+    return {model_name(p): p for p in paths}
 
 
 def log_to_loggers(
@@ -70,6 +71,7 @@ def log_to_loggers(
 
 def evaluate(cfg: DictConfig, out_dir: str | Path) -> dict[str, dict[str, float]]:
     """Run every model of ``cfg.ckpt`` over ``cfg.split`` of ``cfg.data`` and write the results."""
+    check_config(cfg, ("data", "metrics", "logger"))
     device = torch.device("cuda" if cfg.device == "auto" and torch.cuda.is_available() else
                           ("cpu" if cfg.device == "auto" else cfg.device))  # fmt: skip
     ckpt = OmegaConf.to_container(cfg.ckpt, resolve=True) if OmegaConf.is_config(cfg.ckpt) else cfg.ckpt

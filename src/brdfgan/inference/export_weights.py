@@ -11,7 +11,9 @@ and its size, steps, epochs, wall time, hardware, the run a warm-started run beg
 test metrics (the run's own when it tested the exported step, or ``--metrics``). The same
 summary is written beside the file as ``<stem>.json`` for people to read.
 
-Checkpoints are unpickled here (``torch.load(weights_only=True)``), so only export runs you made.
+Checkpoints are read with ``torch.load(weights_only=True)`` and the generator is built from the
+run's stored config only through :func:`brdfgan.runs.network_from_config` (the project's own
+network classes, plain arguments): a crafted run folder cannot make this command run code.
 """
 
 from __future__ import annotations
@@ -29,23 +31,8 @@ import torch
 from omegaconf import OmegaConf
 
 from brdfgan.errors import exit_on_user_error
-from brdfgan.inference.weights import WeightsError, load_checkpoint_generator, save_weights
 from brdfgan.io.atomic import write_text_atomic
-
-
-def find_checkpoint(run_dir: Path, which: str) -> Path:
-    """``last``/``best`` checkpoint of a run directory, or an explicit path."""
-    if which not in ("last", "best"):
-        return Path(which)
-    directory = run_dir / "checkpoints"
-    if which == "last":
-        path = directory / "last.ckpt"
-    else:
-        candidates = sorted(p for p in directory.glob("*.ckpt") if p.name != "last.ckpt")
-        path = candidates[-1] if candidates else directory / "best.ckpt"
-    if not path.is_file():
-        raise WeightsError(f"{path}: no {which} checkpoint in {run_dir}")
-    return path
+from brdfgan.runs import RunFolder, WeightsError, load_checkpoint_generator, read_checkpoint, save_weights
 
 
 def training_wall_time(run_dir: Path) -> float | None:
@@ -86,7 +73,7 @@ def run_test_metrics(
     # last.ckpt and the best epoch's file hold the same weights when they are the same step.
     same = tested.resolve() == checkpoint.resolve()
     if not same:
-        tested_step = torch.load(tested, map_location="cpu", weights_only=True).get("global_step")
+        tested_step = read_checkpoint(tested).get("global_step")
         same = tested_step == state.get("global_step")
     return json.loads(metrics.read_text()).get("model", {}) if same else None
 
@@ -98,8 +85,8 @@ def training_summary(
 
     ``test_metrics``: recorded as given; ``None`` looks for the run's own (:func:`run_test_metrics`).
     """
-    config = OmegaConf.load(run_dir / ".hydra" / "config.yaml")
-    state = torch.load(checkpoint, map_location="cpu", weights_only=True)
+    config = RunFolder(run_dir).config()
+    state = read_checkpoint(checkpoint)
     data = config.data
     spec = OmegaConf.to_container(data.prepare.spec, resolve=False) if "prepare" in data else None
     spec = spec if isinstance(spec, dict) else {}
@@ -134,14 +121,13 @@ def training_summary(
 def warm_start_summary(checkpoint: Path) -> dict[str, Any]:
     """The run a warm-started run (``init_from``) began from: its own summary when the file is a
     checkpoint inside a run directory (``RUN/checkpoints/*.ckpt``), else just the path."""
-    run_dir = checkpoint.parent.parent
-    in_a_run = checkpoint.is_file() and (run_dir / ".hydra" / "config.yaml").is_file()
-    if checkpoint.suffix != ".ckpt" or not in_a_run:
+    run = RunFolder.of_checkpoint(checkpoint)
+    if checkpoint.suffix != ".ckpt" or not checkpoint.is_file() or not run.is_run():
         return {"checkpoint": str(checkpoint)}
-    earlier = training_summary(run_dir, checkpoint, None)
+    earlier = training_summary(run.path, checkpoint, None)
     for key in ("hardware", "exported"):  # this machine now / this export: not facts of that run
         earlier.pop(key)
-    return {"run": str(run_dir), **earlier}
+    return {"run": str(run.path), **earlier}
 
 
 def export_weights(
@@ -160,9 +146,10 @@ def export_weights(
     model)`` to record as the test metrics instead of the run's own (which exist only when the
     exported checkpoint was tested).
     """
-    if not (run_dir / ".hydra" / "config.yaml").is_file():
+    run = RunFolder(run_dir)
+    if not run.is_run():
         raise WeightsError(f"{run_dir}: not a training run directory (no .hydra/config.yaml)")
-    path = find_checkpoint(run_dir, checkpoint)
+    path = run.checkpoint(checkpoint)
     generator, meta = load_checkpoint_generator(path)
     test_metrics = evaluation_metrics(*metrics) if metrics is not None else None
     summary = training_summary(run_dir, path, hardware, test_metrics)

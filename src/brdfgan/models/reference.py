@@ -6,7 +6,7 @@
   constant roughness/metallic (the training means) — what "use the photo as the texture" gives.
 
 Both behave like generators (``forward(photo) -> maps``, ``config()``, ``size_multiple``), so the
-evaluator, :mod:`brdfgan.inference.weights` and ``brdfgan predict`` take them unchanged. Build
+evaluator, :mod:`brdfgan.runs` and ``brdfgan predict`` take them unchanged. Build
 their weight files from a dataset with::
 
     python -m brdfgan.models.reference DATA_DIR --out DIR     # DIR/{mean_maps,photo_basecolor}.safetensors
@@ -111,7 +111,7 @@ def reference_models(mean: Tensor) -> dict[str, nn.Module]:
 def main(argv: Sequence[str] | None = None) -> None:
     from brdfgan.data.datamodule import ShardDataModule
     from brdfgan.errors import exit_on_user_error
-    from brdfgan.inference.weights import save_weights
+    from brdfgan.runs import save_weights
 
     parser = argparse.ArgumentParser(prog="python -m brdfgan.models.reference", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip

@@ -1,0 +1,30 @@
+"""The typed top level of ``conf/evaluate.yaml``: a wrong key or a wrong type is one line at
+composition. Group nodes (``data``, ``metrics``, ``logger``) are ``_target_`` configs checked
+against their signatures by :func:`brdfgan.config_check.check_config` before anything is built."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
+
+
+@dataclass
+class EvaluateConfig:
+    task_name: str = "evaluate"
+    ckpt: Any = MISSING  # a path, a list of paths, or a mapping name -> path
+    split: str = "test"
+    device: str = "auto"
+    grid_samples: int = 6
+    grid_keys: list[str] | None = None
+    paths: dict[str, Any] = field(default_factory=dict)
+    data: dict[str, Any] = field(default_factory=dict)
+    logger: dict[str, Any] | None = None
+    metrics: dict[str, Any] = field(default_factory=dict)
+
+
+def register_configs() -> None:
+    """Make ``evaluate_schema`` available to the defaults list of ``conf/evaluate.yaml``."""
+    ConfigStore.instance().store(name="evaluate_schema", node=EvaluateConfig)

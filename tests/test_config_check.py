@@ -1,0 +1,117 @@
+"""Config type errors are one line naming the full key, the value and the expected type, before
+anything is built (brdfgan.config_check), for train.py, evaluate.py and their groups."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from omegaconf import OmegaConf
+
+from brdfgan.config_check import ConfigValueError, check_config, describe, fits
+from brdfgan.training.run import CHECKED_GROUPS, train
+from tests.conftest import compose_train
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("trainer.max_epochs=abc", "trainer.max_epochs='abc': expected int | None (lightning."),
+        (
+            "model.optimizer.lr=fast",
+            "model.optimizer.lr='fast': expected float | Tensor (torch.optim.adam.Adam)",
+        ),
+        (
+            "data.batch_size=two",
+            "data.batch_size='two': expected int (brdfgan.data.datamodule.ShardDataModule)",
+        ),
+        ("model.generator.width=abc", "model.generator.width='abc': expected int (brdfgan.models.generator."),
+        ("model.generator.width=1e6", "model.generator.width=1000000.0: expected int"),
+        (
+            "model.optimizer.betas=[0.5]",
+            "model.optimizer.betas=[0.5]: expected tuple[float | Tensor, float | Tensor]",
+        ),
+        ("loss.switches.feature=maybe", "loss.switches.feature='maybe': expected bool"),
+        (
+            "callbacks.model_checkpoint.save_top_k=x",
+            "callbacks.model_checkpoint.save_top_k='x': expected int",
+        ),
+        ("trainer.precision=33", "trainer.precision=33: expected 64 | 32 | 16"),
+        ("data.prepare.spec.spp=lots", "data.prepare.spec.spp='lots': expected int"),
+        ("+data.batchsize=3", "data.batchsize: not a parameter of brdfgan.data.datamodule.ShardDataModule"),
+    ],
+)
+def test_a_wrong_value_names_the_key_before_anything_is_built(
+    tmp_path: Path, override: str, message: str
+) -> None:
+    cfg = compose_train(["experiment=smoke", override], tmp_path)
+    with pytest.raises(ConfigValueError) as error:
+        train(cfg)
+    assert message in str(error.value)
+    assert "\n" not in str(error.value)
+    assert not (tmp_path / "data").exists() and not (tmp_path / "run").exists()  # nothing prepared or written
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [[], ["experiment=smoke"], ["experiment=paper"], ["experiment=default_model_finetune"],
+     ["model=deschaintre2018"], ["loss=no_adv"], ["trainer=ddp"], ["logger=many"], ["data=deschaintre"],
+     ["callbacks=none"]],
+)  # fmt: skip
+def test_every_shipped_config_passes_the_check(overrides: list[str]) -> None:
+    check_config(compose_train(overrides), CHECKED_GROUPS)
+
+
+def test_fits_and_describe_on_the_annotation_kinds() -> None:
+    assert fits(3, int) and fits(3, float) and fits(True, bool) and not fits(True, int)
+    assert fits(None, int | None) and fits("a", "int") is None  # an unresolved annotation: not judged
+    assert fits([1, 2.0], tuple[float, float]) and fits([1, 2.0], tuple[float, float]) is True
+    assert fits([1], tuple[float, float]) is False and fits("ab", list[str]) is False
+    assert fits({"a": 1}, dict[str, int]) and not fits({"a": "x"}, dict[str, int])
+    assert fits("32-true", int | str) and fits("x", Path) and not fits(3, Path)
+    assert describe(int | None) == "int | None" and describe(tuple[float, ...]) == "tuple[float, ...]"
+    node = OmegaConf.create({"x": {"_target_": "builtins.no_such_thing"}})
+    with pytest.raises(ConfigValueError, match=r"x\._target_=builtins\.no_such_thing: cannot import it"):
+        check_config(node, ["x"])
+
+
+def _run(script: str, *args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "PROJECT_ROOT": str(cwd)}
+    return subprocess.run([sys.executable, str(ROOT / script), *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=300)  # fmt: skip
+
+
+def test_train_and_evaluate_print_one_line_and_exit_2(tmp_path: Path) -> None:
+    cases = [
+        (
+            "train.py",
+            ["experiment=smoke", "trainer.max_epochs=abc"],
+            "error: trainer.max_epochs='abc': expected",
+        ),
+        ("evaluate.py", ["ckpt=x.ckpt", "data=tiny", "data.batch_size=two"], "error: data.batch_size='two'"),
+        (
+            "evaluate.py",
+            ["ckpt=x.ckpt", "grid_samples=abc"],
+            "error: Error merging override grid_samples=abc: Value 'abc' of type 'str' could not be",
+        ),
+        (
+            "train.py",
+            ["seed=abc"],
+            "error: Error merging override seed=abc: Value 'abc' of type 'str' could not be",
+        ),
+    ]
+    for script, args, message in cases:
+        began = time.monotonic()
+        result = _run(script, *args, cwd=tmp_path)
+        assert result.returncode == 2, result.stderr[-2000:]
+        assert "Traceback" not in result.stderr
+        lines = [line for line in result.stderr.splitlines() if line.strip()]
+        assert len(lines) == 1 and lines[0].startswith(message), result.stderr[-2000:]
+        assert time.monotonic() - began < 60
+    assert not (tmp_path / "data").exists()
