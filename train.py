@@ -10,14 +10,14 @@ from __future__ import annotations
 import hydra
 from omegaconf import DictConfig
 
-from brdfgan.errors import exit_on_user_error
+from brdfgan.errors import exit_on_user_error, run_hydra_app
 from brdfgan.training.config import register_configs
 
 register_configs()
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
-@exit_on_user_error
+@exit_on_user_error(interrupted="interrupted: resume with ckpt_path=<run>/checkpoints/last.ckpt")
 def main(cfg: DictConfig) -> float | None:
     from brdfgan.training.run import train
 
@@ -25,4 +25,4 @@ def main(cfg: DictConfig) -> float | None:
 
 
 if __name__ == "__main__":
-    main()
+    run_hydra_app(main)

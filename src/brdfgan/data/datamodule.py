@@ -26,6 +26,12 @@ noisy data, per worker). Webdataset's own ``shardshuffle`` is not used: it permu
 split with the same seed every epoch. The epoch counter lives in the dataset object; train
 workers are persistent so that each keeps counting (a fresh worker would restart at epoch 0).
 
+Resume. A train loader made while Lightning restores a checkpoint starts at the epoch reached
+and skips, in each worker, exactly the batches of that epoch the run had already trained on
+(the stream is a pure function of ``(seed, epoch, rank, worker)``, so skipping reproduces the
+position, shuffle buffer and crop draws included): the resumed run sees the same samples in the
+same order as an uninterrupted one.
+
 Validation and test read every sample exactly once, in a fixed order (no shuffling), split by
 rank and by worker; ``val_samples`` caps validation at a fixed subset of that size, distributed
 over ranks and workers from the per-shard counts.
@@ -212,19 +218,26 @@ class ShardStream(IterableDataset):
         # Counts the iterations of this copy of the dataset: in the main process (no workers)
         # or in a persistent worker, which keeps its copy between epochs.
         self.epoch = 0
+        # Batches of the first epoch iterated that were already trained on (a resumed run).
+        self.skip_batches = 0
 
     def __iter__(self) -> Iterator[dict[str, Any]]:
         info = get_worker_info()
         worker, num_workers = (0, 1) if info is None else (info.id, info.num_workers)
-        epoch = self.epoch
+        epoch, skip = self.epoch, self.skip_batches
         self.epoch += 1
+        self.skip_batches = 0
         if self.kind == "train":
-            return self._train_batches(epoch, worker, num_workers)
+            return self._train_batches(epoch, worker, num_workers, skip)
         return self._eval_batches(worker, num_workers)
 
     # -- train ----------------------------------------------------------------------------
 
-    def _train_batches(self, epoch: int, worker: int, num_workers: int) -> Iterator[dict[str, Any]]:
+    def _train_batches(
+        self, epoch: int, worker: int, num_workers: int, skip: int = 0
+    ) -> Iterator[dict[str, Any]]:
+        """This worker's batches of ``epoch``, after the first ``skip`` batches the DataLoader
+        would have yielded (over all its workers) this epoch."""
         assert self.batches_per_epoch is not None
         split = len(self.index.urls) >= self.world_size * num_workers
         if split:
@@ -236,9 +249,12 @@ class ShardStream(IterableDataset):
             ]
         else:
             held = [1] * num_workers
-        quota = _apportion(self.batches_per_epoch, held)[worker]
+        quotas = _apportion(self.batches_per_epoch, held)
         samples = self._train_samples(epoch, worker, num_workers, split)
-        return islice(_batches(samples, self.batch_size, partial=False), quota)
+        batches = islice(_batches(samples, self.batch_size, partial=False), quotas[worker])
+        # The batches are produced (not just counted) so the shuffle buffer and crop draws
+        # reach the same state as in the uninterrupted run.
+        return islice(batches, _round_robin_share(quotas, skip)[worker], None)
 
     def _train_samples(self, epoch: int, worker: int, num_workers: int, split: bool) -> Iterator[Sample]:
         for repeat in count():
@@ -349,6 +365,24 @@ def _batches(samples: Iterator[Sample], batch_size: int, *, partial: bool) -> It
         if len(batch) < batch_size and not partial:
             return
         yield collate_samples(batch)
+
+
+def _round_robin_share(quotas: Sequence[int], first: int) -> list[int]:
+    """How many of the DataLoader's first ``first`` batches come from each worker.
+
+    A DataLoader takes batches from its workers in turn, leaving out a worker once it is
+    exhausted; worker ``w`` yields ``quotas[w]`` batches.
+    """
+    taken = [0] * len(quotas)
+    remaining = first
+    for turn in range(max(quotas, default=0)):
+        for worker, quota in enumerate(quotas):
+            if remaining == 0:
+                return taken
+            if turn < quota:
+                taken[worker] += 1
+                remaining -= 1
+    return taken
 
 
 def _mix(*parts: int) -> int:
@@ -499,6 +533,7 @@ class ShardDataModule(L.LightningDataModule):
                 stacklevel=2,
             )
         stream = self._stream("train", index, shuffle_buffer=self.shuffle_buffer, crop=self.train_crop)
+        stream.epoch, stream.skip_batches = self._train_position()
         self.teardown("fit")  # a previous train loader's workers are not needed any more
         self._train_loader = self._loader(stream, persistent=self.num_workers > 0)
         return self._train_loader
@@ -551,6 +586,18 @@ class ShardDataModule(L.LightningDataModule):
         return max(1, samples // (self._world_size * self.batch_size))
 
     # -- internals ------------------------------------------------------------------------
+
+    def _train_position(self) -> tuple[int, int]:
+        """``(epoch, batches of it already trained)`` where the fit loop stands: ``(0, 0)`` for a
+        new run; for a run restored from a checkpoint, the position the checkpoint recorded."""
+        if self.trainer is None:
+            return 0, 0
+        # Batches the loop has trained over the whole run, as restored from a checkpoint (a save
+        # at a batch's end counts that batch as processed). Every epoch has exactly
+        # train_batches_per_epoch batches, so this alone fixes the epoch and the offset in it —
+        # Lightning's own epoch counter still says the previous epoch after an epoch-end save.
+        done = self.trainer.fit_loop.epoch_loop.batch_progress.total.processed
+        return divmod(done, self.train_batches_per_epoch)
 
     def _distributed(self) -> tuple[int, int]:
         if self.trainer is not None:

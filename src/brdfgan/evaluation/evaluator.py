@@ -10,6 +10,7 @@ fixed list of samples.
 from __future__ import annotations
 
 import csv
+import io
 import json
 import os
 from collections.abc import Iterable, Mapping, Sequence
@@ -22,6 +23,7 @@ from torch import Tensor, nn
 from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
 from brdfgan.data.shards import Sample
+from brdfgan.io.atomic import atomic_replace, write_text_atomic
 from brdfgan.io.images import write_image
 
 PAPER_MAPS = ("diffuse", "specular", "normal", "roughness")
@@ -49,17 +51,19 @@ def evaluate_models(
 
 
 def write_results(results: Mapping[str, Mapping[str, float]], out_dir: str | os.PathLike[str]) -> list[Path]:
-    """``metrics.json``, ``metrics.csv`` (one row per model), ``metrics.md`` and ``rmse.png``."""
+    """``metrics.json``, ``metrics.csv`` (one row per model), ``metrics.md`` and ``rmse.png``, each
+    written atomically (a full disk or a kill leaves the previous file or none, never half a one)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     names = sorted({key for values in results.values() for key in values})
-    (out / "metrics.json").write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
-    with (out / "metrics.csv").open("w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(["model", *names])
-        for model, values in results.items():
-            writer.writerow([model, *(f"{values[n]:.6f}" if n in values else "" for n in names)])
-    (out / "metrics.md").write_text(markdown_table(results))
+    write_text_atomic(out / "metrics.json", json.dumps(results, indent=2, sort_keys=True) + "\n")
+    table = io.StringIO(newline="")
+    writer = csv.writer(table)
+    writer.writerow(["model", *names])
+    for model, values in results.items():
+        writer.writerow([model, *(f"{values[n]:.6f}" if n in values else "" for n in names)])
+    write_text_atomic(out / "metrics.csv", table.getvalue())
+    write_text_atomic(out / "metrics.md", markdown_table(results))
     bar_chart(results, out / "rmse.png")
     return [out / n for n in ("metrics.json", "metrics.csv", "metrics.md", "rmse.png")]
 
@@ -96,8 +100,11 @@ def bar_chart(results: Mapping[str, Mapping[str, float]], path: Path) -> Path:
     axis.set_ylabel("RMSE")
     axis.legend(fontsize=7)
     figure.tight_layout()
-    figure.savefig(path)
-    plt.close(figure)
+    try:
+        with atomic_replace(path) as temp:
+            figure.savefig(temp, format="png")
+    finally:
+        plt.close(figure)
     return path
 
 

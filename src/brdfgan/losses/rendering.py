@@ -94,7 +94,8 @@ class RenderingLoss(nn.Module):
     of configurations is reproducible. It is a CPU generator on purpose:
     :func:`sample_rendering_loss_configs` draws on the CPU so that one seed gives the same
     configurations on every device; the few numbers (``B × V × 11``) are then moved to the maps'
-    device. The generator state is not part of ``state_dict``; a resumed run reseeds.
+    device. The generator state is not part of ``state_dict`` (it is not a tensor of the model);
+    a training checkpoint stores it through :meth:`rng_state` so a resumed run draws on exactly.
 
     Under DDP every rank holds its own copy built with the same ``seed``, so all ranks would draw
     the *same* configurations for their different samples — harmless but wasteful. The training
@@ -130,6 +131,14 @@ class RenderingLoss(nn.Module):
         """Restart the configuration sequence from ``seed`` (under DDP: ``seed + global_rank``)."""
         self.seed = seed
         self.rng.manual_seed(seed)
+
+    def rng_state(self) -> torch.Tensor:
+        """The configuration generator's state (to store in a checkpoint)."""
+        return self.rng.get_state()
+
+    def set_rng_state(self, state: torch.Tensor) -> None:
+        """Continue the configuration sequence from a state of :meth:`rng_state`."""
+        self.rng.set_state(state)
 
     def sample_configs(
         self, batch: int, device: torch.device | str | None = None, dtype: torch.dtype = torch.float32

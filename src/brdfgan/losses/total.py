@@ -142,6 +142,15 @@ class GANLoss(nn.Module):
         if self.rendering_loss is not None:
             self.rendering_loss.reseed(seed)
 
+    def rng_state(self) -> Tensor | None:
+        """The state of the loss's own randomness (``None``: the loss draws nothing)."""
+        return self.rendering_loss.rng_state() if self.rendering_loss is not None else None
+
+    def set_rng_state(self, state: Tensor | None) -> None:
+        """Continue from a state of :meth:`rng_state` (a resumed run draws what it would have)."""
+        if self.rendering_loss is not None and state is not None:
+            self.rendering_loss.set_rng_state(state)
+
     def generator_terms(
         self,
         pred_maps: Tensor,

@@ -8,15 +8,22 @@ optimizer step (two per batch with a discriminator) and would halve the schedule
 
 A loss term that is switched off is not computed: without the adversarial and the feature term
 there is no discriminator at all — no forward, no step, no optimizer state, no parameters.
+
+Resuming is exact: a checkpoint stores every source of randomness the step draws from (the
+rendering loss's own generator; Python's, NumPy's and torch's global generators), and the data
+stream continues at the batch it had reached (:class:`~brdfgan.data.datamodule.ShardDataModule`),
+so an interrupted and resumed run ends with the same weights, bit for bit, as a straight one.
 """
 
 from __future__ import annotations
 
 import logging
+import random
 from collections.abc import Callable, Mapping
 from typing import Any
 
 import lightning as L
+import numpy as np
 import torch
 from torch import Tensor, nn
 from torch.optim import Optimizer
@@ -34,6 +41,8 @@ OptimizerFactory = Callable[..., Optimizer]
 
 # Validation renders under fixed configurations so every epoch and every model is compared alike.
 VALIDATION_RENDER_SEED = 2019
+# Where a checkpoint keeps the random generators' states (see on_save_checkpoint).
+RNG_STATE_KEY = "brdfgan_rng_states"
 
 
 class SVBRDFGAN(L.LightningModule):
@@ -88,6 +97,37 @@ class SVBRDFGAN(L.LightningModule):
 
     def forward(self, photo: Tensor) -> Tensor:
         return self.generator(photo)
+
+    # -- exact resume ------------------------------------------------------------------------
+
+    def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        # Plain types and tensors only: checkpoints are read with torch.load(weights_only=True).
+        kind, keys, position, has_gauss, cached = np.random.get_state()
+        checkpoint[RNG_STATE_KEY] = {
+            "loss": self.loss.rng_state(),
+            "python": random.getstate(),
+            "numpy": (
+                str(kind),
+                torch.from_numpy(keys.astype(np.int64)),
+                int(position),
+                int(has_gauss),
+                float(cached),
+            ),
+            "torch": torch.get_rng_state(),
+        }
+
+    def on_load_checkpoint(self, checkpoint: dict[str, Any]) -> None:
+        # Runs after setup() (which reseeds the loss), so the stored states win.
+        states = checkpoint.get(RNG_STATE_KEY)
+        if states is None:  # a checkpoint from before exact resume: continue as it used to
+            log.warning("checkpoint has no random-generator states; the resumed run is not exact")
+            return
+        self.loss.set_rng_state(states["loss"])
+        version, internal, gauss = states["python"]
+        random.setstate((version, tuple(internal), gauss))
+        kind, keys, position, has_gauss, cached = states["numpy"]
+        np.random.set_state((kind, keys.numpy().astype(np.uint32), position, has_gauss, cached))
+        torch.set_rng_state(states["torch"])
 
     # -- optimisation ------------------------------------------------------------------------
 

@@ -1,7 +1,11 @@
 """Build everything a training run needs from its config, then fit and test (``train.py``).
 
-Everything is instantiated before the first step, so a wrong ``_target_`` argument or value is
-reported as one line before any data is generated or any time is spent training.
+The config is type-checked first (:func:`brdfgan.config_check.check_config`: every value of the
+data, model, loss, trainer, callbacks, logger and metrics groups against the signature it is
+passed to), then everything is instantiated before the first step, so a wrong key or value is
+one line naming it before any data is generated or any time is spent training. A checkpoint to
+resume from is checked against the built model before Lightning touches it; every checkpoint is
+written atomically in its own directory (:class:`~brdfgan.training.checkpoint_io.AtomicCheckpointIO`).
 """
 
 from __future__ import annotations
@@ -13,15 +17,22 @@ from typing import Any
 
 import hydra
 import lightning as L
-import torch
 from omegaconf import DictConfig, OmegaConf
 
+from brdfgan.config_check import check_config
+from brdfgan.errors import UserError
 from brdfgan.evaluation.evaluator import evaluate_models, write_results
+from brdfgan.runs import WeightsError, check_resume_checkpoint, network_weights
+from brdfgan.training.checkpoint_io import AtomicCheckpointIO
 
 log = logging.getLogger(__name__)
 
 
-class TrainConfigError(ValueError):
+# The groups whose values are passed to constructors (type-checked before anything is built).
+CHECKED_GROUPS = ("data", "model", "loss", "trainer", "callbacks", "logger", "metrics")
+
+
+class TrainConfigError(UserError):
     """The run config is unusable; the message names the key."""
 
 
@@ -38,24 +49,12 @@ def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.
     module = hydra.utils.instantiate(cfg.model, loss=loss, _convert_="all")
     callbacks = _instantiate_all(cfg.get("callbacks"))
     loggers = _instantiate_all(cfg.get("logger"))
-    trainer = hydra.utils.instantiate(cfg.trainer, callbacks=callbacks, logger=loggers)
+    # Checkpoints go to a temporary file beside their target and are renamed over it, on any
+    # filesystem (Lightning's default stages them in $TMPDIR and copies across filesystems).
+    trainer = hydra.utils.instantiate(
+        cfg.trainer, callbacks=callbacks, logger=loggers, plugins=[AtomicCheckpointIO()]
+    )
     return datamodule, module, trainer
-
-
-def _network_weights(path: Path) -> dict[str, dict[str, torch.Tensor]]:
-    """The state dicts per network (``generator``, ``discriminator``) stored in a training
-    checkpoint, or the generator of a ``.safetensors`` weights file."""
-    if path.suffix.lower() == ".safetensors":
-        from safetensors.torch import load_file
-
-        return {"generator": {name: value.float() for name, value in load_file(str(path)).items()}}
-    state = torch.load(path, map_location="cpu", weights_only=True)["state_dict"]
-    networks: dict[str, dict[str, torch.Tensor]] = {}
-    for key, value in state.items():
-        network, _, name = key.partition(".")
-        if network in ("generator", "discriminator"):
-            networks.setdefault(network, {})[name] = value
-    return networks
 
 
 def warm_start(module: L.LightningModule, path: str | Path) -> list[str]:
@@ -70,8 +69,8 @@ def warm_start(module: L.LightningModule, path: str | Path) -> list[str]:
     if not path.is_file():
         raise TrainConfigError(f"init_from: {path} does not exist")
     try:
-        networks = _network_weights(path)
-    except Exception as error:  # any unreadable file is the same user error
+        networks = network_weights(path)
+    except WeightsError as error:
         raise TrainConfigError(f"init_from: {path} is not a checkpoint or weights file ({error})") from None
     if "generator" not in networks:
         raise TrainConfigError(f"init_from: {path} holds no generator weights")
@@ -94,6 +93,7 @@ def train(cfg: DictConfig) -> float | None:
     """Fit (optionally resuming from ``ckpt_path`` or starting from ``init_from``'s weights), test
     the best checkpoint, and return the monitored metric (for sweeps), or ``None`` when it was
     not logged."""
+    check_config(cfg, CHECKED_GROUPS)
     if cfg.ckpt_path is not None and not Path(cfg.ckpt_path).is_file():
         raise TrainConfigError(f"ckpt_path: checkpoint {cfg.ckpt_path} does not exist")
     init_from = cfg.get("init_from")
@@ -101,6 +101,12 @@ def train(cfg: DictConfig) -> float | None:
         raise TrainConfigError("init_from and ckpt_path: set one (init_from starts a new run from weights)")
     L.seed_everything(cfg.seed, workers=True)
     datamodule, module, trainer = build(cfg)
+    if cfg.ckpt_path is not None:
+        networks = {name: getattr(module, name) for name in ("generator", "discriminator")}
+        try:
+            check_resume_checkpoint(cfg.ckpt_path, {k: v for k, v in networks.items() if v is not None})
+        except WeightsError as error:
+            raise TrainConfigError(f"ckpt_path: {error}") from None
     if init_from is not None:
         loaded = warm_start(module, init_from)
         log.info("init_from: %s from %s (new optimizers and schedule)", " and ".join(loaded), init_from)
