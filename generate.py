@@ -10,39 +10,28 @@ ends with one ``error:`` line; Ctrl-C or SIGTERM with one line too, keeping comp
 from __future__ import annotations
 
 import logging
-import signal
-from types import FrameType
 
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from brdfgan.config_check import check_config
 from brdfgan.data.generate_config import register_configs
-from brdfgan.errors import exit_on_user_error, run_hydra_app
+from brdfgan.errors import exit_on_user_error, interrupts_raise, run_hydra_app
 
 register_configs()
 log = logging.getLogger("generate")
 
 
-def _interrupt_on_sigterm() -> None:
-    """Make SIGTERM (``kill PID``, a scheduler ending the job) stop the run the way Ctrl-C does:
-    the shard being written is dropped, complete ones stay, one line is printed. A handler a
-    launcher installed already (submitit's, for requeueing) is left alone."""
-
-    def interrupt(signum: int, frame: FrameType | None) -> None:
-        raise KeyboardInterrupt
-
-    try:
-        if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
-            signal.signal(signal.SIGTERM, interrupt)
-    except ValueError:  # not the main thread (an in-process launcher): keep the default
-        pass
-
-
 @hydra.main(version_base="1.3", config_path="conf", config_name="generate")
 @exit_on_user_error(interrupted="interrupted: complete shards are kept; re-run the same command to finish")
 def main(cfg: DictConfig) -> None:
-    _interrupt_on_sigterm()
+    # SIGTERM (``kill``, a scheduler ending the job) stops the run as Ctrl-C does: the shard
+    # being written is dropped, complete ones stay, one line is printed.
+    with interrupts_raise():
+        generate(cfg)
+
+
+def generate(cfg: DictConfig) -> None:
     from brdfgan.data.contact_sheet import write_contact_sheet
     from brdfgan.data.generation import dataset_ready, plan_shards, run_generation, spec_from_config
 

@@ -51,8 +51,8 @@ def _weights(directory: Path) -> Path:
     shipped = default_weights_path()
     if shipped.is_file():
         return shipped
-    from brdfgan.inference.weights import save_weights
     from brdfgan.models.generator import Generator
+    from brdfgan.runs import save_weights
 
     generator = Generator(width=16, residual_blocks=4)
     return save_weights(

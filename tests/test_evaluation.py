@@ -15,9 +15,9 @@ from safetensors import safe_open
 
 from brdfgan.inference.export_weights import tested_checkpoint as checkpoint_tested_by_train
 from brdfgan.inference.predict import load_model
-from brdfgan.inference.weights import WeightsError, load_generator, load_weights, save_weights
 from brdfgan.models.generator import Generator
 from brdfgan.report import ReportError, ablation_rows, collect, write_report
+from brdfgan.runs import WeightsError, load_generator, load_weights, save_weights
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = "brdfgan.models.generator.Generator"

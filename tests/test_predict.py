@@ -17,9 +17,9 @@ from brdfgan.errors import USER_ERROR_EXIT_CODE
 from brdfgan.inference.export import ExportError, ExportOptions, texture_set, write_material
 from brdfgan.inference.gltf import PNG_SIGNATURE
 from brdfgan.inference.predict import PredictOptions, load_model, output_names, predict_photo
-from brdfgan.inference.weights import WeightsError, save_weights
 from brdfgan.io.images import read_image
 from brdfgan.models.generator import Generator
+from brdfgan.runs import WeightsError, save_weights
 from tests.conftest import random_maps
 
 TEXTURES = ("basecolor", "normal", "roughness", "metallic", "metallicRoughness", "diffuse", "specular")

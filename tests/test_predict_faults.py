@@ -21,7 +21,7 @@ import pytest
 from PIL import Image
 
 from brdfgan.cli import main
-from brdfgan.errors import DISK_FULL_EXIT_CODE, INTERRUPTED_EXIT_CODE, USER_ERROR_EXIT_CODE
+from brdfgan.errors import DISK_FULL_EXIT_CODE, INTERRUPTED_EXIT_CODE, USER_ERROR_EXIT_CODE, interrupts_raise
 from brdfgan.inference import export
 from brdfgan.inference.export import ExportOptions, recover_outputs, write_material
 from brdfgan.inference.predict import (
@@ -29,7 +29,6 @@ from brdfgan.inference.predict import (
     PredictError,
     PredictOptions,
     check_memory,
-    interrupts_raise,
     load_model,
 )
 from brdfgan.inference.tiling import TilingConfig

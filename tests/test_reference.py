@@ -10,8 +10,8 @@ import torch
 from brdfgan.core.svbrdf import linear_to_srgb, validate_maps
 from brdfgan.data.shards import Sample, shard_path, write_shard
 from brdfgan.evaluation.run import fixed_samples
-from brdfgan.inference.weights import load_weights, save_weights
 from brdfgan.models.reference import ConstantMaps, PhotoAsBasecolor, mean_maps, reference_models
+from brdfgan.runs import load_weights, save_weights
 from tests.conftest import random_maps
 
 

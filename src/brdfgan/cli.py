@@ -143,12 +143,12 @@ def build_parser() -> argparse.ArgumentParser:
 def predict_command(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from brdfgan.errors import interrupts_raise
     from brdfgan.inference.export import ExportOptions
     from brdfgan.inference.predict import (
         PredictOptions,
         check_memory,
         collect_photos,
-        interrupts_raise,
         load_model,
         predict_batch,
     )

@@ -12,8 +12,11 @@ from __future__ import annotations
 import errno
 import functools
 import os
+import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import ParamSpec, TypeVar
 
 P = ParamSpec("P")
@@ -127,3 +130,37 @@ def run_hydra_app(app: Callable[[], object]) -> None:
         cause = f": {one_line(error.__cause__)}" if error.__cause__ is not None else ""
         print(f"error: {one_line(error)}{cause}", file=sys.stderr)
         raise SystemExit(USER_ERROR_EXIT_CODE) from None
+
+
+@contextmanager
+def interrupts_raise() -> Iterator[None]:
+    """Inside the block SIGTERM, like SIGINT, raises ``KeyboardInterrupt``, once.
+
+    A terminated process runs no ``finally`` blocks; an exception does, so partial outputs (the
+    staging folder of a photo, the shard being written) are removed. Signals after the first
+    are ignored until the block ends, so that cleanup is not cut short. Only default handlers
+    are replaced (one a launcher or an embedding program installed is its own business, an
+    ignored signal stays ignored), and the previous ones are restored afterwards. Outside the
+    main thread, where Python cannot set handlers, nothing changes.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    interrupted = False
+
+    def handler(_signum: int, _frame: object) -> None:
+        nonlocal interrupted
+        if interrupted:
+            return
+        interrupted = True
+        raise KeyboardInterrupt
+
+    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
+    replaced = [number for number, default in defaults.items() if signal.getsignal(number) is default]
+    for number in replaced:
+        signal.signal(number, handler)
+    try:
+        yield
+    finally:
+        for number in replaced:
+            signal.signal(number, defaults[number])

@@ -11,7 +11,8 @@ A batch keeps going when one photo fails: :func:`predict_batch` returns what suc
 each failure, the one-line reason; only a full disk stops it (every later photo would fail the
 same way). Before writing it cleans up after killed runs into the same folder
 (:func:`~brdfgan.inference.export.recover_outputs`), and while it runs SIGTERM interrupts it like
-Ctrl-C, so that the staging folder of the photo in progress is removed (:func:`interrupts_raise`).
+Ctrl-C, so that the staging folder of the photo in progress is removed
+(:func:`brdfgan.errors.interrupts_raise`).
 :func:`check_memory` refuses a resolution whose estimated memory exceeds what is available.
 """
 
@@ -21,10 +22,7 @@ import logging
 import math
 import os
 import re
-import signal
-import threading
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -39,7 +37,7 @@ from brdfgan.inference.photo import PHOTO_EXTENSIONS, Colorspace, read_photo
 from brdfgan.inference.preprocess import Crop, preprocess
 from brdfgan.inference.preview import write_animation, write_preview
 from brdfgan.inference.tiling import TilingConfig, activation_bytes_per_pixel, predict_maps, predict_memory
-from brdfgan.inference.weights import WeightsError, load_weights
+from brdfgan.runs import WeightsError, load_weights
 
 log = logging.getLogger(__name__)
 
@@ -240,40 +238,6 @@ def _gib(size: int) -> str:
     return f"{gib:.1f}" if gib < 10 else f"{math.ceil(gib)}"
 
 
-@contextmanager
-def interrupts_raise() -> Iterator[None]:
-    """Inside the block SIGTERM, like SIGINT, raises ``KeyboardInterrupt``, once.
-
-    A terminated process runs no ``finally`` blocks; an exception does, so the staging folder of
-    the photo in progress is removed. Signals after the first are ignored until the block ends,
-    so that cleanup is not cut short. Only default handlers are replaced (one a launcher or an
-    embedding program installed is its own business, an ignored signal stays ignored), and the
-    previous ones are restored afterwards. Outside the main thread, where Python cannot set
-    handlers, nothing changes.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    interrupted = False
-
-    def handler(_signum: int, _frame: object) -> None:
-        nonlocal interrupted
-        if interrupted:
-            return
-        interrupted = True
-        raise KeyboardInterrupt
-
-    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
-    replaced = [number for number, default in defaults.items() if signal.getsignal(number) is default]
-    for number in replaced:
-        signal.signal(number, handler)
-    try:
-        yield
-    finally:
-        for number in replaced:
-            signal.signal(number, defaults[number])
-
-
 def predict_photo(
     path: Path,
     out_dir: Path,
@@ -349,7 +313,7 @@ def predict_batch(
     never loses the rest of the batch. A full disk ends the batch: the result then says so in
     ``stopped`` (``<path>: no space left on device``). Hidden folders left by killed runs in
     ``out_root`` are cleaned up first. Interrupts (``KeyboardInterrupt``) propagate; run inside
-    :func:`interrupts_raise` to get the same for SIGTERM.
+    :func:`brdfgan.errors.interrupts_raise` to get the same for SIGTERM.
     """
     succeeded: list[PhotoResult] = []
     failed: list[tuple[Path, str]] = []
