@@ -93,8 +93,9 @@ def exit_on_user_error(
         def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
             try:
                 return inner(*args, **kwargs)
-            except KeyboardInterrupt:
-                print(interrupted, file=sys.stderr)
+            except KeyboardInterrupt as error:
+                # A command that knows more (where to resume from) raises it with a message.
+                print(str(error) or interrupted, file=sys.stderr)
                 raise SystemExit(INTERRUPTED_EXIT_CODE) from None
             except BaseException as error:
                 if is_disk_full(error):
@@ -119,13 +120,26 @@ def run_hydra_app(app: Callable[[], object]) -> None:
     exit 2, here. Errors inside the task are the task wrapper's business; a bug's traceback
     is never swallowed.
     """
+    import logging
+
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
     os.environ["HYDRA_FULL_ERROR"] = "1"
+    # A log file on a full disk must not print a "--- Logging error ---" traceback per record;
+    # the write that matters fails on its own and is reported below as one line.
+    logging.raiseExceptions = False
     try:
         app()
+    except OSError as error:  # Hydra writing the run folder's .hydra/ files on a full disk
+        if not is_disk_full(error):
+            raise
+        print(f"error: {disk_full_message(error)}", file=sys.stderr)
+        raise SystemExit(DISK_FULL_EXIT_CODE) from None
     except (HydraException, OmegaConfBaseException) as error:
+        if is_disk_full(error):
+            print(f"error: {disk_full_message(error)}", file=sys.stderr)
+            raise SystemExit(DISK_FULL_EXIT_CODE) from None
         # "Error merging override seed=abc" says where; its cause says what is wrong.
         cause = f": {one_line(error.__cause__)}" if error.__cause__ is not None else ""
         print(f"error: {one_line(error)}{cause}", file=sys.stderr)

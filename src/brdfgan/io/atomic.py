@@ -9,6 +9,7 @@ A full disk while writing removes the temporary file and raises
 from __future__ import annotations
 
 import os
+import re
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -20,6 +21,18 @@ from brdfgan.errors import DiskFullError, is_disk_full
 def temp_path(path: Path) -> Path:
     """``.<name>.<random>.tmp`` in the target's directory (same filesystem, so rename is atomic)."""
     return path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+
+
+def stale_temp_files(path: Path) -> list[Path]:
+    """Temporary files of :func:`atomic_replace` for ``path`` that a killed writer left behind.
+
+    Only call this where no other process may be writing ``path`` at the same time (a training
+    run's own checkpoints): a live writer's temporary file looks the same.
+    """
+    pattern = re.compile(rf"^\.{re.escape(path.name)}\.[0-9a-f]{{12}}\.tmp$")
+    if not path.parent.is_dir():
+        return []
+    return sorted(p for p in path.parent.iterdir() if pattern.match(p.name) and p.is_file())
 
 
 @contextmanager

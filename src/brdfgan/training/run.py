@@ -22,6 +22,7 @@ from omegaconf import DictConfig, OmegaConf
 from brdfgan.config_check import check_config
 from brdfgan.errors import UserError
 from brdfgan.evaluation.evaluator import evaluate_models, write_results
+from brdfgan.io.atomic import stale_temp_files
 from brdfgan.runs import WeightsError, check_resume_checkpoint, network_weights
 from brdfgan.training.checkpoint_io import AtomicCheckpointIO
 
@@ -89,6 +90,39 @@ def warm_start(module: L.LightningModule, path: str | Path) -> list[str]:
     return loaded
 
 
+def _run_interruptible(trainer: L.Trainer, stage: Any, **kwargs: Any) -> None:
+    """Run ``trainer.fit``/``trainer.test``; Lightning ends a stage on Ctrl-C with ``exit(1)``
+    and on SIGTERM (at the next batch boundary) with a ``SystemExit`` of status 0 — both become
+    a ``KeyboardInterrupt`` that says where to resume from."""
+    try:
+        stage(**kwargs)
+    except SystemExit:
+        if not trainer.interrupted:
+            raise
+        last = _last_checkpoint(trainer)
+        hint = f"resume with ckpt_path={last}" if last is not None else "no checkpoint was written yet"
+        raise KeyboardInterrupt(f"interrupted: {hint}") from None
+
+
+def _last_checkpoint(trainer: L.Trainer) -> Path | None:
+    """The ``last.ckpt`` the run's checkpoint callbacks write, when one exists."""
+    for callback in trainer.checkpoint_callbacks:
+        dirpath = getattr(callback, "dirpath", None)
+        if dirpath and getattr(callback, "filename", None) == "last":
+            last = Path(dirpath) / "last.ckpt"
+            if last.is_file():
+                return last
+    return None
+
+
+def _remove_stale_checkpoint_temps(checkpoint: Path) -> None:
+    """A writer killed mid-checkpoint leaves its hidden temporary file (the checkpoint itself is
+    intact); the run that resumes from that folder removes it."""
+    for stale in stale_temp_files(checkpoint):
+        log.info("removing %s, left by a checkpoint write that was killed", stale)
+        stale.unlink(missing_ok=True)
+
+
 def train(cfg: DictConfig) -> float | None:
     """Fit (optionally resuming from ``ckpt_path`` or starting from ``init_from``'s weights), test
     the best checkpoint, and return the monitored metric (for sweeps), or ``None`` when it was
@@ -107,19 +141,20 @@ def train(cfg: DictConfig) -> float | None:
             check_resume_checkpoint(cfg.ckpt_path, {k: v for k, v in networks.items() if v is not None})
         except WeightsError as error:
             raise TrainConfigError(f"ckpt_path: {error}") from None
+        _remove_stale_checkpoint_temps(Path(cfg.ckpt_path))
     if init_from is not None:
         loaded = warm_start(module, init_from)
         log.info("init_from: %s from %s (new optimizers and schedule)", " and ".join(loaded), init_from)
     log.info("run config:\n%s", OmegaConf.to_yaml(cfg, resolve=True))
     if cfg.train:
-        trainer.fit(module, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
+        _run_interruptible(trainer, trainer.fit, model=module, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
     metric = trainer.callback_metrics.get(cfg.monitor)
     value = float(metric) if metric is not None else None
     if cfg.test:
         checkpoint = getattr(trainer.checkpoint_callback, "best_model_path", "") or None
         if not cfg.train:
             checkpoint = cfg.ckpt_path
-        trainer.test(module, datamodule=datamodule, ckpt_path=checkpoint)
+        _run_interruptible(trainer, trainer.test, model=module, datamodule=datamodule, ckpt_path=checkpoint)
         if cfg.get("metrics") is not None:
             # The evaluator's tables for this run (brdfgan.report builds the ablation from them).
             # Every rank evaluates its part; the metrics' compute() gathers the sums of all ranks.
