@@ -93,17 +93,18 @@ def tail(text: str, lines: int = 3) -> str:
 
 
 def expect_one_line_error(
-    result: subprocess.CompletedProcess[str], *, exit_code: int, contains: str = ""
+    result: subprocess.CompletedProcess[str], *, exit_code: int, contains: str = "", prefix: str = "error:"
 ) -> str:
-    """The command exited with ``exit_code`` and printed one ``error:`` line, no traceback."""
-    errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    """The command exited with ``exit_code`` and printed one ``prefix`` line (``error: …`` by
+    default, ``interrupted: …`` for a signal) containing ``contains``, and no traceback."""
+    lines = [line for line in result.stderr.splitlines() if line.startswith(prefix)]
     if "Traceback" in result.stderr or "Traceback" in result.stdout:
         raise ScenarioFailed(f"traceback (exit {result.returncode}): {tail(result.stderr)}")
     if result.returncode != exit_code:
         raise ScenarioFailed(f"exit {result.returncode}, expected {exit_code}: {tail(result.stderr)}")
-    if len(errors) != 1 or contains not in errors[0]:
-        raise ScenarioFailed(f"expected one 'error: …{contains}…' line, got: {tail(result.stderr)}")
-    return errors[0]
+    if len(lines) != 1 or contains not in lines[0]:
+        raise ScenarioFailed(f"expected one '{prefix} …{contains}…' line, got: {tail(result.stderr)}")
+    return lines[0]
 
 
 def hidden_leftovers(folder: Path) -> list[Path]:

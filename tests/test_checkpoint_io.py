@@ -17,36 +17,32 @@ import torch
 from brdfgan.errors import DiskFullError, exit_on_user_error
 from brdfgan.evaluation.evaluator import write_results
 from brdfgan.io.atomic import stale_temp_files
-from brdfgan.training import checkpoint_io
 from brdfgan.training.checkpoint_io import AtomicCheckpointIO
 from brdfgan.training.run import _remove_stale_checkpoint_temps, build, train
 from tests.conftest import compose_train
 
 ROOT = Path(__file__).resolve().parents[1]
 
+# Checkpoint 1 is written; checkpoint 2 is killed (SIGKILL) after half its bytes reached the
+# file — the moment a kill left a truncated last.ckpt before.
 KILL_MID_WRITE = textwrap.dedent(
     """
-    import io, os, signal, sys
+    import os, pathlib, signal, sys
     import torch
-    from brdfgan.training import checkpoint_io
+    from brdfgan.training.checkpoint_io import AtomicCheckpointIO
 
     path = sys.argv[1]
-    io_plugin = checkpoint_io.AtomicCheckpointIO()
-    io_plugin.save_checkpoint({"state_dict": {"w": torch.zeros(1000)}, "global_step": 1}, path)
-    real_save = torch.save
+    writer = AtomicCheckpointIO()
+    writer.save_checkpoint({"state_dict": {"w": torch.zeros(1000)}, "global_step": 1}, path)
 
-    def save_half_then_die(obj, target):
-        buffer = io.BytesIO()
-        real_save(obj, buffer)
-        data = buffer.getvalue()
-        with open(target, "wb") as handle:
-            handle.write(data[: len(data) // 2])
+    def write_half_then_die(self, data):
+        with self.open("wb") as handle:
+            handle.write(bytes(data)[: len(data) // 2])
             handle.flush()
-            os.fsync(handle.fileno())
         os.kill(os.getpid(), signal.SIGKILL)
 
-    checkpoint_io.torch.save = save_half_then_die
-    io_plugin.save_checkpoint({"state_dict": {"w": torch.ones(1000)}, "global_step": 2}, path)
+    pathlib.Path.write_bytes = write_half_then_die
+    writer.save_checkpoint({"state_dict": {"w": torch.ones(1000)}, "global_step": 2}, path)
     """
 )
 
@@ -83,18 +79,19 @@ def test_the_trainer_writes_checkpoints_through_the_atomic_plugin_and_loads_safe
 def test_a_full_disk_while_training_names_the_checkpoint_and_leaves_only_whole_files(
     tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    real_save = torch.save
-    saves = []
+    real_write_bytes = Path.write_bytes
+    checkpoint_writes = []
 
-    def save_until_full(obj: object, target: Path) -> None:
-        saves.append(target)
-        if len(saves) < 3:
-            real_save(obj, target)
-            return
-        Path(target).write_bytes(b"partial checkpoint")  # some bytes made it before the disk filled
+    def write_until_full(self: Path, data: bytes) -> int:
+        if not self.name.startswith(".last.ckpt."):
+            return real_write_bytes(self, data)
+        checkpoint_writes.append(self)
+        if len(checkpoint_writes) < 3:
+            return real_write_bytes(self, data)
+        real_write_bytes(self, bytes(data)[:1000])  # some bytes made it before the disk filled
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(checkpoint_io.torch, "save", save_until_full)
+    monkeypatch.setattr(Path, "write_bytes", write_until_full)
     overrides = ["experiment=smoke", "test=false", "callbacks.mid_epoch_checkpoint.every_n_train_steps=2"]
     cfg = compose_train(overrides, tiny_data)
     cfg.paths.output_dir = str(tmp_path / "run")

@@ -11,6 +11,7 @@ Loading always uses ``torch.load(weights_only=True)``.
 
 from __future__ import annotations
 
+import io
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -32,8 +33,13 @@ class AtomicCheckpointIO(TorchCheckpointIO):
             raise TypeError(f"{type(self).__name__} takes no storage_options, got {storage_options!r}")
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
+        # Serialised in memory first (as Lightning does): torch.save's zip writer reports a
+        # full disk as an opaque RuntimeError, a plain file write as ENOSPC, which
+        # atomic_replace turns into a DiskFullError naming the checkpoint.
+        buffer = io.BytesIO()
+        torch.save(checkpoint, buffer)
         with atomic_replace(path) as temp:
-            torch.save(checkpoint, temp)
+            temp.write_bytes(buffer.getbuffer())
 
     def load_checkpoint(
         self,
