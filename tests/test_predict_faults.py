@@ -165,13 +165,10 @@ sys.exit(main(args))
 """
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
-def test_signal_mid_batch_leaves_no_staging_folder(
-    tmp_path: Path, weights: Path, sig: signal.Signals
-) -> None:
+def batch_args(tmp_path: Path, out: Path, weights: Path) -> list[str]:
+    """``brdfgan predict`` on three small flash photos into ``out``, quiet and without previews."""
     photos = [flash_photo(tmp_path / f"p{k}.png") for k in range(3)]
-    out = tmp_path / "out"
-    args = [
+    return [
         "predict",
         *map(str, photos),
         "--out",
@@ -181,6 +178,14 @@ def test_signal_mid_batch_leaves_no_staging_folder(
         "--quiet",
         "--no-preview",
     ]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_signal_mid_batch_leaves_no_staging_folder(
+    tmp_path: Path, weights: Path, sig: signal.Signals
+) -> None:
+    out = tmp_path / "out"
+    args = batch_args(tmp_path, out, weights)
     child = run_child(BATCH_CHILD, str(int(sig)), *args)
     if sig == signal.SIGKILL:
         # Nothing can clean up after kill -9: the second photo's staging folder stays ...
@@ -228,18 +233,8 @@ def test_interrupts_raise_makes_signals_a_keyboard_interrupt_that_cleans_up(
 def test_full_disk_stops_the_batch_with_one_line_naming_the_folder(
     tmp_path: Path, weights: Path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]
 ) -> None:
-    photos = [flash_photo(tmp_path / f"p{k}.png") for k in range(3)]
     out = tmp_path / "out"
-    args = [
-        "predict",
-        *map(str, photos),
-        "--out",
-        str(out),
-        "--weights",
-        str(weights),
-        "--quiet",
-        "--no-preview",
-    ]
+    args = batch_args(tmp_path, out, weights)
     calls: list[Path] = []
 
     def full_disk(path: Path, **kwargs: object) -> None:

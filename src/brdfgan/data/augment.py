@@ -33,7 +33,7 @@ from brdfgan.core.svbrdf import (
     normalize_normal,
     srgb_to_linear,
 )
-from brdfgan.data.spec_checks import in_range, number, ordered
+from brdfgan.data.spec_checks import in_range, ordered
 
 
 @dataclass(frozen=True)
@@ -56,12 +56,7 @@ class CropSampling:
 
     def __post_init__(self) -> None:
         key = "dataset.crop"  # where a crop spec is configured; messages name the key as typed
-        ordered(
-            f"{key}.scale_min",
-            number(f"{key}.scale_min", self.scale_min),
-            f"{key}.scale_max",
-            number(f"{key}.scale_max", self.scale_max),
-        )
+        ordered(key, self, "scale_min", "scale_max")
         in_range(f"{key}.scale_min", self.scale_min, 0.0, 1.0, low_open=True)  # log-uniform
         in_range(f"{key}.scale_max", self.scale_max, 0.0, 1.0, low_open=True)
 

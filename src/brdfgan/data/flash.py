@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import torch
 
-from brdfgan.data.spec_checks import in_range, number, ordered
+from brdfgan.data.spec_checks import in_range, ordered
 
 MIN_TEMPERATURE_K = 1667.0
 MAX_TEMPERATURE_K = 25000.0
@@ -66,19 +66,9 @@ class FlashSampling:
 
     def __post_init__(self) -> None:
         key = "dataset.flash"
-        ordered(
-            f"{key}.intensity_min",
-            number(f"{key}.intensity_min", self.intensity_min),
-            f"{key}.intensity_max",
-            number(f"{key}.intensity_max", self.intensity_max),
-        )
+        ordered(key, self, "intensity_min", "intensity_max")
         in_range(f"{key}.intensity_min", self.intensity_min, 0.0, low_open=True)  # log-uniform
-        ordered(
-            f"{key}.temperature_min_k",
-            number(f"{key}.temperature_min_k", self.temperature_min_k),
-            f"{key}.temperature_max_k",
-            number(f"{key}.temperature_max_k", self.temperature_max_k),
-        )
+        ordered(key, self, "temperature_min_k", "temperature_max_k")
         for name in ("temperature_min_k", "temperature_max_k"):  # where the locus fit holds
             in_range(f"{key}.{name}", getattr(self, name), MIN_TEMPERATURE_K, MAX_TEMPERATURE_K)
 

@@ -48,7 +48,7 @@ import torch
 
 from brdfgan.core.exposure import LUMINANCE_WEIGHTS
 from brdfgan.data.flash import blackbody_rgb
-from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, number, ordered
+from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, ordered
 
 EnvironmentKind = Literal["sunsky", "room", "file"]
 ParamValue = float | str
@@ -625,12 +625,7 @@ class LightingConfig:
         fraction = self.file_test_fraction
         in_range(f"{key}.file_test_fraction", fraction, 0.0, 1.0, low_open=True, high_open=True)
         integer(f"{key}.resolution", self.resolution, minimum=4)
-        ordered(
-            f"{key}.env_to_flash_min",
-            number(f"{key}.env_to_flash_min", self.env_to_flash_min),
-            f"{key}.env_to_flash_max",
-            number(f"{key}.env_to_flash_max", self.env_to_flash_max),
-        )
+        ordered(key, self, "env_to_flash_min", "env_to_flash_max")
         in_range(f"{key}.env_to_flash_min", self.env_to_flash_min, 0.0, low_open=True)  # log-uniform
 
 

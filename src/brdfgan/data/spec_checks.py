@@ -73,8 +73,12 @@ def _describe(low: float | None, high: float | None, low_open: bool, high_open: 
     return f"{'<' if high_open else '<='} {high:g}"
 
 
-def ordered(low_key: str, low: float, high_key: str, high: float) -> None:
-    """A ``*_min``/``*_max`` pair must not be inverted (equal is allowed: a constant)."""
+def ordered(key: str, spec: object, low_name: str, high_name: str) -> None:
+    """The fields ``low_name``/``high_name`` of ``spec`` (configured under ``key``) are numbers
+    and not inverted (equal is allowed: a constant)."""
+    low_key, high_key = f"{key}.{low_name}", f"{key}.{high_name}"
+    low = number(low_key, getattr(spec, low_name))
+    high = number(high_key, getattr(spec, high_name))
     if low > high:
         raise DatasetConfigError(
             f"{low_key}={_show(low)} > {high_key}={_show(high)}: the minimum must not exceed the maximum"
