@@ -12,6 +12,7 @@ from hydra.core.config_store import ConfigStore
 
 @dataclass
 class GenerateConfig:
+    task_name: str = "generate"
     out_dir: str = "data"
     shard: Any = None  # None: every shard; an int or a list of ints: those positions of the plan
     plan: bool = False
