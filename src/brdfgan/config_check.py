@@ -57,7 +57,7 @@ def check_node(node: Any, key: str) -> None:
             _check_target_node(node, key)
         else:
             for name in node:
-                check_node(node._get_node(str(name)), f"{key}.{name}")
+                check_node(node._get_node(str(name)), f"{key}.{name!s}")
     elif isinstance(node, ListConfig):
         for position in range(len(node)):
             check_node(node._get_node(position), f"{key}[{position}]")

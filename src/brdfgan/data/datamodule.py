@@ -70,11 +70,12 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from itertools import count, islice
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import lightning as L
 import torch
 import webdataset as wds
+from lightning.pytorch.loops.progress import _ProcessedTracker
 from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
 from brdfgan.data.shards import (
@@ -596,7 +597,10 @@ class ShardDataModule(L.LightningDataModule):
         # at a batch's end counts that batch as processed). Every epoch has exactly
         # train_batches_per_epoch batches, so this alone fixes the epoch and the offset in it —
         # Lightning's own epoch counter still says the previous epoch after an epoch-end save.
-        done = self.trainer.fit_loop.epoch_loop.batch_progress.total.processed
+        # (``total`` is a processed-counting tracker in a batch progress; its static type is the
+        # base class of every progress.)
+        total = cast(_ProcessedTracker, self.trainer.fit_loop.epoch_loop.batch_progress.total)
+        done = total.processed
         return divmod(done, self.train_batches_per_epoch)
 
     def _distributed(self) -> tuple[int, int]:

@@ -13,12 +13,14 @@ import csv
 import io
 import json
 import os
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
 from torch import Tensor, nn
+from torchmetrics import MetricCollection
 
 from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
@@ -33,18 +35,18 @@ ALL_MAPS = (*PAPER_MAPS, "basecolor", "metallic")
 @torch.no_grad()
 def evaluate_models(
     models: Mapping[str, nn.Module],
-    batches: Iterable[Mapping[str, object]],
-    make_metrics: object,
+    batches: Iterable[Mapping[str, Any]],
+    make_metrics: Callable[[], MetricCollection],
     device: torch.device | str = "cpu",
 ) -> dict[str, dict[str, float]]:
     """Metric values per model name. ``make_metrics()`` builds a fresh metric per model; every
     model sees the same batches in the same order."""
-    metrics = {name: make_metrics().to(device) for name in models}  # type: ignore[operator]
+    metrics = {name: make_metrics().to(device) for name in models}
     for model in models.values():
         model.to(device).eval()
     for batch in batches:
-        photo = batch["photo"].to(device)  # type: ignore[union-attr]
-        truth = batch["maps"].to(device)  # type: ignore[union-attr]
+        photo = batch["photo"].to(device)
+        truth = batch["maps"].to(device)
         for name, model in models.items():
             metrics[name].update(model(photo), truth)
     return {name: {k: float(v) for k, v in metric.compute().items()} for name, metric in metrics.items()}

@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 import OpenEXR
 
-from brdfgan.errors import DiskFullError, is_disk_full
+from brdfgan.errors import DiskFullError, UserError, is_disk_full
 
 __all__ = [
     "EXR_EXTENSIONS",
@@ -59,7 +59,7 @@ ExrPrecision = Literal["half", "float"]
 _INTEGER_SCALE: dict[np.dtype, float] = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
 
 
-class ImageIOError(ValueError):
+class ImageIOError(UserError):
     """An image file cannot be read or written; the message names the file."""
 
 
@@ -264,13 +264,16 @@ def _check_array(path: Path, array: np.ndarray) -> np.ndarray:
 def _write_png(path: Path, temp: Path, image: np.ndarray, bit_depth: int) -> None:
     if not np.isfinite(image).all():
         raise ImageIOError(f"{path}: refusing to write infinite values to PNG")
-    scale, dtype = (255.0, np.uint8) if bit_depth == 8 else (65535.0, np.uint16)
-    quantised = np.rint(np.clip(image.astype(np.float64), 0.0, 1.0) * scale).astype(dtype)
+    unit = np.clip(image.astype(np.float64), 0.0, 1.0)
+    quantised = (np.rint(unit * 255.0).astype(np.uint8) if bit_depth == 8 else
+                 np.rint(unit * 65535.0).astype(np.uint16))  # fmt: skip
     if quantised.shape[2] == 3:
-        quantised = cv2.cvtColor(quantised, cv2.COLOR_RGB2BGR)
+        bgr = cv2.cvtColor(quantised, cv2.COLOR_RGB2BGR)
     elif quantised.shape[2] == 4:
-        quantised = cv2.cvtColor(quantised, cv2.COLOR_RGBA2BGRA)
-    ok, encoded = cv2.imencode(".png", quantised)
+        bgr = cv2.cvtColor(quantised, cv2.COLOR_RGBA2BGRA)
+    else:
+        bgr = quantised
+    ok, encoded = cv2.imencode(".png", bgr)
     if not ok:
         raise ImageIOError(f"{path}: PNG encoding failed")
     # O_EXCL: never clobber a file of the same name; mode 0o666 lets the umask decide permissions

@@ -119,7 +119,7 @@ def write_maps(
         except ImageIOError as error:
             raise MapIOError(str(error)) from error
 
-    other = "exr" if format == "png" else "png"
+    other: MapFormat = "exr" if format == "png" else "png"
     for stale in map_paths(directory, other).values():
         stale.unlink(missing_ok=True)
     return paths
@@ -159,12 +159,12 @@ def read_maps(directory: str | os.PathLike[str], *, format: MapFormat | None = N
                 f"basecolor's {size[1]}x{size[0]}"
             )
 
-    basecolor = _in_unit_range(paths["basecolor"], _colour(images["basecolor"]))
-    basecolor = torch.from_numpy(basecolor).permute(2, 0, 1).double()
+    stored = _in_unit_range(paths["basecolor"], _colour(images["basecolor"]))
+    basecolor = torch.from_numpy(stored).permute(2, 0, 1).double()
     if format == "exr":
         basecolor = linear_to_srgb(basecolor)
-    normal = _in_unit_range(paths["normal"], _normal_channels(paths["normal"], images["normal"]))
-    normal = _decode_normal(paths["normal"], torch.from_numpy(normal).permute(2, 0, 1).double())
+    encoded = _in_unit_range(paths["normal"], _normal_channels(paths["normal"], images["normal"]))
+    normal = _decode_normal(paths["normal"], torch.from_numpy(encoded).permute(2, 0, 1).double())
     scalars = [
         torch.from_numpy(_in_unit_range(paths[name], _grayscale(paths[name], images[name])))
         .permute(2, 0, 1)

@@ -377,7 +377,9 @@ class SVBRDFMetrics(MetricCollection):
         **metric_kwargs: Any,
     ) -> None:
         kw = metric_kwargs
-        metrics: dict[str, Metric] = {"rmse": MapRMSE(albedo_space=albedo_space, prefix="rmse/", **kw)}
+        metrics: dict[str, Metric | MetricCollection] = {
+            "rmse": MapRMSE(albedo_space=albedo_space, prefix="rmse/", **kw)
+        }
         if downscale_to is not None:
             metrics[f"rmse{downscale_to}"] = MapRMSE(
                 downscale_to, albedo_space=albedo_space, prefix=f"rmse{downscale_to}/", **kw

@@ -146,6 +146,7 @@ class Deschaintre2018(nn.Module):
             nn.init.normal_(fc.weight, 0.0, math.sqrt(1.0 / fc.in_features))
             nn.init.normal_(fc.bias, 0.0, GLOBAL_BIAS_STD)
         for fc in self.global_to_features:
+            assert isinstance(fc, nn.Linear)
             nn.init.normal_(fc.weight, 0.0, FEATURE_BIAS_INIT_SCALE * math.sqrt(1.0 / fc.in_features))
 
     def config(self) -> dict[str, Any]:

@@ -157,7 +157,9 @@ class MultiScaleDiscriminator(nn.Module):
 
     def config(self) -> dict[str, Any]:
         """Constructor arguments (plain ints), to store next to the weights."""
-        return {**self.discriminators[0].config(), "scales": self.scales}
+        first = self.discriminators[0]
+        assert isinstance(first, PatchDiscriminator)
+        return {**first.config(), "scales": self.scales}
 
     def forward(self, photo: Tensor, maps: Tensor) -> list[list[Tensor]]:
         x = discriminator_input(photo, maps)

@@ -48,4 +48,4 @@ class AtomicCheckpointIO(TorchCheckpointIO):
         weights_only: bool | None = None,
     ) -> dict[str, Any]:
         # A checkpoint is data: whatever a caller asks, nothing in it may run code.
-        return super().load_checkpoint(path, map_location=map_location, weights_only=True)
+        return super().load_checkpoint(Path(path), map_location=map_location, weights_only=True)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import logging
 import random
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, cast
 
 import lightning as L
 import numpy as np
@@ -28,6 +28,7 @@ import torch
 from torch import Tensor, nn
 from torch.optim import Optimizer
 from torch.optim.lr_scheduler import LambdaLR
+from torchmetrics import MetricCollection
 
 from brdfgan.core.sampling import sample_rendering_loss_configs
 from brdfgan.losses.parameter import parameter_loss
@@ -73,7 +74,7 @@ class SVBRDFGAN(L.LightningModule):
         constant_lr_fraction: float = 0.5,
         total_steps: int | None = None,
         gradient_clip: float | None = None,
-        metrics: Callable[[], nn.Module] | None = None,
+        metrics: Callable[[], MetricCollection] | None = None,
     ) -> None:
         super().__init__()
         self.automatic_optimization = False
@@ -87,8 +88,8 @@ class SVBRDFGAN(L.LightningModule):
         self.constant_lr_fraction = constant_lr_fraction
         self.total_steps = total_steps
         self.gradient_clip = gradient_clip
-        self.val_metrics = metrics() if metrics is not None else None
-        self.test_metrics = metrics() if metrics is not None else None
+        self.val_metrics: MetricCollection | None = metrics() if metrics is not None else None
+        self.test_metrics: MetricCollection | None = metrics() if metrics is not None else None
         self.save_hyperparameters(ignore=["generator", "discriminator", "loss", "optimizer", "metrics"])
 
     def setup(self, stage: str) -> None:
@@ -102,7 +103,9 @@ class SVBRDFGAN(L.LightningModule):
 
     def on_save_checkpoint(self, checkpoint: dict[str, Any]) -> None:
         # Plain types and tensors only: checkpoints are read with torch.load(weights_only=True).
-        kind, keys, position, has_gauss, cached = np.random.get_state()
+        kind, keys, position, has_gauss, cached = cast(
+            tuple[str, np.ndarray, int, int, float], np.random.get_state(legacy=True)
+        )
         checkpoint[RNG_STATE_KEY] = {
             "loss": self.loss.rng_state(),
             "python": random.getstate(),
@@ -160,15 +163,20 @@ class SVBRDFGAN(L.LightningModule):
         # changing trainer.max_epochs or model.total_steps; an unchanged configuration gives
         # the same schedule, and the current learning rate is recomputed for the step reached.
         schedule = LinearDecaySchedule(self._schedule_steps(), self.constant_lr_fraction)
-        schedulers = self.lr_schedulers()
-        for scheduler in schedulers if isinstance(schedulers, list) else [schedulers]:
-            if scheduler is None or list(scheduler.lr_lambdas) == [schedule] * len(scheduler.lr_lambdas):
+        for scheduler in self._schedulers():
+            if list(scheduler.lr_lambdas) == [schedule] * len(scheduler.lr_lambdas):
                 continue
             log.info("learning-rate schedule: %s generator steps (the checkpoint had %s)",
-                     schedule.total_steps, scheduler.lr_lambdas[0].total_steps)  # fmt: skip
+                     schedule.total_steps, getattr(scheduler.lr_lambdas[0], "total_steps", "?"))  # fmt: skip
             scheduler.lr_lambdas = [schedule] * len(scheduler.lr_lambdas)
             for group, base_lr in zip(scheduler.optimizer.param_groups, scheduler.base_lrs, strict=True):
                 group["lr"] = base_lr * schedule(scheduler.last_epoch)
+
+    def _schedulers(self) -> list[LambdaLR]:
+        """The learning-rate schedulers of configure_optimizers (one per network)."""
+        schedulers = self.lr_schedulers()
+        found = schedulers if isinstance(schedulers, list) else [schedulers]
+        return [scheduler for scheduler in found if isinstance(scheduler, LambdaLR)]
 
     def _optimizers(self) -> tuple[Any, Any | None]:
         optimizers = self.optimizers()
@@ -209,8 +217,7 @@ class SVBRDFGAN(L.LightningModule):
             self._step(g_opt, g_terms["g_total"])
         logged.update(g_terms)
 
-        schedulers = self.lr_schedulers()
-        for scheduler in schedulers if isinstance(schedulers, list) else [schedulers]:
+        for scheduler in self._schedulers():
             scheduler.step()
         self.log_dict(
             {f"train/{name}": value.detach() for name, value in logged.items()},

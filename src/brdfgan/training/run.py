@@ -13,11 +13,12 @@ from __future__ import annotations
 import logging
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import hydra
 import lightning as L
 from omegaconf import DictConfig, OmegaConf
+from torch import nn
 
 from brdfgan.config_check import check_config
 from brdfgan.errors import UserError
@@ -75,7 +76,7 @@ def warm_start(module: L.LightningModule, path: str | Path) -> list[str]:
         raise TrainConfigError(f"init_from: {path} is not a checkpoint or weights file ({error})") from None
     if "generator" not in networks:
         raise TrainConfigError(f"init_from: {path} holds no generator weights")
-    loaded = []
+    loaded: list[str] = []
     for name in ("generator", "discriminator"):
         network = getattr(module, name, None)
         if network is None or name not in networks:
@@ -136,9 +137,10 @@ def train(cfg: DictConfig) -> float | None:
     L.seed_everything(cfg.seed, workers=True)
     datamodule, module, trainer = build(cfg)
     if cfg.ckpt_path is not None:
-        networks = {name: getattr(module, name) for name in ("generator", "discriminator")}
+        found = {name: getattr(module, name, None) for name in ("generator", "discriminator")}
+        networks = {name: network for name, network in found.items() if isinstance(network, nn.Module)}
         try:
-            check_resume_checkpoint(cfg.ckpt_path, {k: v for k, v in networks.items() if v is not None})
+            check_resume_checkpoint(cfg.ckpt_path, networks)
         except WeightsError as error:
             raise TrainConfigError(f"ckpt_path: {error}") from None
         _remove_stale_checkpoint_temps(Path(cfg.ckpt_path))
@@ -159,7 +161,7 @@ def train(cfg: DictConfig) -> float | None:
             # The evaluator's tables for this run (brdfgan.report builds the ablation from them).
             # Every rank evaluates its part; the metrics' compute() gathers the sums of all ranks.
             results = evaluate_models(
-                {"model": module.generator},
+                {"model": cast(nn.Module, module.generator)},
                 datamodule.test_dataloader(),
                 hydra.utils.instantiate(cfg.metrics),
                 module.device,
