@@ -106,7 +106,7 @@ def test_evaluate_and_export_weights_refuse_a_crafted_run_in_one_line(tmp_path: 
     expected = f"error: {run.resolve()}/.hydra/config.yaml: not a brdfgan model config (torch.load)"
     for command in (
         [str(ROOT / "evaluate.py"), f"ckpt={checkpoint}", "data=tiny"],
-        ["-m", "brdfgan.inference.export_weights", str(run)],
+        ["-m", "brdfgan.cli", "export-weights", str(run)],
     ):
         result = _cli(*command, cwd=tmp_path)
         assert result.returncode == 2, result.stderr[-2000:]
@@ -172,3 +172,20 @@ def test_predict_refuses_a_crafted_weights_file_in_one_line(tmp_path: Path) -> N
     assert result.returncode == 2, result.stderr[-2000:]
     assert f"error: {weights}: not a brdfgan model config (builtins.open)" in result.stderr
     assert "Traceback" not in result.stderr and victim.read_text() == "precious"
+
+
+def test_the_generator_like_classes_follow_the_protocol() -> None:
+    from brdfgan.models.deschaintre2018 import Deschaintre2018
+    from brdfgan.models.reference import ConstantMaps, PhotoAsBasecolor
+    from brdfgan.runs import GeneratorLike
+
+    photo = torch.rand(1, 3, 32, 32)
+    networks = (Generator(**SMALL), Deschaintre2018(width=4, levels=2), ConstantMaps(), PhotoAsBasecolor())
+    for network in networks:
+        assert isinstance(network, GeneratorLike)
+        assert isinstance(network.size_multiple, int) and isinstance(network.config(), dict)
+        assert network(photo).shape == (1, 8, 32, 32)
+        # config() rebuilds the same architecture through the one allowlisted builder
+        target = f"{type(network).__module__}.{type(network).__name__}"
+        rebuilt = network_from_config({"_target_": target, **network.config()}, "test")
+        assert rebuilt.state_dict().keys() == network.state_dict().keys()
