@@ -6,7 +6,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=.venv/bin/python
 OUT=logs/default_model
-BASELINE=(model=deschaintre2018 model.generator.levels=7 loss=no_adv loss.switches.feature=false)
+BASELINE=(model=deschaintre2018 model.generator.levels=7 loss=supervised)
 # Grid samples, fixed before training: the first crop of the first test material of every family.
 GRID='[test-m000008-c0-r0,test-m000020-c0-r0,test-m000029-c0-r0,test-m000031-c0-r0,test-m000033-c0-r0,test-m000066-c0-r0,test-m000067-c0-r0,test-m000082-c0-r0]'
 

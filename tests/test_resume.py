@@ -120,7 +120,7 @@ def test_another_architectures_checkpoint_is_refused_before_training(tmp_path: P
     # A GAN checkpoint for a run without a discriminator (another loss) is refused too.
     _, gan, _ = build(compose_train(["experiment=smoke"], tmp_path))
     torch.save({"state_dict": gan.state_dict(), "global_step": 4}, checkpoint)
-    overrides = ["experiment=smoke", "loss=no_adv", "loss.switches.feature=false", f"ckpt_path={checkpoint}"]
+    overrides = ["experiment=smoke", "loss=supervised", f"ckpt_path={checkpoint}"]
     cfg = compose_train(overrides, tmp_path)
     with pytest.raises(TrainConfigError, match="holds a discriminator this run's model does not have"):
         train(cfg)

@@ -53,6 +53,7 @@ def test_default_model_finetune_is_stage_one_without_a_discriminator() -> None:
     stage2 = compose_train(["experiment=default_model_finetune"])
     assert stage2.init_from.endswith("logs/default_model/gan/checkpoints/last.ckpt")
     assert stage2.data == stage1.data and stage2.model.generator == stage1.model.generator
+    assert stage2.loss == compose_train(["loss=supervised"]).loss
     _, module, _ = build(stage2)
     assert module.discriminator is None and module.loss.switches.parameter and module.loss.switches.rendering
 
@@ -77,9 +78,11 @@ def test_wrong_key_or_type_fails_at_composition() -> None:
 
 
 def test_without_adversarial_and_feature_terms_there_is_no_discriminator() -> None:
-    cfg = compose_train(["loss=no_adv", "loss.switches.feature=false"])
+    cfg = compose_train(["loss=supervised"])
+    assert cfg.loss == compose_train(["loss=no_adv", "loss.switches.feature=false"]).loss
     _, module, _ = build(cfg)
     assert module.discriminator is None
+    assert module.loss.switches.parameter and module.loss.switches.rendering
     assert not any("discriminator" in name for name, _ in module.named_parameters())
     cfg = compose_train(["loss=full"])
     _, module, _ = build(cfg)
@@ -108,7 +111,7 @@ def test_warm_start_takes_the_weights_and_nothing_else(tmp_path: Path) -> None:
     torch.manual_seed(1)
     _, gan, _ = build(compose_train(["loss=full"]))
     checkpoint = _state_dict_file(gan, tmp_path / "gan.ckpt")
-    content_loss = ["loss=no_adv", "loss.switches.feature=false"]
+    content_loss = ["loss=supervised"]
     # A GAN checkpoint into a run without a discriminator: the generator only.
     torch.manual_seed(2)
     _, content_only, _ = build(compose_train(content_loss))
@@ -132,7 +135,7 @@ def test_warm_start_takes_the_weights_and_nothing_else(tmp_path: Path) -> None:
 
 
 def test_warm_start_errors_name_the_file(tmp_path: Path) -> None:
-    _, module, _ = build(compose_train(["loss=no_adv", "loss.switches.feature=false"]))
+    _, module, _ = build(compose_train(["loss=supervised"]))
     _, wider, _ = build(compose_train(["loss=no_adv", "model.generator.width=8"]))
     narrow = _state_dict_file(wider, tmp_path / "narrow.ckpt")
     with pytest.raises(TrainConfigError, match=r"init_from: the generator in .*narrow.ckpt does not fit"):
