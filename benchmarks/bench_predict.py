@@ -4,7 +4,7 @@ Each resolution runs in a fresh subprocess (so its peak RSS is its own) on a syn
 flash photo (JPEG), with the shipped default weights when they are installed, else a randomly
 initialised generator of the same architecture (timings do not depend on the values). Above 1024²
 the generator runs tiled (1024² tiles, frozen statistics), so its memory stays that of one tile.
-The generator's share is the time spent inside ``predict_maps``; the rest is decoding, hotspot
+The generator's share is the time spent inside ``Predictor.maps``; the rest is decoding, hotspot
 search, resizing, encoding seven textures, the .glb and the preview.
 
 It also measures the sgemm rate of this machine (4096³ fp32 matmul) and reports the paper
@@ -46,7 +46,7 @@ def _photo(path: Path) -> Path:
 
 
 def _weights(directory: Path) -> Path:
-    from brdfgan.inference.predict import default_weights_path
+    from brdfgan.inference.model.weights import default_weights_path
 
     shipped = default_weights_path()
     if shipped.is_file():
@@ -67,21 +67,22 @@ def _weights(directory: Path) -> Path:
 
 def run_one(photo: Path, weights: Path, size: int, out: Path) -> dict[str, float]:
     """One predict call in this process; returns seconds and peak RSS (MiB)."""
-    import brdfgan.inference.predict as predict
+    from brdfgan.inference.model.weights import load_model
+    from brdfgan.inference.pipeline import PredictOptions, Predictor, predict_photo
 
     spent = {"generator": 0.0}
-    original = predict.predict_maps
+    original = Predictor.maps
 
-    def timed(*args, **kwargs):
+    def timed(self: Predictor, photo):
         start = time.perf_counter()
-        result = original(*args, **kwargs)
+        result = original(self, photo)
         spent["generator"] += time.perf_counter() - start
         return result
 
-    predict.predict_maps = timed
-    model = predict.load_model(weights)
+    Predictor.maps = timed  # type: ignore[method-assign]  # timing only, in this throwaway process
+    model = load_model(weights)
     start = time.perf_counter()
-    predict.predict_photo(photo, out / f"p{size}", model, predict.PredictOptions(resolution=size))
+    predict_photo(photo, out / f"p{size}", Predictor.create(model, PredictOptions(resolution=size)))
     total = time.perf_counter() - start
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return {"total": total, "generator": spent["generator"], "peak_mib": peak, "model": model.model_id}

@@ -41,7 +41,7 @@ INTERRUPTED = "interrupted: finished photos are complete; the one in progress wa
 # first of the two renames used where there is no exchange), the rest is brdfgan's command line.
 KILL_IN_SWAP = """
 import os, signal, sys
-from brdfgan.inference import export
+from brdfgan.inference.outputs import export
 
 def die():
     os.kill(os.getpid(), signal.SIGKILL)

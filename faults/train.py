@@ -248,7 +248,7 @@ def crafted_run_folder(workdir: Path) -> str:
         shutil.copy(last_checkpoint(project() / "reference"), last_checkpoint(run_dir))
         for command in (
             [PYTHON, "evaluate.py", f"ckpt={last_checkpoint(run_dir)}", f"hydra.run.dir={workdir / 'eval'}"],
-            [PYTHON, "-m", "brdfgan.inference.export_weights", str(run_dir)],
+            [PYTHON, "-m", "brdfgan.cli", "export-weights", str(run_dir)],
         ):
             result = run(command, env=env())
             seen.append(expect_one_line_error(result, exit_code=2, contains="not a brdfgan model config"))

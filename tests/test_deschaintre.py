@@ -13,6 +13,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig, OmegaConf
 from torch import Tensor, nn
 
+from brdfgan.cli import main
 from brdfgan.core.svbrdf import (
     diffuse_albedo,
     specular_albedo,
@@ -26,7 +27,6 @@ from brdfgan.data.deschaintre_dataset import (
     DeschaintreFormatError,
     albedos_to_basecolor_metallic,
     convert_deschaintre_folder,
-    main,
     maps_from_deschaintre,
     maps_to_deschaintre,
     read_deschaintre_sample,
@@ -231,12 +231,12 @@ def test_cli_converts_and_reports_errors_on_one_line(
     src = tmp_path / "src"
     src.mkdir()
     write_deschaintre_sample(src / "a.png", *make_sample(0, size=16))
-    main([str(src), str(tmp_path / "out"), "--split", "val", "--flip-green"])
+    assert (
+        main(["convert-deschaintre", str(src), str(tmp_path / "out"), "--split", "val", "--flip-green"]) == 0
+    )
     assert "1 sample(s) in 1 shard(s)" in capsys.readouterr().out
     assert json.loads((tmp_path / "out" / "val" / "manifest.json").read_text())["conversion"]["flip_green"]
-    with pytest.raises(SystemExit) as info:
-        main([str(tmp_path / "missing"), str(tmp_path / "out")])
-    assert info.value.code == 2
+    assert main(["convert-deschaintre", str(tmp_path / "missing"), str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "missing: source folder not found" in err and err.count("\n") == 1
 

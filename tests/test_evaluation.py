@@ -13,8 +13,8 @@ import torch
 import yaml
 from safetensors import safe_open
 
-from brdfgan.inference.export_weights import tested_checkpoint as checkpoint_tested_by_train
-from brdfgan.inference.predict import load_model
+from brdfgan.inference.model.export_weights import tested_checkpoint as checkpoint_tested_by_train
+from brdfgan.inference.model.weights import load_model
 from brdfgan.models.generator import Generator
 from brdfgan.report import ReportError, ablation_rows, collect, write_report
 from brdfgan.runs import WeightsError, load_generator, load_weights, save_weights
@@ -128,7 +128,7 @@ def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> N
 
     # The run exports to the weights `brdfgan predict` loads: fp16 tensors, architecture and summary.
     shipped = tiny_data / "shipped" / "smoke.safetensors"
-    exported = subprocess.run([sys.executable, "-m", "brdfgan.inference.export_weights", str(run), "--out",
+    exported = subprocess.run([sys.executable, "-m", "brdfgan.cli", "export-weights", str(run), "--out",
                                str(shipped), "--model-id", "smoke-v1", "--hardware", "test CPU"],
                               capture_output=True, text=True, timeout=300)  # fmt: skip
     assert exported.returncode == 0, exported.stderr[-2000:]
@@ -148,7 +148,7 @@ def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> N
         assert all(handle.get_tensor(k).dtype == torch.float16 for k in handle.keys() if "weight" in k)  # noqa: SIM118 (not iterable)
     photo = torch.rand(1, 3, 64, 64)
     assert torch.allclose(model.generator(photo), generator.eval()(photo), atol=2e-2)  # fp16 rounding
-    missing = subprocess.run([sys.executable, "-m", "brdfgan.inference.export_weights", str(tiny_data)],
+    missing = subprocess.run([sys.executable, "-m", "brdfgan.cli", "export-weights", str(tiny_data)],
                              capture_output=True, text=True, timeout=300)  # fmt: skip
     assert missing.returncode == 2 and "not a training run directory" in missing.stderr
 
@@ -213,7 +213,7 @@ def _fake_training_run(run_dir: Path, overrides: list[str], epoch: int, step: in
 
 
 def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> None:
-    from brdfgan.inference.export_weights import training_summary
+    from brdfgan.inference.model.export_weights import training_summary
 
     gan = _fake_training_run(tmp_path / "gan", ["experiment=default_model"], epoch=6, step=4900)
     content = ["experiment=default_model_finetune", f"init_from={gan}"]
@@ -234,7 +234,7 @@ def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> 
 
 
 def test_exported_test_metrics_belong_to_the_exported_checkpoint(tmp_path: Path) -> None:
-    from brdfgan.inference.export_weights import evaluation_metrics, training_summary
+    from brdfgan.inference.model.export_weights import evaluation_metrics, training_summary
 
     run = tmp_path / "run"
     last = _fake_training_run(run, ["experiment=smoke"], epoch=5, step=60)

@@ -381,7 +381,8 @@ def test_cli_plan_lists_every_shard(tmp_path: Path) -> None:
 
 
 def test_contact_sheet_shows_every_panel_of_random_samples(tmp_path: Path) -> None:
-    from brdfgan.data.contact_sheet import COLUMNS, main, pick_samples
+    from brdfgan.cli import main
+    from brdfgan.data.contact_sheet import COLUMNS, pick_samples
     from brdfgan.io.images import read_image
 
     spec = tiny_spec()
@@ -389,7 +390,7 @@ def test_contact_sheet_shows_every_panel_of_random_samples(tmp_path: Path) -> No
     picked = pick_samples(tmp_path, "train", rows=3, seed=0)
     assert len(picked) == 3 and len({s.key for s in picked}) == 3
     assert [s.key for s in pick_samples(tmp_path, "train", rows=3, seed=0)] == [s.key for s in picked]
-    assert main([str(tmp_path), "--rows", "3", "--out", str(tmp_path / "sheet.png")]) == 0
+    assert main(["contact-sheet", str(tmp_path), "--rows", "3", "--out", str(tmp_path / "sheet.png")]) == 0
     sheet = read_image(tmp_path / "sheet.png")
     assert sheet.shape[1] == len(COLUMNS) * spec.resolution
     assert sheet.shape[0] > 3 * spec.resolution  # rows plus the header

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import pytest
 
-from brdfgan.inference.gltf import build_glb, write_glb
+from brdfgan.inference.outputs.gltf import build_glb, write_glb
 
 ROOT = Path(__file__).resolve().parents[1]
 VALIDATOR = ROOT / ".node" / "node_modules" / "gltf-validator"

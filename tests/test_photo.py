@@ -16,7 +16,7 @@ from PIL import Image, ImageOps
 
 from brdfgan.core.exposure import auto_expose
 from brdfgan.core.svbrdf import linear_to_srgb, srgb_to_linear
-from brdfgan.inference.photo import (
+from brdfgan.inference.intake.photo import (
     LOOKS_LINEAR_MAX_MEDIAN,
     LOOKS_SRGB_MIN_MEDIAN,
     MIN_PHOTO_SIZE,

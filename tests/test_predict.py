@@ -14,9 +14,10 @@ import torch
 from brdfgan.cli import PARTIAL_FAILURE_EXIT_CODE, main
 from brdfgan.core.svbrdf import decode_normal, diffuse_albedo, linear_to_srgb, specular_albedo, srgb_to_linear
 from brdfgan.errors import USER_ERROR_EXIT_CODE
-from brdfgan.inference.export import ExportError, ExportOptions, texture_set, write_material
-from brdfgan.inference.gltf import PNG_SIGNATURE
-from brdfgan.inference.predict import PredictOptions, load_model, output_names, predict_photo
+from brdfgan.inference.model.weights import load_model
+from brdfgan.inference.outputs.export import ExportError, ExportOptions, texture_set, write_material
+from brdfgan.inference.outputs.gltf import PNG_SIGNATURE
+from brdfgan.inference.pipeline import PredictOptions, Predictor, output_names, predict_photo
 from brdfgan.io.images import read_image
 from brdfgan.models.generator import Generator
 from brdfgan.runs import WeightsError, save_weights
@@ -126,7 +127,8 @@ def test_output_directory_is_replaced_atomically(tmp_path: Path) -> None:
 def test_predict_photo_writes_everything(tmp_path: Path, weights: Path) -> None:
     photo = flash_photo(tmp_path / "wood.jpg")
     model = load_model(weights)
-    result = predict_photo(photo, tmp_path / "out" / "wood", model, PredictOptions(animate="gif"))
+    predictor = Predictor.create(model, PredictOptions(animate="gif"))
+    result = predict_photo(photo, tmp_path / "out" / "wood", predictor)
     names = {p.name for p in result.output.iterdir()}
     assert names == {f"{t}.png" for t in TEXTURES} | {
         "material.glb",

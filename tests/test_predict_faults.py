@@ -22,16 +22,11 @@ from PIL import Image
 
 from brdfgan.cli import main
 from brdfgan.errors import DISK_FULL_EXIT_CODE, INTERRUPTED_EXIT_CODE, USER_ERROR_EXIT_CODE, interrupts_raise
-from brdfgan.inference import export
-from brdfgan.inference.export import ExportOptions, recover_outputs, write_material
-from brdfgan.inference.predict import (
-    Model,
-    PredictError,
-    PredictOptions,
-    check_memory,
-    load_model,
-)
-from brdfgan.inference.tiling import TilingConfig
+from brdfgan.inference.model.memory import check_memory
+from brdfgan.inference.model.tiling import TilingConfig
+from brdfgan.inference.model.weights import Model, PredictError, load_model
+from brdfgan.inference.outputs import export
+from brdfgan.inference.outputs.export import ExportOptions, recover_outputs, write_material
 from brdfgan.io.images import write_image
 from brdfgan.models.generator import Generator
 from tests import test_predict
@@ -63,7 +58,7 @@ import os, signal, sys
 from pathlib import Path
 import torch
 from brdfgan.core.svbrdf import join_maps
-from brdfgan.inference import export
+from brdfgan.inference.outputs import export
 
 out, mode = Path(sys.argv[1]), sys.argv[2]
 flat = torch.tensor([0.0, 0.0, 1.0]).view(3, 1, 1).expand(3, 8, 8)
@@ -147,7 +142,7 @@ def test_recover_outputs_removes_only_folders_of_processes_that_are_gone(tmp_pat
 
 BATCH_CHILD = """
 import os, signal, sys
-from brdfgan.inference import export
+from brdfgan.inference.outputs import export
 
 sig, args = int(sys.argv[1]), sys.argv[2:]
 real_write_glb = export.write_glb
@@ -290,7 +285,7 @@ def test_black_and_corrupt_photos_fail_with_one_line_and_stdout_lists_only_resul
 def test_absurd_resolution_is_refused_up_front_with_the_memory_it_needs(
     tmp_path: Path, weights: Path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]
 ) -> None:
-    monkeypatch.setattr("brdfgan.inference.predict.available_memory", lambda: 8 * 2**30)
+    monkeypatch.setattr("brdfgan.inference.model.memory.available_memory", lambda: 8 * 2**30)
     photo = flash_photo(tmp_path / "p.png")
     code = main(["predict", str(photo), "--out", str(tmp_path / "out"), "--weights", str(weights),
                  "--quiet", "--resolution", "100000"])  # fmt: skip
@@ -310,13 +305,13 @@ def test_check_memory_advises_tiles_when_the_untiled_pass_is_what_does_not_fit(t
     with pytest.raises(
         PredictError, match=r"needs ~4\.\d GiB of memory, 2\.0 GiB are available; use --tile 1024"
     ):
-        check_memory(model, PredictOptions(tiling=untiled), available=2 * 2**30)
-    check_memory(model, PredictOptions(), available=2 * 2**30)  # the default tiles fit
-    check_memory(model, PredictOptions(tiling=untiled), available=5 * 2**30)
+        check_memory(model, 2048, untiled, available=2 * 2**30)
+    check_memory(model, 2048, TilingConfig(), available=2 * 2**30)  # the default tiles fit
+    check_memory(model, 2048, untiled, available=5 * 2**30)
 
 
 def test_the_estimate_does_not_refuse_ordinary_runs() -> None:
     model = load_model()  # the shipped weights: a run at 1024² peaked at 0.75 GB resident
-    check_memory(model, PredictOptions(resolution=1024), available=2**30)
+    check_memory(model, 1024, TilingConfig(), available=2**30)
     with pytest.raises(PredictError, match=r"--resolution 4096 needs ~5\.0 GiB"):
-        check_memory(model, PredictOptions(resolution=4096), available=2**30)
+        check_memory(model, 4096, TilingConfig(), available=2**30)

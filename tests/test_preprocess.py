@@ -14,8 +14,8 @@ from PIL import Image
 
 from brdfgan.core.exposure import auto_expose
 from brdfgan.core.svbrdf import linear_to_srgb
-from brdfgan.inference.photo import Photo, PhotoError, read_photo
-from brdfgan.inference.preprocess import (
+from brdfgan.inference.intake.photo import Photo, PhotoError, read_photo
+from brdfgan.inference.intake.preprocess import (
     CENTRED_SNAP_FRACTION,
     CLIPPED_WARNING_FRACTION,
     Crop,

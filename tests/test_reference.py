@@ -9,6 +9,7 @@ import torch
 
 from brdfgan.core.svbrdf import linear_to_srgb, validate_maps
 from brdfgan.data.shards import Sample, shard_path, write_shard
+from brdfgan.errors import UserError
 from brdfgan.evaluation.run import fixed_samples
 from brdfgan.models.reference import ConstantMaps, PhotoAsBasecolor, mean_maps, reference_models
 from brdfgan.runs import load_weights, save_weights
@@ -23,7 +24,7 @@ def test_mean_maps_is_the_pixel_mean_with_a_unit_normal() -> None:
     assert torch.allclose(mean[[0, 1, 2, 6, 7]].double(), expected[[0, 1, 2, 6, 7]], atol=1e-6)
     assert torch.isclose(mean[3:6].norm(), torch.tensor(1.0))
     assert torch.allclose(mean[3:6].double(), expected[3:6] / expected[3:6].norm(), atol=1e-6)
-    with pytest.raises(ValueError, match="no training samples"):
+    with pytest.raises(UserError, match="no training samples"):
         mean_maps([])
 
 

@@ -118,7 +118,7 @@ def test_evaluate_and_export_weights_refuse_a_crafted_run_in_one_line(tmp_path: 
 
 def test_a_weights_file_naming_another_callable_is_refused(tmp_path: Path) -> None:
     generator = Generator(**SMALL)
-    for target in ("builtins.open", "brdfgan.models.reference.main", "brdfgan.runs.save_weights"):
+    for target in ("builtins.open", "brdfgan.models.reference.mean_maps", "brdfgan.runs.save_weights"):
         path = save_weights(tmp_path / "w.safetensors", generator, target=target, config={}, model_id="x")
         with pytest.raises(WeightsError, match=rf"w\.safetensors: not a brdfgan model config \({target}\)"):
             load_weights(path)

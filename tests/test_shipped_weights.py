@@ -16,10 +16,10 @@ from pathlib import Path
 import torch
 
 from brdfgan.core.svbrdf import CHANNELS
-from brdfgan.inference.photo import read_photo
-from brdfgan.inference.predict import default_weights_path, load_model
-from brdfgan.inference.preprocess import preprocess
-from brdfgan.inference.tiling import predict_maps
+from brdfgan.inference.intake.photo import read_photo
+from brdfgan.inference.intake.preprocess import preprocess
+from brdfgan.inference.model.tiling import predict_maps
+from brdfgan.inference.model.weights import default_weights_path, load_model
 
 EXPECTED = Path(__file__).parent / "expected" / "shipped_weights.json"
 SAMPLE = "wood_planks.jpg"

@@ -29,7 +29,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from brdfgan.core.svbrdf import NORMAL, validate_maps
-from brdfgan.inference.tiling import (
+from brdfgan.inference.model.tiling import (
     TILED_BUFFER_CHANNELS,
     TilingConfig,
     activation_bytes_per_pixel,

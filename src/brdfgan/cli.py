@@ -1,4 +1,12 @@
-"""The ``brdfgan`` console script. ``brdfgan predict --help`` shows examples."""
+"""The ``brdfgan`` console: one subcommand per task; ``brdfgan COMMAND --help`` for each.
+
+This module only parses arguments and prints; the work is done by the library function each
+command names. Errors a user can fix (:class:`brdfgan.errors.UserError`), Hydra/OmegaConf
+configuration errors, a full disk and an interrupt end a command with one line
+(:func:`brdfgan.errors.run_reporting_errors`); anything else is a bug and keeps its traceback.
+Training, evaluation and dataset generation are the Hydra scripts ``train.py``, ``evaluate.py``
+and ``generate.py``.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +16,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from brdfgan.errors import DISK_FULL_EXIT_CODE, INTERRUPTED_EXIT_CODE, USER_ERROR_EXIT_CODE, one_line
+from brdfgan import __version__
+from brdfgan.errors import DISK_FULL_EXIT_CODE, USER_ERROR_EXIT_CODE, one_line, run_reporting_errors
 
 # Exit status when the command ran but at least one photo of the batch failed.
 PARTIAL_FAILURE_EXIT_CODE = 1
@@ -28,7 +37,7 @@ examples:
 
 
 def _crop(text: str):  # -> Crop (imported lazily: --help stays fast)
-    from brdfgan.inference.preprocess import Crop
+    from brdfgan.inference.intake.preprocess import Crop
 
     try:
         return Crop.parse(text)
@@ -46,22 +55,11 @@ def _positive(text: str) -> int:
     return value
 
 
-def tiling_for(tile: int | None):  # -> TilingConfig
-    """The default tiling, or with another tile side (overlap and margin shrink for small tiles)."""
-    from brdfgan.inference.tiling import TilingConfig
-
-    default = TilingConfig()
-    if tile is None:
-        return default
-    overlap = min(default.overlap, tile // 2)
-    margin = min(default.margin, (3 * overlap) // 8)
-    return TilingConfig(tile=tile, overlap=overlap, margin=margin, max_direct_pixels=tile * tile)
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="brdfgan", description="SVBRDF estimation from a single flash photo (Boss & Lensch 2019)."
     )
+    parser.add_argument("--version", action="version", version=f"brdfgan {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     predict = commands.add_parser(
         "predict",
@@ -137,49 +135,125 @@ def build_parser() -> argparse.ArgumentParser:
         help="photos above N² run as N² tiles (default 1024: memory of one 1024² pass, any resolution)",
     )
     predict.add_argument("--quiet", action="store_true", help="no progress bar")
+    predict.set_defaults(run=predict_command, interrupted=PREDICT_INTERRUPTED)
+
+    export = commands.add_parser(
+        "export-weights",
+        help="a training run → a .safetensors weights file that predict can load",
+        description="Export a training run's generator (fp16 unless --full-precision) with its "
+        "training summary, as RUN_DIR/weights.safetensors (or --out) and <stem>.json.",
+    )
+    export.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="a train.py run folder")
+    export.add_argument("--checkpoint", default="last", help="last (default), best, or a .ckpt path")
+    export.add_argument("--out", type=Path, help="default: RUN_DIR/weights.safetensors")
+    export.add_argument("--model-id", help="default: the run directory's name")
+    export.add_argument("--full-precision", action="store_true", help="store fp32 (default fp16)")
+    export.add_argument("--hardware", help="what it was trained on, for the summary")
+    export.add_argument("--metrics", type=Path, help="an evaluate.py metrics.json to record as test metrics")
+    export.add_argument("--metrics-model", help="the model's name in --metrics (default: the only one)")
+    export.set_defaults(run=export_weights_command, interrupted="interrupted: no weights file was written")
+
+    sheet = commands.add_parser(
+        "contact-sheet",
+        help="a dataset → a PNG grid of samples (input | base color | normal | roughness | metallic)",
+        description="Write a contact sheet of a generated dataset: one seeded random sample per row.",
+    )
+    sheet.add_argument("data_dir", type=Path, metavar="DATA_DIR", help="a generated dataset")
+    sheet.add_argument("--split", default="train", help="default: train")
+    sheet.add_argument("--rows", type=int, default=16, help="samples shown (default 16)")
+    sheet.add_argument("--seed", type=int, default=0, help="which samples (default 0)")
+    sheet.add_argument("--out", type=Path, default=None, help="default: DATA_DIR/contact_sheet_<split>.png")
+    sheet.set_defaults(run=contact_sheet_command, interrupted="interrupted: no contact sheet was written")
+
+    convert = commands.add_parser(
+        "convert-deschaintre",
+        help="a folder of Deschaintre 2018 samples → brdfgan shards (for evaluate.py)",
+        description="Convert a folder of Deschaintre 2018 samples (one PNG of five tiles: "
+        "input | normal | diffuse | roughness | specular) into brdfgan shards.",
+    )
+    convert.add_argument("src", help="folder of .png samples")
+    convert.add_argument("out", help="dataset root; the split goes to OUT/<split>/")
+    convert.add_argument("--split", default="test", help="split name (default: test)")
+    convert.add_argument("--samples-per-shard", type=int, default=None, help="default: 64")
+    convert.add_argument("--flip-green", action="store_true", help="normal tiles are DirectX (+Y down)")
+    convert.add_argument("--crop", type=int, default=None, help="centre-crop every tile to CROP×CROP")
+    convert.add_argument(
+        "--skip-malformed", action="store_true", help="skip bad files (listed in the manifest)"
+    )
+    convert.add_argument("--overwrite", action="store_true", help="replace an existing split")
+    convert.set_defaults(
+        run=convert_deschaintre_command,
+        interrupted="interrupted: the split has no manifest yet; run again with --overwrite",
+    )
+
+    report = commands.add_parser(
+        "report",
+        help="training runs → the paper's ablation table (ablation.md, ablation.csv)",
+        description="Group the runs below RUN_DIR… by loss and seed and write the ablation table "
+        "next to the first directory (or --out).",
+    )
+    report.add_argument("directories", type=Path, nargs="+", metavar="RUN_DIR")
+    report.add_argument("--out", type=Path, default=None, help="default: the first RUN_DIR")
+    report.set_defaults(run=report_command, interrupted="interrupted")
+
+    references = commands.add_parser(
+        "references",
+        help="a dataset → weights of the trivial reference predictors (mean maps, photo as base colour)",
+        description="Average the train split of DATA_DIR and write OUT/mean_maps.safetensors and "
+        "OUT/photo_basecolor.safetensors, which predict and evaluate.py load like any model.",
+    )
+    references.add_argument("data_dir", type=Path, metavar="DATA_DIR", help="its train split is averaged")
+    references.add_argument("--out", type=Path, required=True, metavar="DIR")
+    references.set_defaults(run=references_command, interrupted="interrupted")
     return parser
+
+
+PREDICT_INTERRUPTED = "interrupted: finished photos are complete; the one in progress was not written"
 
 
 def predict_command(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from brdfgan.errors import interrupts_raise
-    from brdfgan.inference.export import ExportOptions
-    from brdfgan.inference.predict import (
+    from brdfgan.inference.model.memory import check_memory
+    from brdfgan.inference.model.tiling import TilingConfig
+    from brdfgan.inference.model.weights import load_model
+    from brdfgan.inference.outputs.export import ExportOptions
+    from brdfgan.inference.pipeline import (
+        PhotoFailure,
+        PhotoResult,
         PredictOptions,
-        check_memory,
+        Predictor,
         collect_photos,
-        load_model,
         predict_batch,
     )
 
-    try:
-        model = load_model(args.weights)
-        tiling = tiling_for(args.tile)
-        options = PredictOptions(
-            resolution=args.resolution,
-            crop=args.crop,
-            colorspace=args.input_colorspace,
-            export=ExportOptions(args.format, args.bit_depth, args.normal_convention),
-            tiling=tiling,
-            preview=not args.no_preview,
-            animate=args.animate,
-        )
-        check_memory(model, options)  # before any photo is read or anything large allocated
-    except ValueError as error:
-        print(f"error: {one_line(error)}", file=sys.stderr)
-        return USER_ERROR_EXIT_CODE
+    options = PredictOptions(
+        resolution=args.resolution,
+        crop=args.crop,
+        colorspace=args.input_colorspace,
+        export=ExportOptions(args.format, args.bit_depth, args.normal_convention),
+        tiling=TilingConfig.for_tile(args.tile),
+        preview=not args.no_preview,
+        animate=args.animate,
+    )
+    predictor = Predictor.create(load_model(args.weights), options)
+    # Before any photo is read or anything large allocated.
+    check_memory(predictor.model, predictor.resolution, options.tiling)
     photos = collect_photos(args.inputs)
     if not photos:
         print("error: no photos to process", file=sys.stderr)
         return USER_ERROR_EXIT_CODE
-    resolution = options.resolution or model.resolution
-    print(f"model {model.model_id} ({model.path}); {len(photos)} photo(s) at {resolution}²", file=sys.stderr)
+    model = predictor.model
+    print(
+        f"model {model.model_id} ({model.path}); {len(photos)} photo(s) at {predictor.resolution}²",
+        file=sys.stderr,
+    )
     bar = tqdm(total=len(photos), unit="photo", disable=args.quiet or None, file=sys.stderr)
 
-    def report(result) -> None:
-        if isinstance(result, tuple):
-            bar.write(f"error: {result[1]}", file=sys.stderr)
+    def report(result: PhotoResult | PhotoFailure) -> None:
+        if isinstance(result, PhotoFailure):
+            bar.write(f"error: {result.message}", file=sys.stderr)
         else:
             for warning in result.warnings:
                 bar.write(f"warning: {result.photo}: {warning}", file=sys.stderr)
@@ -188,14 +262,9 @@ def predict_command(args: argparse.Namespace) -> int:
     try:
         # SIGTERM too: the photo in progress then leaves no hidden staging folder behind.
         with interrupts_raise():
-            outcome = predict_batch(photos, args.out, model, options, on_result=report)
-    except KeyboardInterrupt:
+            outcome = predict_batch(photos, args.out, predictor, on_result=report)
+    finally:
         bar.close()
-        print(
-            "interrupted: finished photos are complete; the one in progress was not written", file=sys.stderr
-        )
-        return INTERRUPTED_EXIT_CODE
-    bar.close()
     for result in outcome.succeeded:
         print(result.output)
     if outcome.stopped is not None:  # a full disk; its error line was printed as it happened
@@ -207,20 +276,72 @@ def predict_command(args: argparse.Namespace) -> int:
         return DISK_FULL_EXIT_CODE
     if outcome.failed:
         print(f"{len(outcome.failed)} of {len(photos)} photo(s) failed:", file=sys.stderr)
-        for _, message in outcome.failed:
-            print(f"  {message}", file=sys.stderr)
+        for failure in outcome.failed:
+            print(f"  {failure.message}", file=sys.stderr)
         return PARTIAL_FAILURE_EXIT_CODE
     print(f"done: {len(outcome.succeeded)} material(s) in {args.out}", file=sys.stderr)
+    return 0
+
+
+def export_weights_command(args: argparse.Namespace) -> int:
+    from brdfgan.inference.model.export_weights import export_weights
+
+    metrics = (args.metrics, args.metrics_model) if args.metrics is not None else None
+    out = args.out or args.run_dir / "weights.safetensors"
+    export_weights(args.run_dir, out, checkpoint=args.checkpoint, model_id=args.model_id,
+                   half=not args.full_precision, hardware=args.hardware, metrics=metrics)  # fmt: skip
+    print(out)
+    return 0
+
+
+def contact_sheet_command(args: argparse.Namespace) -> int:
+    from brdfgan.data.contact_sheet import write_contact_sheet
+
+    print(write_contact_sheet(args.data_dir, args.split, rows=args.rows, seed=args.seed, out=args.out))
+    return 0
+
+
+def convert_deschaintre_command(args: argparse.Namespace) -> int:
+    from brdfgan.data.deschaintre_dataset import DEFAULT_SAMPLES_PER_SHARD, convert_deschaintre_folder
+
+    per_shard = DEFAULT_SAMPLES_PER_SHARD if args.samples_per_shard is None else args.samples_per_shard
+    summary = convert_deschaintre_folder(
+        args.src,
+        args.out,
+        args.split,
+        per_shard,
+        flip_green=args.flip_green,
+        crop=args.crop,
+        skip_malformed=args.skip_malformed,
+        overwrite=args.overwrite,
+    )
+    for name, reason in summary.skipped:
+        print(f"skipped {name}: {reason}")
+    print(summary.describe())
+    return 0
+
+
+def report_command(args: argparse.Namespace) -> int:
+    from brdfgan.report import write_report
+
+    markdown, _ = write_report(args.directories, args.out)
+    print(markdown.read_text())
+    return 0
+
+
+def references_command(args: argparse.Namespace) -> int:
+    from brdfgan.references import write_reference_weights
+
+    for path in write_reference_weights(args.data_dir, args.out):
+        print(path)
     return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s: %(message)s")
     args = build_parser().parse_args(argv)
-    if args.command == "predict":
-        return predict_command(args)
-    raise AssertionError(f"unhandled command {args.command}")  # argparse rejects unknown commands
+    return run_reporting_errors(lambda: args.run(args), interrupted=args.interrupted)
 
 
-if __name__ == "__main__":
+if __name__ == "__main__":  # ``python -m brdfgan.cli`` is the console script too
     sys.exit(main())

@@ -1,7 +1,9 @@
 """User errors: what a command reports as one line and a non-zero exit instead of a traceback.
 
-Every module raises a ``ValueError`` subclass naming the offending file or key; entry points wrap
-their work in :func:`exit_on_user_error` so those become ``error: <message>`` on stderr, exit 2.
+Every project error class derives from :class:`UserError` and names the offending file or key;
+entry points wrap their work in :func:`exit_on_user_error` (or :func:`run_reporting_errors`) so
+those, and Hydra's and OmegaConf's configuration errors, become ``error: <message>`` on stderr,
+exit 2. Any other exception, a plain ``ValueError`` included, is a bug and keeps its traceback.
 A full disk is not the user's mistake in the command but needs no traceback either: it becomes
 ``error: <path>: no space left on device``, exit 1 (:class:`DiskFullError`, raised by the atomic
 writers of :mod:`brdfgan.io.atomic`, or any ``OSError`` with ``ENOSPC``/``EDQUOT``).
@@ -78,33 +80,58 @@ def one_line(error: BaseException) -> str:
     return " ".join(str(error).split()) or type(error).__name__
 
 
+def report_error(error: BaseException) -> int | None:
+    """Print the one line for an error a command reports without a traceback and return its exit
+    status; ``None`` for anything else (a bug), which the caller re-raises."""
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    if is_disk_full(error):
+        print(f"error: {disk_full_message(error)}", file=sys.stderr)
+        return DISK_FULL_EXIT_CODE
+    if isinstance(error, UserError | HydraException | OmegaConfBaseException):
+        print(f"error: {one_line(error)}", file=sys.stderr)
+        return USER_ERROR_EXIT_CODE
+    return None
+
+
+def run_reporting_errors(function: Callable[[], int], *, interrupted: str = "interrupted") -> int:
+    """``function()``'s exit status; a user error, a full disk or an interrupt print one line and
+    return their exit status instead (:func:`report_error`). ``interrupted``: what an interrupt
+    prints unless the ``KeyboardInterrupt`` carries a message of its own."""
+    try:
+        return function()
+    except KeyboardInterrupt as error:
+        # A command that knows more (where to resume from) raises it with a message.
+        print(str(error) or interrupted, file=sys.stderr)
+        return INTERRUPTED_EXIT_CODE
+    except Exception as error:
+        code = report_error(error)
+        if code is None:
+            raise
+        return code
+
+
 def exit_on_user_error(
     function: Callable[P, R] | None = None, *, interrupted: str = "interrupted"
 ) -> Callable[P, R] | Callable[[Callable[P, R]], Callable[P, R]]:
-    """Run ``function``; a ``ValueError`` (our error classes derive from it), Hydra's
-    instantiation/config errors, a full disk or a ``KeyboardInterrupt`` end the process with one
-    line. ``interrupted``: what an interrupt prints (each command says what it kept)."""
+    """Run ``function``; a :class:`UserError`, Hydra's instantiation/config errors, a full disk or
+    a ``KeyboardInterrupt`` end the process with one line (:func:`report_error`). ``interrupted``:
+    what an interrupt prints (each command says what it kept)."""
 
     def decorate(inner: Callable[P, R]) -> Callable[P, R]:
-        from hydra.errors import HydraException
-        from omegaconf.errors import OmegaConfBaseException
-
         @functools.wraps(inner)
         def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
             try:
                 return inner(*args, **kwargs)
             except KeyboardInterrupt as error:
-                # A command that knows more (where to resume from) raises it with a message.
                 print(str(error) or interrupted, file=sys.stderr)
                 raise SystemExit(INTERRUPTED_EXIT_CODE) from None
             except BaseException as error:
-                if is_disk_full(error):
-                    print(f"error: {disk_full_message(error)}", file=sys.stderr)
-                    raise SystemExit(DISK_FULL_EXIT_CODE) from None
-                if isinstance(error, ValueError | HydraException | OmegaConfBaseException):
-                    print(f"error: {one_line(error)}", file=sys.stderr)
-                    raise SystemExit(USER_ERROR_EXIT_CODE) from None
-                raise
+                code = report_error(error)
+                if code is None:
+                    raise
+                raise SystemExit(code) from None
 
         return wrapper
 

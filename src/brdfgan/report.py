@@ -1,4 +1,4 @@
-"""The paper's ablation table from training runs: ``python -m brdfgan.report RUN_DIR…``.
+"""The paper's ablation table from training runs: ``brdfgan report RUN_DIR…``.
 
 Every run folder below the given directories that holds a ``metrics.json`` (written by
 ``train.py`` after testing) is grouped by its ``loss`` choice and seed (from the run's
@@ -10,7 +10,6 @@ Written as ``ablation.md`` and ``ablation.csv`` next to the first directory (or 
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import statistics
@@ -19,7 +18,7 @@ from pathlib import Path
 
 import yaml
 
-from brdfgan.errors import exit_on_user_error
+from brdfgan.errors import UserError
 from brdfgan.runs import RunFolder
 
 COLUMNS = (("full", "proposed"), ("no_render", "−L_r"), ("no_param", "−L_p"), ("no_feat", "−L_f"),
@@ -29,7 +28,7 @@ ROWS = (("rmse/diffuse", "diffuse"), ("rmse/specular", "specular"), ("rmse/norma
         ("rerender_rmse", "re-render"))  # fmt: skip
 
 
-class ReportError(ValueError):
+class ReportError(UserError):
     """No usable runs; the message names the directory."""
 
 
@@ -107,18 +106,3 @@ def write_report(directories: list[Path], out: Path | None = None) -> tuple[Path
     with table.open("w", newline="") as handle:
         csv.writer(handle).writerows(rows)
     return markdown, table
-
-
-@exit_on_user_error
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("directories", type=Path, nargs="+")
-    parser.add_argument("--out", type=Path, default=None)
-    args = parser.parse_args(argv)
-    markdown, _ = write_report(args.directories, args.out)
-    print(markdown.read_text())
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

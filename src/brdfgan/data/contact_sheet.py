@@ -1,7 +1,7 @@
 """Contact sheet of a dataset: a PNG grid, one sample per row — input | base color | normal |
 roughness | metallic — so a person can judge the realism of generated data at a glance.
 
-    python -m brdfgan.data.contact_sheet DATA_DIR [--split train] [--rows 16] [--seed 0] [--out PATH]
+    brdfgan contact-sheet DATA_DIR [--split train] [--rows 16] [--seed 0] [--out PATH]
 
 The input photo is linear LDR and is shown sRGB-encoded, as a phone would display it; base color
 is stored sRGB and shown as is; normals as (n+1)/2 (OpenGL, the usual blue-ish look); roughness
@@ -10,7 +10,6 @@ and metallic as gray. Samples are a seeded uniform draw (reservoir sampling over
 
 from __future__ import annotations
 
-import argparse
 import random
 from pathlib import Path
 
@@ -20,7 +19,7 @@ import torch
 
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
 from brdfgan.data.shards import Sample, iter_shard, list_shards
-from brdfgan.errors import exit_on_user_error
+from brdfgan.errors import UserError
 from brdfgan.io.images import write_image
 
 COLUMNS = ("input", "basecolor", "normal", "roughness", "metallic")
@@ -64,7 +63,7 @@ def sample_row(sample: Sample) -> torch.Tensor:
 def contact_sheet(samples: list[Sample]) -> np.ndarray:
     """The grid with a header naming the columns. Shape: ``(rows·H + label, 5·W, 3)`` in [0, 1]."""
     if not samples:
-        raise ValueError("no samples to show")
+        raise UserError("no samples to show")
     rows = torch.cat([sample_row(s) for s in samples], dim=-2).permute(1, 2, 0).numpy()
     width = rows.shape[1] // len(COLUMNS)
     header = np.full((_LABEL_HEIGHT, rows.shape[1], 3), 255, dtype=np.uint8)  # putText draws on 8-bit
@@ -84,20 +83,3 @@ def write_contact_sheet(
     """Write the contact sheet PNG (default ``DATA_DIR/contact_sheet_<split>.png``)."""
     path = Path(out) if out else Path(data_dir) / f"contact_sheet_{split}.png"
     return write_image(path, contact_sheet(pick_samples(data_dir, split, rows, seed)))
-
-
-@exit_on_user_error
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("data_dir", type=Path)
-    parser.add_argument("--split", default="train")
-    parser.add_argument("--rows", type=int, default=16)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=None)
-    args = parser.parse_args(argv)
-    print(write_contact_sheet(args.data_dir, args.split, rows=args.rows, seed=args.seed, out=args.out))
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

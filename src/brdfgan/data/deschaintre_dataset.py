@@ -37,17 +37,16 @@ Malformed files (not decodable, not RGB, width ≠ 5 × height, crop larger than
 a half-converted split is never mistaken for a complete one — or, with ``skip_malformed=True``,
 skips it and lists it (file and reason) in the manifest and the returned summary.
 
-CLI: ``python -m brdfgan.data.deschaintre_dataset SRC OUT [--split test] [--flip-green] ...``
+Command: ``brdfgan convert-deschaintre SRC OUT [--split test] [--flip-green] ...``
 """
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import math
 import os
 import re
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -67,7 +66,7 @@ from brdfgan.core.svbrdf import (
     srgb_to_linear,
 )
 from brdfgan.data.shards import Sample, ShardInfo, list_shards, shard_path, write_manifest, write_shard
-from brdfgan.errors import exit_on_user_error
+from brdfgan.errors import UserError
 from brdfgan.io.images import ImageIOError, read_image, write_image
 
 __all__ = [
@@ -95,7 +94,7 @@ TIE_TOLERANCE = 1e-6
 _BINARY_EPS = 1e-6
 
 
-class DeschaintreDatasetError(ValueError):
+class DeschaintreDatasetError(UserError):
     """The conversion cannot proceed (bad folder, existing output); the message names the path."""
 
 
@@ -414,44 +413,3 @@ def _prepare_split(root: Path, split: str, overwrite: bool) -> None:
         )
     for path in [manifest, *existing]:
         path.unlink(missing_ok=True)
-
-
-# --------------------------------------------------------------------------------------------
-# CLI
-
-
-@exit_on_user_error
-def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog="python -m brdfgan.data.deschaintre_dataset",
-        description="Convert a folder of Deschaintre 2018 samples (one PNG of five tiles: "
-        "input | normal | diffuse | roughness | specular) into brdfgan shards.",
-    )
-    parser.add_argument("src", help="folder of .png samples")
-    parser.add_argument("out", help="dataset root; the split goes to OUT/<split>/")
-    parser.add_argument("--split", default="test", help="split name (default: test)")
-    parser.add_argument("--samples-per-shard", type=int, default=DEFAULT_SAMPLES_PER_SHARD)
-    parser.add_argument("--flip-green", action="store_true", help="normal tiles are DirectX (+Y down)")
-    parser.add_argument("--crop", type=int, default=None, help="centre-crop every tile to CROP×CROP")
-    parser.add_argument(
-        "--skip-malformed", action="store_true", help="skip bad files (listed in the manifest)"
-    )
-    parser.add_argument("--overwrite", action="store_true", help="replace an existing split")
-    args = parser.parse_args(argv)
-    summary = convert_deschaintre_folder(
-        args.src,
-        args.out,
-        args.split,
-        args.samples_per_shard,
-        flip_green=args.flip_green,
-        crop=args.crop,
-        skip_malformed=args.skip_malformed,
-        overwrite=args.overwrite,
-    )
-    for name, reason in summary.skipped:
-        print(f"skipped {name}: {reason}")
-    print(summary.describe())
-
-
-if __name__ == "__main__":
-    main()

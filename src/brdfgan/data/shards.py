@@ -65,6 +65,7 @@ from brdfgan.core.svbrdf import (
     split_maps,
     validate_maps,
 )
+from brdfgan.errors import UserError
 from brdfgan.io.atomic import atomic_replace, write_text_atomic
 
 __all__ = [
@@ -110,7 +111,7 @@ _SCALE16 = 65535.0
 _TAR_BLOCK = 512
 
 
-class ShardError(ValueError):
+class ShardError(UserError):
     """A sample or shard is malformed or corrupt; the message names the sample key or file."""
 
 

@@ -1,1 +1,11 @@
-"""Inference: loading trained generators (safetensors weights, training checkpoints)."""
+"""Inference, by stage: photo → engine-ready material (the pipeline behind ``brdfgan predict``).
+
+- :mod:`~brdfgan.inference.intake`: reading a photo (:mod:`.intake.photo`) and preparing it for the
+  network (:mod:`.intake.preprocess`: crop on the flash hotspot, resize, auto exposure).
+- :mod:`~brdfgan.inference.model`: the generator (:mod:`.model.weights`: loading a ``.safetensors``
+  file; :mod:`.model.export_weights`: writing one from a training run), running it with bounded
+  memory (:mod:`.model.tiling`) and checking that memory up front (:mod:`.model.memory`).
+- :mod:`~brdfgan.inference.outputs`: texture files, ``material.glb`` and ``material.json``
+  (:mod:`.outputs.export`, :mod:`.outputs.gltf`) and the relit previews (:mod:`.preview`).
+- :mod:`~brdfgan.inference.pipeline`: the stages chained per photo and per batch.
+"""

@@ -9,15 +9,11 @@ Both behave like generators (``forward(photo) -> maps``, ``config()``, ``size_mu
 evaluator, :mod:`brdfgan.runs` and ``brdfgan predict`` take them unchanged. Build
 their weight files from a dataset with::
 
-    python -m brdfgan.models.reference DATA_DIR --out DIR     # DIR/{mean_maps,photo_basecolor}.safetensors
+    brdfgan references DATA_DIR --out DIR         # DIR/{mean_maps,photo_basecolor}.safetensors
 """
 
 from __future__ import annotations
 
-import argparse
-import sys
-from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import torch
@@ -32,6 +28,7 @@ from brdfgan.core.svbrdf import (
     linear_to_srgb,
     normalize_normal,
 )
+from brdfgan.errors import UserError
 
 
 class ConstantMaps(nn.Module):
@@ -92,7 +89,7 @@ def mean_maps(batches: Any) -> Tensor:
         total += maps.sum(dim=(0, 2, 3))
         pixels += maps.shape[0] * maps.shape[2] * maps.shape[3]
     if pixels == 0:
-        raise ValueError("no training samples to average")
+        raise UserError("no training samples to average")  # an empty train split: `brdfgan references`
     mean = total / pixels
     mean[NORMAL] = normalize_normal(mean[NORMAL].view(3, 1, 1), dim=0).view(3)
     return mean.float()
@@ -106,35 +103,3 @@ def reference_models(mean: Tensor) -> dict[str, nn.Module]:
     photo.roughness.fill_(float(mean[ROUGHNESS]))
     photo.metallic.fill_(float(mean[METALLIC]))
     return {"mean_maps": constant, "photo_basecolor": photo}
-
-
-def main(argv: Sequence[str] | None = None) -> None:
-    from brdfgan.data.datamodule import ShardDataModule
-    from brdfgan.errors import exit_on_user_error
-    from brdfgan.runs import save_weights
-
-    parser = argparse.ArgumentParser(prog="python -m brdfgan.models.reference", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
-    parser.add_argument("data_dir", type=Path, help="a generated dataset; its train split is averaged")
-    parser.add_argument("--out", type=Path, required=True)
-    args = parser.parse_args(argv)
-
-    @exit_on_user_error
-    def run() -> None:
-        datamodule = ShardDataModule(str(args.data_dir), batch_size=16, train_split=None, val_split=None,
-                                     test_split="train")  # fmt: skip
-        datamodule.setup("test")
-        mean = mean_maps(datamodule.test_dataloader())
-        args.out.mkdir(parents=True, exist_ok=True)
-        for name, model in reference_models(mean).items():
-            path = args.out / f"{name}.safetensors"
-            save_weights(path, model, target=f"brdfgan.models.reference.{type(model).__name__}", config={},
-                         model_id=f"{name} ({args.data_dir.name} train mean)",
-                         extra={"train_mean": [round(float(v), 6) for v in mean]})  # fmt: skip
-            print(path)
-
-    run()
-
-
-if __name__ == "__main__":
-    main(sys.argv[1:])

@@ -22,6 +22,7 @@ from brdfgan.data.materials.families import (
     tiles,
     wood,
 )
+from brdfgan.errors import UserError
 
 FAMILIES: Mapping[str, MaterialFamily] = MappingProxyType(
     {
@@ -42,7 +43,7 @@ FAMILIES: Mapping[str, MaterialFamily] = MappingProxyType(
 )
 
 
-class UnknownFamilyError(ValueError):
+class UnknownFamilyError(UserError):
     """A configured family name is not in the registry."""
 
 

@@ -39,7 +39,7 @@ import os
 import struct
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -47,6 +47,7 @@ import torch
 from PIL import Image, UnidentifiedImageError
 
 from brdfgan.core.svbrdf import srgb_to_linear
+from brdfgan.errors import UserError
 from brdfgan.io.images import ImageIOError, read_image
 
 __all__ = [
@@ -97,7 +98,7 @@ _LIBRAW_FLIP_TO_EXIF = {0: 1, 3: 3, 5: 8, 6: 6}
 _EXR_PIXEL_BITS = {0: 32, 1: 16, 2: 32}  # UINT, HALF, FLOAT
 
 
-class PhotoError(ValueError):
+class PhotoError(UserError):
     """A photo cannot be used; the message is one line and starts with the file's path."""
 
     def __init__(self, path: str | os.PathLike[str], problem: str) -> None:
@@ -137,6 +138,17 @@ class Photo:
     @property
     def width(self) -> int:
         return int(self.linear.shape[-1])
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``input`` entry of ``material.json``: the file and how it was decoded."""
+        return {
+            "file": str(self.path),
+            "source": self.source,
+            "bit_depth": self.bit_depth,
+            "colorspace": self.colorspace,
+            "exif_orientation": self.orientation,
+            "size": [self.width, self.height],
+        }
 
 
 def read_photo(path: str | os.PathLike[str], colorspace: Colorspace | None = None) -> Photo:

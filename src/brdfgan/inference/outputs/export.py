@@ -64,8 +64,8 @@ from brdfgan.core.svbrdf import (
     srgb_to_linear,
     validate_maps,
 )
-from brdfgan.errors import DiskFullError, is_disk_full
-from brdfgan.inference.gltf import write_glb
+from brdfgan.errors import DiskFullError, UserError, is_disk_full
+from brdfgan.inference.outputs.gltf import write_glb
 from brdfgan.io.images import write_image
 
 log = logging.getLogger(__name__)
@@ -82,7 +82,7 @@ HIDDEN_OUTPUT_PATTERN = re.compile(
 )
 
 
-class ExportError(ValueError):
+class ExportError(UserError):
     """The outputs cannot be written; the message names the path or option."""
 
 

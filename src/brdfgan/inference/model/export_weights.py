@@ -1,6 +1,6 @@
 """Turn a training run into a ``.safetensors`` weights file that ``brdfgan predict`` can load.
 
-    python -m brdfgan.inference.export_weights RUN_DIR [--checkpoint last|best|PATH]
+    brdfgan export-weights RUN_DIR [--checkpoint last|best|PATH]
         [--out PATH] [--model-id ID] [--full-precision] [--hardware TEXT]
         [--metrics EVAL_DIR/metrics.json [--metrics-model NAME]]
 
@@ -18,11 +18,8 @@ network classes, plain arguments): a crafted run folder cannot make this command
 
 from __future__ import annotations
 
-import argparse
 import json
 import platform
-import sys
-from collections.abc import Sequence
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -30,7 +27,6 @@ from typing import Any
 import torch
 from omegaconf import OmegaConf
 
-from brdfgan.errors import exit_on_user_error
 from brdfgan.io.atomic import write_text_atomic
 from brdfgan.runs import RunFolder, WeightsError, load_checkpoint_generator, read_checkpoint, save_weights
 
@@ -176,27 +172,3 @@ def evaluation_metrics(path: Path, model: str | None = None) -> dict[str, float]
         names = ", ".join(results) if isinstance(results, dict) else "none"
         raise WeightsError(f"{path}: no model {model!r} in these metrics (models: {names})")
     return results[model]
-
-
-@exit_on_user_error
-def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m brdfgan.inference.export_weights", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
-    parser.add_argument("run_dir", type=Path)
-    parser.add_argument("--checkpoint", default="last", help="last (default), best, or a .ckpt path")
-    parser.add_argument("--out", type=Path, help="default: RUN_DIR/weights.safetensors")
-    parser.add_argument("--model-id", help="default: the run directory's name")
-    parser.add_argument("--full-precision", action="store_true", help="store fp32 (default fp16)")
-    parser.add_argument("--hardware", help="what it was trained on, for the summary")
-    parser.add_argument("--metrics", type=Path, help="an evaluate.py metrics.json to record as test metrics")
-    parser.add_argument("--metrics-model", help="the model's name in --metrics (default: the only one)")
-    args = parser.parse_args(argv)
-    metrics = (args.metrics, args.metrics_model) if args.metrics is not None else None
-    out = args.out or args.run_dir / "weights.safetensors"
-    export_weights(args.run_dir, out, checkpoint=args.checkpoint, model_id=args.model_id,
-                   half=not args.full_precision, hardware=args.hardware, metrics=metrics)  # fmt: skip
-    print(out)
-
-
-if __name__ == "__main__":
-    main(sys.argv[1:])

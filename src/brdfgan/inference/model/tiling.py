@@ -54,6 +54,7 @@ import math
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 import torch.nn.functional as F
@@ -117,10 +118,29 @@ class TilingConfig:
         """Whether :func:`predict_maps` splits an ``height × width`` photo into tiles."""
         return height * width > self.max_direct_pixels
 
+    @classmethod
+    def for_tile(cls, tile: int | None) -> TilingConfig:
+        """The default tiling, or with another tile side (``--tile``): photos above ``tile``² run
+        tiled; overlap and margin shrink for small tiles so the config stays valid."""
+        default = cls()
+        if tile is None:
+            return default
+        overlap = min(default.overlap, tile // 2)
+        margin = min(default.margin, (3 * overlap) // 8)
+        return cls(tile=tile, overlap=overlap, margin=margin, max_direct_pixels=tile * tile)
+
     @property
     def ramp(self) -> int:
         """Width of the raised-cosine transition inside the overlap: ``overlap - 2 * margin``."""
         return self.overlap - 2 * self.margin
+
+    def to_json(self, tiled: bool) -> dict[str, Any]:
+        """The ``inference`` entry of ``material.json`` for a photo that ran ``tiled`` or not."""
+        return {
+            "tiled": tiled,
+            "tile": self.tile if tiled else None,
+            "overlap": self.overlap if tiled else None,
+        }
 
 
 # --- statistics ------------------------------------------------------------------------------------

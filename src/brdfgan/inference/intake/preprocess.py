@@ -2,7 +2,7 @@
 
 The paper (§6.1) exported RAW photos linearly and cropped them 1:1 with the camera flash roughly
 at the centre; the training inputs were rendered HDR images auto-exposed to linear LDR (appendix,
-DESIGN.md §2). :func:`preprocess` does the same to a :class:`~brdfgan.inference.photo.Photo`:
+DESIGN.md §2). :func:`preprocess` does the same to a :class:`~brdfgan.inference.intake.photo.Photo`:
 
 1. **Crop.** Either the user's ``x,y,size`` square (validated against the photo), or the square
    chosen by :func:`hotspot_crop` around the flash highlight found by :func:`find_hotspot`.
@@ -29,13 +29,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import torch
 import torch.nn.functional as F
 from torch import Tensor
 
 from brdfgan.core.exposure import auto_expose, luminance
-from brdfgan.inference.photo import Photo, PhotoError
+from brdfgan.inference.intake.photo import Photo, PhotoError
 
 __all__ = [
     "CLIPPED_WARNING_FRACTION",
@@ -152,6 +153,22 @@ class Preprocessed:
     resized_from: int
     stats: dict[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``crop``, ``resolution``, ``resized_from`` and ``exposure_scale`` entries of
+        ``material.json`` (``input_statistics`` is :attr:`stats`)."""
+        return {
+            "crop": {
+                "x": self.crop.x,
+                "y": self.crop.y,
+                "size": self.crop.size,
+                "chosen": "user" if self.hotspot is None else "flash hotspot",
+                "hotspot": list(self.hotspot) if self.hotspot is not None else None,
+            },
+            "resolution": int(self.photo.shape[-1]),
+            "resized_from": self.resized_from,
+            "exposure_scale": self.exposure_scale,
+        }
 
 
 def find_hotspot(linear: Tensor) -> tuple[float, float]:
@@ -316,7 +333,7 @@ def preprocess(
     """Crop, resize (linear) and auto-expose a photo into the generator's input.
 
     Args:
-        photo: the decoded photo (:func:`~brdfgan.inference.photo.read_photo`).
+        photo: the decoded photo (:func:`~brdfgan.inference.intake.photo.read_photo`).
         resolution: the side N of the network input.
         crop: a user-given square (validated against the photo); ``None`` chooses one around the
             flash highlight with :func:`hotspot_crop`.

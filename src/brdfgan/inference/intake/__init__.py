@@ -1,0 +1,1 @@
+"""Intake: photo files decoded to linear RGB, then cropped, resized and exposed for the network."""

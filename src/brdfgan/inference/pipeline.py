@@ -1,0 +1,205 @@
+"""Photo → engine-ready material: the stages chained, per photo and per batch (``brdfgan predict``).
+
+For each photo::
+
+    read_photo (linear RGB, EXIF orientation, colour-space checks)       intake
+      → preprocess (square crop on the flash hotspot, linear resize, the training auto exposure)
+      → the generator, tiled with frozen normalisation statistics when large          model
+      → write_material (textures, material.glb, material.json, preview.png [, preview.gif/mp4])  outputs
+
+A batch keeps going when one photo fails: :func:`predict_batch` returns what succeeded and, for
+each failure, the one-line reason; only a full disk stops it (every later photo would fail the
+same way). Before writing it cleans up after killed runs into the same folder
+(:func:`~brdfgan.inference.outputs.export.recover_outputs`), and while it runs SIGTERM interrupts
+it like Ctrl-C when run inside :func:`brdfgan.errors.interrupts_raise`, so that the staging folder
+of the photo in progress is removed.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from torch import Tensor
+
+from brdfgan.errors import UserError, disk_full_message, is_disk_full, one_line
+from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, read_photo
+from brdfgan.inference.intake.preprocess import Crop, preprocess
+from brdfgan.inference.model.tiling import TilingConfig, predict_direct, predict_tiled
+from brdfgan.inference.model.weights import Model
+from brdfgan.inference.outputs.export import ExportOptions, recover_outputs, write_material
+from brdfgan.inference.preview import write_animation, write_preview
+
+log = logging.getLogger(__name__)
+
+BRDF_DESCRIPTION = (
+    "Cook-Torrance GGX (Smith, Schlick) + Burley diffuse, metallic workflow, alpha = roughness^2"
+)
+
+
+@dataclass(frozen=True)
+class PredictOptions:
+    """Everything ``brdfgan predict`` lets the user choose besides inputs and weights."""
+
+    resolution: int | None = None  # None: the resolution the model was trained at
+    crop: Crop | None = None  # None: a square centred on the detected flash hotspot
+    colorspace: Colorspace | None = None  # None: the file format's default (sRGB for JPEG/PNG)
+    export: ExportOptions = field(default_factory=ExportOptions)
+    tiling: TilingConfig = field(default_factory=TilingConfig)
+    preview: bool = True
+    animate: Literal["gif", "mp4"] | None = None
+
+
+@dataclass(frozen=True)
+class Predictor:
+    """A model with the options of one run, the resolution and "tiled or not" decided once."""
+
+    model: Model
+    options: PredictOptions
+    resolution: int
+    tiled: bool
+
+    @classmethod
+    def create(cls, model: Model, options: PredictOptions) -> Predictor:
+        resolution = options.resolution or model.resolution
+        return cls(model, options, resolution, options.tiling.runs_tiled(resolution, resolution))
+
+    def maps(self, photo: Tensor) -> Tensor:
+        """The generator's maps of one prepared photo. Shape: ``(3, N, N)`` → ``(8, N, N)``."""
+        if self.tiled:
+            return predict_tiled(self.model.generator, photo[None], self.options.tiling)[0]
+        return predict_direct(self.model.generator, photo[None])[0]
+
+
+@dataclass(frozen=True)
+class PhotoResult:
+    photo: Path
+    output: Path
+    warnings: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class PhotoFailure:
+    photo: Path
+    message: str  # one line, naming the photo
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    succeeded: list[PhotoResult]
+    failed: list[PhotoFailure]
+    stopped: str | None = None  # why the batch ended before its last photo (a full disk)
+
+
+def collect_photos(inputs: Sequence[str | os.PathLike[str]]) -> list[Path]:
+    """Photos named on the command line; a directory contributes its photo files (sorted, not
+    recursive). A missing path is kept, so that it is reported as a failure of its own."""
+    photos: list[Path] = []
+    for item in inputs:
+        path = Path(item)
+        if path.is_dir():
+            found = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in PHOTO_EXTENSIONS)
+            if not found:
+                log.warning(
+                    "%s: no photo files (%s) in this directory", path, ", ".join(sorted(PHOTO_EXTENSIONS))
+                )
+            photos += found
+        else:
+            photos.append(path)
+    return photos
+
+
+def output_names(photos: Sequence[Path]) -> list[str]:
+    """One output folder name per photo: the file stem, made unique within the batch."""
+    names: list[str] = []
+    taken: set[str] = set()
+    for photo in photos:
+        base = re.sub(r"[^A-Za-z0-9._-]+", "_", photo.stem).strip("._") or "photo"
+        name, counter = base, 2
+        while name in taken:
+            name, counter = f"{base}-{counter}", counter + 1
+        taken.add(name)
+        names.append(name)
+    return names
+
+
+def predict_photo(path: Path, out_dir: Path, predictor: Predictor) -> PhotoResult:
+    """Run the whole pipeline on one photo and write ``out_dir`` (replaced atomically)."""
+    options = predictor.options
+    photo = read_photo(path, options.colorspace)
+    prepared = preprocess(photo, predictor.resolution, options.crop)
+    maps = predictor.maps(prepared.photo)
+    warnings = photo.warnings + prepared.warnings
+    metadata = {
+        "name": out_dir.name,
+        "model": predictor.model.to_json(),
+        "input": photo.to_json(),
+        **prepared.to_json(),
+        "inference": options.tiling.to_json(predictor.tiled),
+        "input_statistics": prepared.stats,
+        "brdf": BRDF_DESCRIPTION,
+        "warnings": list(warnings),
+    }
+    extra_files: dict[str, Callable[[Path], Any]] = {}
+    if options.preview:
+        extra_files["preview.png"] = lambda target: write_preview(target, prepared.photo, maps)
+    if options.animate is not None:
+        extra_files[f"preview.{options.animate}"] = lambda target: write_animation(target, maps)
+    write_material(out_dir, maps, options.export, metadata, extra_files=extra_files)
+    return PhotoResult(photo=path, output=out_dir, warnings=warnings)
+
+
+def predict_batch(
+    photos: Sequence[Path],
+    out_root: Path,
+    predictor: Predictor,
+    *,
+    on_result: Callable[[PhotoResult | PhotoFailure], None] | None = None,
+) -> BatchResult:
+    """Predict every photo into ``out_root/<name>/``; a failure is recorded and the batch goes on.
+
+    User errors (:class:`~brdfgan.errors.UserError`: unreadable or unsupported files, bad crops,
+    unwritable outputs) and OS errors are reported with their one-line message; anything else
+    with its exception type, so a bug in one photo
+    never loses the rest of the batch. A full disk ends the batch: the result then says so in
+    ``stopped`` (``<path>: no space left on device``). Hidden folders left by killed runs in
+    ``out_root`` are cleaned up first. Interrupts (``KeyboardInterrupt``) propagate; run inside
+    :func:`brdfgan.errors.interrupts_raise` to get the same for SIGTERM.
+    """
+    succeeded: list[PhotoResult] = []
+    failed: list[PhotoFailure] = []
+    try:
+        recover_outputs(out_root)
+    except OSError as error:  # not fatal: the photos may still be writable
+        log.warning("%s: cannot clean up after earlier runs (%s)", out_root, error.strerror or error)
+    for photo, name in zip(photos, output_names(photos), strict=True):
+        result: PhotoResult | PhotoFailure
+        try:
+            result = predict_photo(photo, out_root / name, predictor)
+            succeeded.append(result)
+        except (UserError, OSError) as error:
+            result = PhotoFailure(photo, _failure_message(photo, error))
+            failed.append(result)
+            if is_disk_full(error):
+                if on_result is not None:
+                    on_result(result)
+                return BatchResult(succeeded=succeeded, failed=failed, stopped=result.message)
+        except Exception as error:  # keep the batch alive and report the bug
+            log.debug("internal error on %s", photo, exc_info=True)
+            result = PhotoFailure(photo, f"{photo}: internal error {type(error).__name__}: {one_line(error)}")
+            failed.append(result)
+        if on_result is not None:
+            on_result(result)
+    return BatchResult(succeeded=succeeded, failed=failed)
+
+
+def _failure_message(photo: Path, error: Exception) -> str:
+    if is_disk_full(error):
+        return disk_full_message(error)
+    message = one_line(error)
+    return message if str(photo) in message else f"{photo}: {message}"
