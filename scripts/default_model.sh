@@ -33,11 +33,11 @@ OMP_NUM_THREADS=2 $PY train.py -m experiment=default_model loss=full,no_adv,no_f
     seed=0,1,2 'data.seed=${seed}' trainer.max_epochs=1 data.epoch_samples=1000 \
     task_name=default_model_ablation hydra.sweep.dir=$OUT/ablation
 $PY -m brdfgan.report $OUT/ablation --out $OUT/ablation_report
-$PY -m brdfgan.models.reference data/default_model --out $OUT/references
+$PY -m brdfgan.cli references data/default_model --out $OUT/references
 $PY evaluate.py data=default_model split=test grid_keys="$GRID" metrics.downscale_to=128 hydra.run.dir=$OUT/evaluation \
     "ckpt={shipped: $OUT/gan_finetune/checkpoints/last.ckpt, gan_stage1: $OUT/gan/checkpoints/last.ckpt, baseline: $OUT/baseline/checkpoints/last.ckpt, mean_maps: $OUT/references/mean_maps.safetensors, photo_basecolor: $OUT/references/photo_basecolor.safetensors}"
 $PY scripts/grid_figure.py $OUT/evaluation docs/default_model_grid.png --models shipped gan_stage1 baseline --panel 80
-$PY -m brdfgan.inference.export_weights $OUT/gan_finetune --out src/brdfgan/weights/default.safetensors \
+$PY -m brdfgan.cli export-weights $OUT/gan_finetune --out src/brdfgan/weights/default.safetensors \
     --model-id brdfgan-default-v2 --metrics $OUT/evaluation/metrics.json --metrics-model shipped \
     --hardware "2 vCPU x86_64 (no GPU); stage 1: 1 thread, shared with the baseline run; stage 2: 2 threads"
 $PY -m tests.test_shipped_weights                                        # refresh the stored statistics
