@@ -8,19 +8,17 @@ import numpy as np
 import pytest
 import torch
 
-from brdfgan.core.render import FlashCapture
-from brdfgan.core.svbrdf import CHANNELS, flat_maps, normalize_normal
-from brdfgan.data.lighting import (
-    ENVMAP_TO_WORLD,
+from brdfgan.core.lighting import (
     Environment,
     SunLight,
     equirect_directions,
-    load_environment,
     normalize_environment,
-    room_spec,
-    sunsky_spec,
     upper_hemisphere_irradiance,
 )
+from brdfgan.core.render import FlashCapture
+from brdfgan.core.svbrdf import CHANNELS, flat_maps, normalize_normal
+from brdfgan.data.lighting import load_environment, room_spec, sunsky_spec
+from brdfgan.mitsuba_render.environment import ENVMAP_TO_WORLD
 from tests.conftest import random_maps
 
 pytestmark = pytest.mark.mitsuba
@@ -88,7 +86,7 @@ def _half_tilted_normals(maps: torch.Tensor, axis: str, angle_deg: float) -> tor
 
 def test_envmap_emitter_matches_the_texel_directions() -> None:
     # Mitsuba's envmap with ENVMAP_TO_WORLD returns texel (i, j) exactly at equirect_directions[i, j].
-    from brdfgan.data.lighting import _eval_emitter
+    from brdfgan.mitsuba_render.environment import eval_emitter
     from brdfgan.mitsuba_render.variant import mitsuba
 
     mi = mitsuba()
@@ -103,7 +101,7 @@ def test_envmap_emitter_matches_the_texel_directions() -> None:
     )
     # Interior rows (the pole rows collapse to one point, where Mitsuba averages the row).
     directions = equirect_directions(height)[1:-1].reshape(-1, 3)
-    values = _eval_emitter(emitter, directions).reshape(height - 2, 2 * height, 3)
+    values = eval_emitter(emitter, directions).reshape(height - 2, 2 * height, 3)
     np.testing.assert_allclose(values, array[1:-1], rtol=1e-4)
 
 

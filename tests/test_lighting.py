@@ -14,30 +14,32 @@ import numpy as np
 import pytest
 import torch
 
-from brdfgan.data.lighting import (
-    ENVMAP_TO_WORLD,
+from brdfgan.core.lighting import (
     Environment,
-    LightingConfig,
-    LightingDraw,
-    LightingError,
     SunLight,
-    build_environment_pools,
-    draw_lighting,
-    environment_map,
     equirect_directions,
     flash_irradiance,
-    load_environment,
     normalize_environment,
-    read_environment_file,
-    realize_lighting,
-    room_spec,
     rotate_environment,
-    scan_environment_folder,
-    sunsky_spec,
     upper_hemisphere_irradiance,
     upper_hemisphere_irradiance_rgb,
 )
+from brdfgan.data.lighting import (
+    LightingConfig,
+    LightingDraw,
+    LightingError,
+    build_environment_pools,
+    draw_lighting,
+    environment_map,
+    load_environment,
+    read_environment_file,
+    realize_lighting,
+    room_spec,
+    scan_environment_folder,
+    sunsky_spec,
+)
 from brdfgan.io.images import write_image
+from brdfgan.mitsuba_render.environment import ENVMAP_TO_WORLD
 
 RES = 16
 

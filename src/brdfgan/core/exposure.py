@@ -21,7 +21,9 @@ result unchanged. No tone curve is applied: the output stays linear, like a RAW 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -33,12 +35,25 @@ SATURATION_CONSTANT = 78.0
 LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)
 
 
-def luminance(rgb: Tensor) -> Tensor:
-    """Relative luminance of linear RGB. Shape: ``(*, 3, H, W)`` → ``(*, 1, H, W)``."""
-    if rgb.ndim < 3 or rgb.shape[-3] != 3:
-        raise ValueError(f"expected linear RGB of shape (*, 3, H, W), got {tuple(rgb.shape)}")
-    weights = rgb.new_tensor(LUMINANCE_WEIGHTS).view(3, 1, 1)
-    return (rgb * weights).sum(dim=-3, keepdim=True)
+def luminance(rgb: Tensor, dim: int = -3) -> Tensor:
+    """Relative luminance of linear RGB along the (negative) channel dimension ``dim``, kept as size 1.
+
+    Shape:
+        - rgb: ``(*, 3, H, W)`` (``dim = -3``, images) or ``(*, 3)`` (``dim = -1``, colours)
+        - output: ``(*, 1, H, W)`` or ``(*, 1)``
+    """
+    if dim >= 0:
+        raise ValueError(f"dim must be negative (counted from the end), got {dim}")
+    if rgb.ndim < -dim or rgb.shape[dim] != 3:
+        layout = "(*, 3, H, W)" if dim == -3 else f"3 channels at dim {dim}"
+        raise ValueError(f"expected linear RGB of shape {layout}, got {tuple(rgb.shape)}")
+    weights = rgb.new_tensor(LUMINANCE_WEIGHTS).view(3, *([1] * (-dim - 1)))
+    return (rgb * weights).sum(dim=dim, keepdim=True)
+
+
+def luminance_value(rgb: Sequence[float] | np.ndarray) -> float:
+    """:func:`luminance` of one colour given as plain numbers (light colours, irradiances)."""
+    return float(luminance(torch.as_tensor(rgb, dtype=torch.float64), dim=-1))
 
 
 def exposure_value_100(average_luminance: Tensor) -> Tensor:

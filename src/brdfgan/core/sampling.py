@@ -94,6 +94,22 @@ def _uniform(
     return low + (high - low) * torch.rand(shape, generator=generator, **kw)
 
 
+def log_uniform(u: float | Tensor, low: float, high: float) -> float:
+    """``exp(log low + u·(log high − log low))``: the log-uniform value in ``[low, high]`` at the
+    uniform variate ``u`` in [0, 1), so every factor of ten in the range is equally likely.
+
+    A float ``u`` is computed with :mod:`math`, a 0-dim float64 tensor with torch (whose log/exp
+    round differently): each caller keeps the numbers it has always drawn.
+    """
+    if not 0.0 < low <= high:
+        raise ValueError(f"need 0 < low <= high for a log-uniform draw, got {low}, {high}")
+    if isinstance(u, Tensor):
+        log_range = torch.log(u.new_tensor([low, high]))
+        return float(torch.exp(log_range[0] + u * (log_range[1] - log_range[0])))
+    lo, hi = math.log(low), math.log(high)
+    return math.exp(lo + u * (hi - lo))
+
+
 def sample_rendering_loss_configs(
     batch: int,
     sampling: RenderingLossSampling = RenderingLossSampling(),

@@ -23,6 +23,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from brdfgan.core.sampling import log_uniform
 from brdfgan.core.svbrdf import (
     BASECOLOR,
     METALLIC,
@@ -63,9 +64,7 @@ class CropSampling:
     def sample(self, generator: torch.Generator) -> CropTransform:
         u = torch.rand(4, generator=generator, dtype=torch.float64).tolist()
         # Log-uniform scale: each octave of zoom is equally likely.
-        scale = math.exp(
-            math.log(self.scale_min) + u[0] * (math.log(self.scale_max) - math.log(self.scale_min))
-        )
+        scale = log_uniform(u[0], self.scale_min, self.scale_max)
         angle = 2.0 * math.pi * u[1] if self.rotate else 0.0
         return CropTransform(center=(2.0 * u[2] - 1.0, 2.0 * u[3] - 1.0), scale=scale, angle=angle)
 

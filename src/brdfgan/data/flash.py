@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import torch
 
+from brdfgan.core.exposure import luminance_value
+from brdfgan.core.sampling import log_uniform
 from brdfgan.data.spec_checks import in_range, ordered
 
 MIN_TEMPERATURE_K = 1667.0
@@ -49,7 +51,7 @@ def blackbody_rgb(temperature_k: float) -> tuple[float, float, float]:
     x, y = planckian_xy(temperature_k)
     xyz = (x / y, 1.0, (1.0 - x - y) / y)
     rgb = [max(0.0, sum(m * c for m, c in zip(row, xyz, strict=True))) for row in _XYZ_TO_LINEAR_SRGB]
-    luminance = 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
+    luminance = luminance_value(rgb)
     return (rgb[0] / luminance, rgb[1] / luminance, rgb[2] / luminance)
 
 
@@ -75,7 +77,6 @@ class FlashSampling:
     def sample(self, generator: torch.Generator) -> tuple[float, float]:
         """``(intensity, temperature_k)``."""
         u = torch.rand(2, generator=generator, dtype=torch.float64)
-        log_i = torch.log(torch.tensor([self.intensity_min, self.intensity_max], dtype=torch.float64))
-        intensity = float(torch.exp(log_i[0] + u[0] * (log_i[1] - log_i[0])))
+        intensity = log_uniform(u[0], self.intensity_min, self.intensity_max)
         temperature = self.temperature_min_k + float(u[1]) * (self.temperature_max_k - self.temperature_min_k)
         return intensity, temperature

@@ -47,6 +47,7 @@ import torch
 from torch import Tensor
 
 from brdfgan import __version__
+from brdfgan.core.lighting import flash_irradiance
 from brdfgan.core.render import FlashCapture
 from brdfgan.core.svbrdf import InvalidMapsError, validate_maps
 from brdfgan.data.augment import CropSampling, random_crops
@@ -57,7 +58,6 @@ from brdfgan.data.lighting import (
     LightingDraw,
     build_environment_pools,
     draw_lighting,
-    flash_irradiance,
     realize_lighting,
 )
 from brdfgan.data.materials.families import resolve_families

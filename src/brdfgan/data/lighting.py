@@ -1,44 +1,31 @@
-"""Environment lighting for synthetic captures: sun/sky, procedural rooms and user HDR files.
+"""Environment pools and per-render lighting draws for synthetic captures: sun/sky, procedural
+rooms and user HDR files.
 
-Every environment becomes an equirectangular linear-RGB HDR array ``(H, 2H, 3)`` float32 in
-Mitsuba's ``envmap`` convention, so one scene renders every kind by swapping data:
-
-- local frame +Y up; texel column j is at ``φ = 2π(j + ½)/W`` and row i at ``θ = iπ/(H − 1)``
-  (measured here on Mitsuba 3.9: rows are point samples that include both poles, columns are
-  cell centres; the emitter interpolates bilinearly between them);
-- :data:`ENVMAP_TO_WORLD` (+90° about X) takes that frame to ours (+Z up, DESIGN.md §2), so a
-  texel's world direction is ``(sinθ sinφ, sinθ cosφ, cosθ)``: φ runs from +Y towards +X and
-  row 0 is the zenith.
+Every environment becomes a :class:`brdfgan.core.lighting.Environment` (equirect radiance in the
+layout described there, plus an optional sun), so one scene renders every kind by swapping data.
 
 Kinds:
 
-- ``sunsky``: Mitsuba's Hosek–Wilkie ``sunsky`` emitter evaluated on the texel directions with
-  ``sun_scale = 0``. The sun disc (0.53° across) covers about half a texel of a 256×512 map
-  (0.7° texels) and far less of the small maps of tests: a texel's point sample either misses
-  it, and the sun — most of the daylight — vanishes, or hits it, and bilinear interpolation
-  spreads the disc radiance over ~2×2 texels, a ~1.4° sun with several times its power. The
-  sun is instead a separate :class:`SunLight`, a ``directional`` emitter whose irradiance is
-  the sun radiance integrated over the disc (a delta direction instead of a 0.53° disc only
-  matters for near-mirror surfaces).
+- ``sunsky``: Mitsuba's Hosek–Wilkie sky with the sun kept apart as a directional light
+  (:func:`brdfgan.mitsuba_render.environment.sunsky_environment`; Mitsuba is imported on use).
 - ``room``: a box room around the sample with painted walls, ceiling light panels and/or a
   window onto an overcast sky, radiance computed analytically per texel direction (numpy).
 - ``file``: ``.hdr``/``.exr`` lat-long files from a folder, area-resized to the resolution.
 
 Radiometric balance (paper: photos "predominantly flash lit" with other lights present): each
 render scales its environment so the irradiance it puts on the upward-facing sample
-(:func:`upper_hemisphere_irradiance`, sun included) equals ``ratio · E_flash`` with
-``E_flash = I / d²`` the flash irradiance at the sample centre and ``ratio`` log-uniform in
-``[env_to_flash_min, env_to_flash_max]``.
-
-Random rotation about the up axis is a circular shift of the columns
-(:func:`rotate_environment`); the sun direction turns with it.
+(:func:`~brdfgan.core.lighting.upper_hemisphere_irradiance`, sun included) equals
+``ratio · E_flash`` with ``E_flash = I / d²`` the flash irradiance at the sample centre
+(:func:`~brdfgan.core.lighting.flash_irradiance`) and ``ratio`` log-uniform in
+``[env_to_flash_min, env_to_flash_max]``. Each render also turns its environment by a uniform
+random angle about the up axis.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
@@ -46,28 +33,18 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
-from brdfgan.core.exposure import LUMINANCE_WEIGHTS
+from brdfgan.core.lighting import Environment, equirect_directions, normalize_environment
+from brdfgan.core.sampling import log_uniform
 from brdfgan.data.flash import blackbody_rgb
 from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, ordered
+from brdfgan.mitsuba_render.environment import sunsky_environment
 
 EnvironmentKind = Literal["sunsky", "room", "file"]
 ParamValue = float | str
 
 ENVIRONMENT_EXTENSIONS = frozenset({".exr", ".hdr"})
-# Mitsuba envmap local frame (+Y up, φ = 0 at −Z) → our world (+Z up): +90° about X maps
-# local +Y to world +Z and local −Z to world +Y.
-ENVMAP_TO_WORLD: tuple[tuple[float, ...], ...] = (
-    (1.0, 0.0, 0.0, 0.0),
-    (0.0, 0.0, -1.0, 0.0),
-    (0.0, 1.0, 0.0, 0.0),
-    (0.0, 0.0, 0.0, 1.0),
-)
-# Angular diameter of the sun used by Mitsuba's sunsky (its default, degrees).
-SUN_APERTURE_DEG = 0.5358
 # Texel supersampling (per axis) of the analytic room: antialiases panel and window edges.
 ROOM_SUPERSAMPLE = 3
-# Sub-intervals per texel row of the quadrature behind the irradiance weights (error ~1e-6).
-_QUADRATURE_PER_ROW = 64
 
 
 class LightingError(ValueError):
@@ -100,250 +77,14 @@ def make_spec(env_id: str, kind: EnvironmentKind, params: dict[str, ParamValue])
     return EnvironmentSpec(env_id, kind, tuple(sorted(clean.items())))
 
 
-@dataclass(frozen=True)
-class SunLight:
-    """The sun as a directional light: unit ``direction`` towards the sun (world frame, +Z up)
-    and RGB ``irradiance`` on a surface facing it (W/m², or the environment's relative units)."""
-
-    direction: tuple[float, float, float]
-    irradiance: tuple[float, float, float]
-
-    def rotated(self, angle_rad: float) -> SunLight:
-        """Turned by ``angle_rad`` about +Z (right-handed: +X towards +Y)."""
-        c, s = math.cos(angle_rad), math.sin(angle_rad)
-        x, y, z = self.direction
-        return replace(self, direction=(c * x - s * y, s * x + c * y, z))
-
-    def scaled(self, factor: float) -> SunLight:
-        r, g, b = self.irradiance
-        f = float(factor)
-        return replace(self, irradiance=(f * r, f * g, f * b))
-
-    def plane_irradiance(self) -> float:
-        """Luminance of the irradiance it puts on the upward-facing plane z = 0."""
-        return _luminance(self.irradiance) * max(self.direction[2], 0.0)
-
-
-@dataclass(frozen=True, eq=False)
-class Environment:
-    """Environment radiance ``(H, 2H, 3)`` (Mitsuba envmap convention) plus an optional sun."""
-
-    radiance: np.ndarray
-    sun: SunLight | None = None
-
-    def rotated(self, angle_rad: float) -> Environment:
-        """Turned by ``angle_rad`` about the up axis (+Z), sun included."""
-        sun = self.sun.rotated(angle_rad) if self.sun else None
-        return Environment(rotate_environment(self.radiance, angle_rad), sun)
-
-    def scaled(self, factor: float) -> Environment:
-        sun = self.sun.scaled(factor) if self.sun else None
-        return Environment((self.radiance * np.float32(factor)).astype(np.float32), sun)
-
-    def plane_irradiance(self) -> float:
-        """Luminance of the irradiance on the upward-facing plane, sun included."""
-        sun = self.sun.plane_irradiance() if self.sun else 0.0
-        return upper_hemisphere_irradiance(self.radiance) + sun
-
-
-# ----------------------------------------------------------------------------- geometry
-
-
-def _luminance(rgb: Sequence[float] | np.ndarray) -> float:
-    return float(sum(w * float(c) for w, c in zip(LUMINANCE_WEIGHTS, rgb, strict=True)))
-
-
-def _check_equirect(array: np.ndarray) -> None:
-    if array.ndim != 3 or array.shape[2] != 3 or array.shape[1] != 2 * array.shape[0] or array.shape[0] < 3:
-        raise ValueError(f"expected an equirect array of shape (H, 2H, 3) with H >= 3, got {array.shape}")
-
-
-def equirect_directions(height: int, supersample: int = 1) -> np.ndarray:
-    """World directions (+Z up) of the texels of an ``(height, 2·height)`` map.
-
-    With ``supersample = s > 1``, ``s²`` directions spread evenly over each texel's cell
-    (``Δθ = π/(H − 1)`` by ``Δφ = 2π/W`` around the texel's sample point), for box filtering.
-
-    Shape:
-        - output: ``(H, 2H, 3)``, or ``(H, 2H, s², 3)`` with supersampling
-    """
-    if height < 3:
-        raise ValueError(f"equirect height must be >= 3, got {height}")
-    width = 2 * height
-    offsets = (np.arange(supersample) + 0.5) / supersample - 0.5  # (s,) in (−½, ½)
-    rows = np.arange(height)[:, None] + offsets[None, :]  # (H, s)
-    cols = np.arange(width)[:, None] + 0.5 + offsets[None, :]  # (W, s)
-    theta = np.clip(rows * (math.pi / (height - 1)), 0.0, math.pi)
-    phi = cols * (2.0 * math.pi / width)
-    # (H, W, s_theta, s_phi)
-    theta = theta[:, None, :, None]
-    phi = phi[None, :, None, :]
-    sin_theta = np.sin(theta)
-    directions = np.stack(
-        np.broadcast_arrays(sin_theta * np.sin(phi), sin_theta * np.cos(phi), np.cos(theta)), axis=-1
-    )
-    directions = directions.reshape(height, width, supersample * supersample, 3)
-    return directions[:, :, 0] if supersample == 1 else directions
-
-
-@lru_cache(maxsize=16)
-def _row_irradiance_weights(height: int) -> np.ndarray:
-    # Mitsuba interpolates rows linearly in θ between samples at θ_i = iπ/(H − 1), so texel row i
-    # carries the hat function around θ_i; its weight is ∫ hat_i(θ) cosθ sinθ dθ over the upper
-    # hemisphere (θ ≤ π/2), times the column width Δφ (each column's hat integrates to Δφ in φ).
-    delta = math.pi / (height - 1)
-    count = max(_QUADRATURE_PER_ROW * (height - 1), 8192)
-    theta = (np.arange(count) + 0.5) * (math.pi / count)  # midpoints over [0, π]
-    integrand = np.where(theta <= math.pi / 2, np.cos(theta) * np.sin(theta), 0.0) * (math.pi / count)
-    position = theta / delta
-    lower = np.minimum(np.floor(position).astype(np.int64), height - 2)
-    frac = position - lower
-    weights = np.bincount(lower, integrand * (1.0 - frac), minlength=height)
-    weights += np.bincount(lower + 1, integrand * frac, minlength=height)
-    weights *= 2.0 * math.pi / (2 * height)
-    weights.setflags(write=False)
-    return weights
-
-
-def upper_hemisphere_irradiance_rgb(array: np.ndarray) -> np.ndarray:
-    """RGB irradiance on the upward-facing plane (cosine-weighted over θ ≤ 90°).
-
-    Shape:
-        - array: ``(H, 2H, 3)``
-        - output: ``(3,)`` float64
-    """
-    _check_equirect(array)
-    weights = _row_irradiance_weights(array.shape[0])
-    return np.einsum("h,hwc->c", weights, array.astype(np.float64))
-
-
-def upper_hemisphere_irradiance(array: np.ndarray) -> float:
-    """Luminance of the irradiance the environment puts on the upward-facing plane.
-
-    A constant environment of radiance L gives π·L.
-
-    Shape:
-        - array: ``(H, 2H, 3)``
-    """
-    return _luminance(upper_hemisphere_irradiance_rgb(array))
-
-
-def rotate_environment(array: np.ndarray, angle_rad: float) -> np.ndarray:
-    """Rotate an environment about the up axis (+Z) by ``angle_rad`` (right-handed, +X → +Y).
-
-    A light at azimuth φ (from +Y towards +X) moves to φ − angle, i.e. the columns shift by
-    ``angle·W/2π``. Fractional shifts interpolate linearly between the two neighbouring integer
-    shifts (exact for multiples of 2π/W; otherwise a blur of under one texel). Column sums are
-    preserved, so the plane irradiance does not change.
-
-    Shape:
-        - array: ``(H, 2H, C)``
-        - output: same
-    """
-    width = array.shape[1]
-    shift = (angle_rad * width / (2.0 * math.pi)) % width
-    whole = math.floor(shift)
-    frac = shift - whole
-    base = np.roll(array, -whole, axis=1)
-    if frac < 1e-9:
-        return base.astype(np.float32, copy=True)
-    nxt = np.roll(base, -1, axis=1)
-    return ((1.0 - frac) * base + frac * nxt).astype(np.float32)
-
-
-def flash_irradiance(radiant_intensity: Sequence[float], distance: float) -> float:
-    """Luminance of the flash irradiance ``I / d²`` at the sample centre (flash at the camera)."""
-    if distance <= 0:
-        raise ValueError(f"flash distance must be positive, got {distance}")
-    return _luminance(radiant_intensity) / (distance * distance)
-
-
-def normalize_environment(environment: Environment, target_irradiance: float) -> Environment:
-    """Scale radiance and sun together so the plane irradiance equals ``target_irradiance``."""
-    current = environment.plane_irradiance()
-    if not current > 0.0:
-        raise ValueError("cannot normalise an environment that puts no light on the sample plane")
-    return environment.scaled(target_irradiance / current)
-
-
-# ----------------------------------------------------------------------------- sun and sky
-
-
-def _sun_vector(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
-    """Unit vector towards the sun; azimuth from +X towards +Y, elevation above the plane."""
-    el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
-    return np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
-
-
-def _eval_emitter(emitter: Any, directions: np.ndarray) -> np.ndarray:
-    """Radiance an emitter sends towards the origin from world ``directions``; ``(N, 3)`` → ``(N, 3)``."""
-    from brdfgan.mitsuba_render.variant import mitsuba
-
-    mi = mitsuba()
-    import drjit as dr
-
-    wi = -np.ascontiguousarray(directions, dtype=np.float32)
-    if mi.variant().startswith("scalar"):  # no vectorised evaluation: one direction at a time
-        out = np.empty_like(wi)
-        si = dr.zeros(mi.SurfaceInteraction3f)
-        for n, w in enumerate(wi):
-            si.wi = mi.Vector3f(*map(float, w))
-            out[n] = np.array(emitter.eval(si))
-        return out
-    si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
-    si.wi = mi.Vector3f(wi[:, 0], wi[:, 1], wi[:, 2])
-    return np.array(emitter.eval(si), dtype=np.float32).T.copy()
-
-
 def _sunsky_environment(spec: EnvironmentSpec, resolution: int) -> Environment:
-    from brdfgan.mitsuba_render.variant import mitsuba
-
-    mi = mitsuba()
-    sun = _sun_vector(float(spec.param("elevation_deg")), float(spec.param("azimuth_deg")))
-    ground_albedo = float(spec.param("ground_albedo"))
-    base = {
-        "type": "sunsky",
-        "sun_direction": [float(c) for c in sun],
-        "turbidity": float(spec.param("turbidity")),
-        "albedo": ground_albedo,
-        "sun_aperture": SUN_APERTURE_DEG,
-    }
-    # The emitter's own frame is the world frame (+Z up; the tests check the sky is above).
-    sky = mi.load_dict({**base, "sun_scale": 0.0})
-    directions = equirect_directions(resolution).reshape(-1, 3)
-    radiance = np.maximum(_eval_emitter(sky, directions), 0.0).reshape(resolution, 2 * resolution, 3)
-
-    # Sun irradiance: integrate the disc radiance (limb darkening included) on a polar grid
-    # uniform in solid angle; the sky alone is evaluated from the sun-less emitter.
-    sun_only = mi.load_dict({**base, "sky_scale": 0.0})
-    half = math.radians(SUN_APERTURE_DEG) / 2.0
-    n_r, n_phi = 16, 32
-    u = (np.arange(n_r) + 0.5) / n_r
-    cos_a = 1.0 - u * (1.0 - math.cos(half))  # uniform in cos(angle) = uniform in solid angle
-    sin_a = np.sqrt(1.0 - cos_a**2)
-    psi = (np.arange(n_phi) + 0.5) * (2.0 * math.pi / n_phi)
-    tangent = np.cross(sun, [0.0, 0.0, 1.0] if abs(sun[2]) < 0.9 else [1.0, 0.0, 0.0])
-    tangent /= np.linalg.norm(tangent)
-    bitangent = np.cross(sun, tangent)
-    disc = (
-        cos_a[:, None, None] * sun
-        + (sin_a[:, None] * np.cos(psi)[None, :])[..., None] * tangent
-        + (sin_a[:, None] * np.sin(psi)[None, :])[..., None] * bitangent
-    ).reshape(-1, 3)
-    solid_angle = 2.0 * math.pi * (1.0 - math.cos(half))
-    sun_radiance = np.maximum(_eval_emitter(sun_only, disc), 0.0).astype(np.float64)
-    sun_irradiance = sun_radiance.mean(axis=0) * solid_angle
-
-    # Ground below the horizon: a Lambertian plain of the model's ground albedo lit by sky + sun.
-    # The sample plane hides it, but reflections off tilted normals near grazing may see it.
-    ground_e = upper_hemisphere_irradiance_rgb(radiance) + sun_irradiance * sun[2]
-    below = equirect_directions(resolution)[..., 2] < 0.0
-    radiance[below] = (ground_albedo * ground_e / math.pi).astype(np.float32)
-    light = SunLight(
-        (float(sun[0]), float(sun[1]), float(sun[2])),
-        (float(sun_irradiance[0]), float(sun_irradiance[1]), float(sun_irradiance[2])),
+    return sunsky_environment(
+        float(spec.param("elevation_deg")),
+        float(spec.param("azimuth_deg")),
+        float(spec.param("turbidity")),
+        float(spec.param("ground_albedo")),
+        resolution,
     )
-    return Environment(radiance.astype(np.float32), light)
 
 
 # ----------------------------------------------------------------------------- rooms
@@ -406,7 +147,7 @@ def _sample_room_params(rng: np.random.Generator) -> dict[str, ParamValue]:
         p["window_sill"] = rng.uniform(0.5, 1.0)
         p["window_height"] = min(rng.uniform(0.8, 1.6), float(p["height"]) - float(p["window_sill"]) - 0.1)
         # Zenith radiance of the overcast sky outside, relative to the panels' radiance of 1.
-        p["window_radiance"] = math.exp(rng.uniform(math.log(0.5), math.log(5.0)))
+        p["window_radiance"] = log_uniform(rng.random(), 0.5, 5.0)
         p["window_temperature_k"] = rng.uniform(5500.0, 9000.0)
         p["outside_ground_albedo"] = rng.uniform(0.1, 0.3)
     return p
@@ -785,8 +526,7 @@ class LightingDraw:
 def sample_env_to_flash_ratio(config: LightingConfig, generator: torch.Generator) -> float:
     """Log-uniform ratio in ``[env_to_flash_min, env_to_flash_max]``."""
     u = float(torch.rand((), generator=generator, dtype=torch.float64))
-    lo, hi = math.log(config.env_to_flash_min), math.log(config.env_to_flash_max)
-    return math.exp(lo + u * (hi - lo))
+    return log_uniform(u, config.env_to_flash_min, config.env_to_flash_max)
 
 
 def draw_lighting(

@@ -3,9 +3,9 @@
 Scene: the textured plane of :func:`brdfgan.mitsuba_render.scene.plane_scene_dict` (principled +
 normalmap, nearest-filtered raw bitmaps, rows flipped), the capture camera of
 :class:`~brdfgan.core.render.FlashCapture`, a point-light flash at the camera, an ``envmap``
-emitter holding an equirect array of :mod:`brdfgan.data.lighting` (its +Y-up frame turned to our
-+Z-up by :data:`~brdfgan.data.lighting.ENVMAP_TO_WORLD`) and, for sun/sky environments, the sun
-as a ``directional`` emitter.
+emitter holding an equirect array of :mod:`brdfgan.core.lighting` (its +Y-up frame turned to our
++Z-up by :data:`~brdfgan.mitsuba_render.environment.ENVMAP_TO_WORLD`) and, for sun/sky
+environments, the sun as a ``directional`` emitter.
 
 Integrator: ``direct``. Per pixel sample it takes one emitter sample (envmap importance sampling
 by luminance, the point light or the sun) and one BSDF sample, combined with the power
@@ -43,9 +43,10 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.exposure import auto_expose
+from brdfgan.core.lighting import Environment, SunLight, check_equirect, orthonormal_frame
 from brdfgan.core.render import FlashCapture
 from brdfgan.core.svbrdf import encode_normal, split_maps, srgb_to_linear, validate_maps
-from brdfgan.data.lighting import ENVMAP_TO_WORLD, Environment, SunLight
+from brdfgan.mitsuba_render.environment import ENVMAP_TO_WORLD
 from brdfgan.mitsuba_render.scene import MitsubaPointLight, plane_scene_dict
 from brdfgan.mitsuba_render.variant import mitsuba
 
@@ -100,18 +101,16 @@ def _padded_envmap(environment: np.ndarray) -> np.ndarray:
 
 
 def _sun_to_world(mi: Any, direction: tuple[float, float, float]) -> Any:
-    # A directional emitter shines along its local +Z; it must travel away from the sun.
+    # A directional emitter shines along its local +Z; it must travel away from the sun. Only that
+    # axis matters to it, so look_at may take any up vector off the axis: a tangent of its frame.
     towards = np.asarray(direction, dtype=np.float64)
     towards /= np.linalg.norm(towards)
-    up = [0.0, 1.0, 0.0] if abs(towards[1]) < 0.9 else [1.0, 0.0, 0.0]
-    return mi.ScalarTransform4f().look_at(origin=[0.0, 0.0, 0.0], target=list(-towards), up=up)
+    up, _ = orthonormal_frame(towards)
+    return mi.ScalarTransform4f().look_at(origin=[0.0, 0.0, 0.0], target=list(-towards), up=list(up))
 
 
 def _check_environment(environment: np.ndarray) -> None:
-    if environment.ndim != 3 or environment.shape[2] != 3 or environment.shape[1] != 2 * environment.shape[0]:
-        raise ValueError(f"environment must have shape (H, 2H, 3), got {environment.shape}")
-    if environment.shape[0] < 3:
-        raise ValueError(f"environment height must be >= 3, got {environment.shape[0]}")
+    check_equirect(environment)
     if not np.isfinite(environment).all() or (environment < 0).any():
         raise ValueError("environment must be finite and non-negative")
 
