@@ -11,23 +11,21 @@ import torch
 import torch.nn.functional as F
 from PIL import Image
 
+from brdfgan.core import relight as relight_module
+from brdfgan.core.relight import SKY_LIGHT_DISTANCE, relight, render_sky
 from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
+from brdfgan.core.sky import ProceduralSky, sample_sky
 from brdfgan.core.svbrdf import flat_maps, linear_to_srgb, normalize_normal
 from brdfgan.inference import preview
 from brdfgan.inference.preview import (
-    ENVIRONMENT_LIGHT_DISTANCE,
     LABEL_HEIGHT,
     SEPARATOR,
     SEPARATOR_COLOR,
-    Environment,
     animation_frames,
     preview_image,
     preview_lights,
     preview_size,
-    relight,
-    render_environment,
     resize_maps,
-    sample_environment,
     write_animation,
     write_preview,
 )
@@ -108,9 +106,9 @@ def test_relight_intensity_forms_and_environment_term() -> None:
     )
     rgb = torch.tensor([[1.0, 0.0, 0.5], [0.0, 3.0, 1.0]])
     torch.testing.assert_close(relight(maps, lights, intensity=rgb), unit * rgb.view(2, 3, 1, 1))
-    env = Environment()
-    with_env = relight(maps, lights, environment=env, samples=8)
-    torch.testing.assert_close(with_env, unit + render_environment(maps, env, samples=8))
+    env = ProceduralSky()
+    with_env = relight(maps, lights, sky=env, samples=8)
+    torch.testing.assert_close(with_env, unit + render_sky(maps, env, samples=8))
     with pytest.raises(ValueError, match="intensity"):
         relight(maps, lights, intensity=torch.ones(3))
     with pytest.raises(ValueError, match="light_positions"):
@@ -130,8 +128,8 @@ def test_relight_is_differentiable() -> None:
 
 def test_sample_environment_estimates_horizontal_irradiance() -> None:
     # A uniform sky of radiance c gives irradiance π·c on an upward surface.
-    directions, irradiance = sample_environment(
-        Environment(zenith=(0.5,) * 3, horizon=(0.5,) * 3, sun_irradiance=0.0), 64
+    directions, irradiance = sample_sky(
+        ProceduralSky(zenith=(0.5,) * 3, horizon=(0.5,) * 3, sun_irradiance=0.0), 64
     )
     assert directions.shape == irradiance.shape == (64, 3)
     torch.testing.assert_close(directions.norm(dim=-1), torch.ones(64, dtype=torch.float64))
@@ -141,25 +139,25 @@ def test_sample_environment_estimates_horizontal_irradiance() -> None:
     )
 
     # Default sky + sun against a fine quadrature of ∫ L(ω) cos θ dω.
-    env = Environment()
+    env = ProceduralSky()
     rows, cols = 1000, 2000
     u = (torch.arange(rows, dtype=torch.float64) + 0.5) / rows
     phi = (torch.arange(cols, dtype=torch.float64) + 0.5) * (2 * math.pi / cols)
     sin_theta = (1 - u * u).sqrt()[:, None]
     grid = torch.stack([sin_theta * phi.cos(), sin_theta * phi.sin(), u[:, None].expand(-1, cols)], dim=-1)
     reference = (env.radiance(grid) * u[:, None, None]).sum(dim=(0, 1)) * (2 * math.pi / (rows * cols))
-    directions, irradiance = sample_environment(env, 64)
+    directions, irradiance = sample_sky(env, 64)
     torch.testing.assert_close((irradiance * directions[:, 2:3]).sum(dim=0), reference, rtol=0.03, atol=0)
 
     # Fixed seed: the same lights every time; another seed: other lights.
-    again = sample_environment(env, 64)
+    again = sample_sky(env, 64)
     torch.testing.assert_close(again[0], directions, rtol=0, atol=0)
-    assert not torch.allclose(sample_environment(env, 64, seed=1)[0], directions)
+    assert not torch.allclose(sample_sky(env, 64, seed=1)[0], directions)
 
 
 def test_concentrated_environment_acts_as_one_distant_light() -> None:
     # All energy in a tiny sun lobe (angular radius ~0.2°) and a black sky.
-    env = Environment(
+    env = ProceduralSky(
         zenith=(0.0, 0.0, 0.0),
         horizon=(0.0, 0.0, 0.0),
         sun_irradiance=2.0,
@@ -170,9 +168,9 @@ def test_concentrated_environment_acts_as_one_distant_light() -> None:
     )
     maps = random_maps(SIZE, SIZE, seed=3)
     maps[6] = 0.3 + 0.7 * maps[6]  # roughness ≥ 0.3: a 0.2° lobe is then indistinguishable from a delta
-    rendered = render_environment(maps, env, samples=16)
+    rendered = render_sky(maps, env, samples=16)
     # Independent reference: one light in the sun direction, 100× farther, float64.
-    distance = 100.0 * ENVIRONMENT_LIGHT_DISTANCE
+    distance = 100.0 * SKY_LIGHT_DISTANCE
     direction = env.sun_direction()
     lights = PointLights(
         position=(distance * direction).view(1, 1, 1, 3),
@@ -187,25 +185,23 @@ def test_concentrated_environment_acts_as_one_distant_light() -> None:
 def test_render_environment_converges_and_chunks_agree() -> None:
     maps = random_maps(16, 16, seed=4)
     maps[6] = 0.5 + 0.5 * maps[6]
-    env = Environment()
-    coarse = render_environment(maps, env, samples=64)
-    torch.testing.assert_close(
-        render_environment(maps, env, samples=64, chunk=64), coarse, rtol=1e-4, atol=1e-6
-    )
-    fine = render_environment(maps, env, samples=512)
+    env = ProceduralSky()
+    coarse = render_sky(maps, env, samples=64)
+    torch.testing.assert_close(render_sky(maps, env, samples=64, chunk=64), coarse, rtol=1e-4, atol=1e-6)
+    fine = render_sky(maps, env, samples=512)
     assert _relative_l1(coarse, fine) < 0.05
     assert coarse.shape == (3, 16, 16) and (coarse >= 0).all()
 
 
 def test_environment_rejects_bad_parameters() -> None:
     with pytest.raises(ValueError, match="zenith"):
-        Environment(zenith=(-1.0, 0.0, 0.0))
+        ProceduralSky(zenith=(-1.0, 0.0, 0.0))
     with pytest.raises(ValueError, match="sun_elevation_deg"):
-        Environment(sun_elevation_deg=0.0)
+        ProceduralSky(sun_elevation_deg=0.0)
     with pytest.raises(ValueError, match="sun_sharpness"):
-        Environment(sun_sharpness=0.0)
+        ProceduralSky(sun_sharpness=0.0)
     with pytest.raises(ValueError, match="samples"):
-        sample_environment(Environment(), 0)
+        sample_sky(ProceduralSky(), 0)
 
 
 # ------------------------------------------------------------------------------------------- resize
@@ -255,13 +251,13 @@ def test_preview_image_layout_and_input_tile() -> None:
 
 def test_preview_image_renders_big_maps_at_tile_size(monkeypatch: pytest.MonkeyPatch) -> None:
     seen: list[tuple[int, ...]] = []
-    original = preview.render_point_lights
+    original = relight_module.render_point_lights
 
     def spy(maps: torch.Tensor, *args: object, **kwargs: object) -> torch.Tensor:
         seen.append(tuple(maps.shape))
         return original(maps, *args, **kwargs)
 
-    monkeypatch.setattr(preview, "render_point_lights", spy)
+    monkeypatch.setattr(relight_module, "render_point_lights", spy)
     image = preview_image(torch.rand(3, 48, 80), random_maps(128, 128, seed=7), tile=16, lights=1, samples=4)
     assert image.shape[:2] == preview_size(16, 1)
     assert seen and all(shape[-2:] == (16, 16) for shape in seen)
