@@ -32,6 +32,7 @@ from brdfgan.core.svbrdf import NORMAL, validate_maps
 from brdfgan.inference.model.tiling import (
     TILED_BUFFER_CHANNELS,
     TilingConfig,
+    TilingError,
     activation_bytes_per_pixel,
     blend_window,
     frozen_instance_norm,
@@ -403,7 +404,8 @@ def test_predict_maps_runs_small_photos_directly_and_restores_the_mode(
 
 
 def test_bad_inputs_are_refused(generator: Generator, photo: Tensor) -> None:
-    with pytest.raises(ValueError, match="multiple of the model's size multiple 4"):
+    # --tile is the user's choice: a UserError, reported as one line per photo.
+    with pytest.raises(TilingError, match="multiple of the model's size multiple 4"):
         predict_tiled(generator, photo, TilingConfig(tile=98, overlap=32, margin=8))
     with pytest.raises(ValueError, match=r"\(1, 3, H, W\)"):
         predict_maps(generator, photo.expand(2, -1, -1, -1))
@@ -440,3 +442,13 @@ def test_memory_estimate_follows_the_widest_layer_and_tiles_bound_the_network() 
     # Tiled, the network costs one tile whatever the size; only the full-size buffers grow.
     assert tiled[1] - tiled[0] == TILED_BUFFER_CHANNELS * 4 * (4096**2 - 2048**2)
     assert tiled[0] - TILED_BUFFER_CHANNELS * 4 * 2048**2 == direct
+
+
+def test_tile_option_policy_keeps_the_config_valid_and_tiles_above_one_tile() -> None:
+    assert TilingConfig.for_tile(None) == TilingConfig()
+    small = TilingConfig.for_tile(128)  # overlap and margin shrink with the tile
+    assert (small.tile, small.overlap, small.margin, small.max_direct_pixels) == (128, 64, 24, 128 * 128)
+    assert not small.runs_tiled(128, 128) and small.runs_tiled(129, 128)
+    assert TilingConfig.for_tile(1).overlap == 0  # the smallest tile is still a valid config
+    assert small.to_json(True) == {"tiled": True, "tile": 128, "overlap": 64}
+    assert small.to_json(False) == {"tiled": False, "tile": None, "overlap": None}

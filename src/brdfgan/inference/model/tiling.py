@@ -61,12 +61,17 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from brdfgan.core.svbrdf import NORMAL, NUM_CHANNELS, normalize_normal
+from brdfgan.errors import UserError
 from brdfgan.models.heads import PHOTO_CHANNELS
 
 ProgressCallback = Callable[[int, int], None]
 # Per InstanceNorm2d (by module name): one (mean, biased variance) pair of shape (C,) per call in a
 # forward pass, in call order (a module used twice in a forward gets two entries).
 NormStatistics = dict[str, list[tuple[Tensor, Tensor]]]
+
+
+class TilingError(UserError):
+    """The tile side (``--tile``) does not suit the model; other checks here are contracts (ValueError)."""
 
 
 @dataclass(frozen=True)
@@ -506,7 +511,7 @@ def predict_tiled(
     _check_photo(photo, single=True)
     multiple = _size_multiple(generator)
     if config.tile % multiple:
-        raise ValueError(f"tile {config.tile} must be a multiple of the model's size multiple {multiple}")
+        raise TilingError(f"tile {config.tile} must be a multiple of the model's size multiple {multiple}")
     device, dtype = _model_placement(generator, photo)
     height, width = photo.shape[-2:]
 
@@ -516,7 +521,7 @@ def predict_tiled(
         # A photo smaller than a tile along an axis is one tile along it.
         tile_h, tile_w = min(config.tile, full_h), min(config.tile, full_w)
         if padded_size(generator, tile_h, tile_w) != (tile_h, tile_w):
-            raise ValueError(f"tile {config.tile} is too small for the model (size multiple {multiple})")
+            raise TilingError(f"tile {config.tile} is too small for the model (size multiple {multiple})")
         ys = tile_starts(full_h, tile_h, config.overlap, multiple)
         xs = tile_starts(full_w, tile_w, config.overlap, multiple)
 
