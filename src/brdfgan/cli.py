@@ -15,12 +15,17 @@ import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from brdfgan import __version__
 from brdfgan.errors import DISK_FULL_EXIT_CODE, USER_ERROR_EXIT_CODE, one_line, run_reporting_errors
 
+if TYPE_CHECKING:  # imported lazily below: --help must not wait for torch
+    from brdfgan.inference.intake.preprocess import Crop
+
 # Exit status when the command ran but at least one photo of the batch failed.
 PARTIAL_FAILURE_EXIT_CODE = 1
+PREDICT_INTERRUPTED = "interrupted: finished photos are complete; the one in progress was not written"
 
 PREDICT_EXAMPLES = """\
 examples:
@@ -36,7 +41,7 @@ examples:
 """
 
 
-def _crop(text: str):  # -> Crop (imported lazily: --help stays fast)
+def _crop(text: str) -> Crop:
     from brdfgan.inference.intake.preprocess import Crop
 
     try:
@@ -206,9 +211,6 @@ def build_parser() -> argparse.ArgumentParser:
     references.add_argument("--out", type=Path, required=True, metavar="DIR")
     references.set_defaults(run=references_command, interrupted="interrupted")
     return parser
-
-
-PREDICT_INTERRUPTED = "interrupted: finished photos are complete; the one in progress was not written"
 
 
 def predict_command(args: argparse.Namespace) -> int:
