@@ -37,6 +37,7 @@ from brdfgan.core.lighting import Environment, equirect_directions, normalize_en
 from brdfgan.core.sampling import log_uniform
 from brdfgan.data.flash import blackbody_rgb
 from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, ordered
+from brdfgan.errors import UserError
 from brdfgan.mitsuba_render.environment import sunsky_environment
 
 EnvironmentKind = Literal["sunsky", "room", "file"]
@@ -47,7 +48,7 @@ ENVIRONMENT_EXTENSIONS = frozenset({".exr", ".hdr"})
 ROOM_SUPERSAMPLE = 3
 
 
-class LightingError(ValueError):
+class LightingError(UserError):
     """An environment source cannot be used; the one-line message names the path."""
 
 
