@@ -19,6 +19,7 @@ import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from types import FrameType
 from typing import ParamSpec, TypeVar
 
 P = ParamSpec("P")
@@ -189,14 +190,17 @@ def interrupts_raise() -> Iterator[None]:
         return
     interrupted = False
 
-    def handler(_signum: int, _frame: object) -> None:
+    def handler(_signum: int, _frame: FrameType | None) -> None:
         nonlocal interrupted
         if interrupted:
             return
         interrupted = True
         raise KeyboardInterrupt
 
-    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL}
+    defaults: dict[signal.Signals, Callable[[int, FrameType | None], object] | int] = {
+        signal.SIGINT: signal.default_int_handler,
+        signal.SIGTERM: signal.SIG_DFL,
+    }
     replaced = [number for number, default in defaults.items() if signal.getsignal(number) is default]
     for number in replaced:
         signal.signal(number, handler)

@@ -250,7 +250,8 @@ def frozen_instance_norm(model: nn.Module, stats: NormStatistics) -> Iterator[No
             if previous is _MISSING:
                 del module.forward
             else:
-                module.forward = previous  # type: ignore[method-assign]
+                # The callable saved above, typed ``object`` because of the _MISSING sentinel.
+                module.forward = previous  # type: ignore[assignment]
 
 
 # --- geometry --------------------------------------------------------------------------------------

@@ -168,7 +168,7 @@ def texture_set(maps: Tensor, options: ExportOptions) -> dict[str, Texture]:
 
 def png_bytes(values: np.ndarray) -> bytes:
     """8-bit PNG of ``(H, W, C)`` values in [0, 1], RGB order (OpenCV wants BGR: converted here)."""
-    image = np.clip(np.rint(values * 255.0), 0, 255).astype(np.uint8)
+    image: np.ndarray = np.clip(np.rint(values * 255.0), 0, 255).astype(np.uint8)
     if image.ndim == 3 and image.shape[2] == 3:
         image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
     ok, encoded = cv2.imencode(".png", image)
