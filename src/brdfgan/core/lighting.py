@@ -172,7 +172,8 @@ def _row_irradiance_weights(height: int) -> np.ndarray:
     position = theta / delta
     lower = np.minimum(np.floor(position).astype(np.int64), height - 2)
     frac = position - lower
-    weights = np.bincount(lower, integrand * (1.0 - frac), minlength=height)
+    # float64: bincount with weights sums them (its stubs only know the integer counting form).
+    weights: np.ndarray = np.bincount(lower, integrand * (1.0 - frac), minlength=height)
     weights += np.bincount(lower + 1, integrand * frac, minlength=height)
     weights *= 2.0 * math.pi / (2 * height)
     weights.setflags(write=False)

@@ -76,7 +76,7 @@ def sunsky_environment(
     Below the horizon the map shows a Lambertian plain of ``ground_albedo`` lit by sky and sun.
     """
     mi = mitsuba()
-    sun = spherical_direction(np.float64(math.radians(azimuth_deg)), np.float64(math.radians(elevation_deg)))
+    sun = spherical_direction(np.array(math.radians(azimuth_deg)), np.array(math.radians(elevation_deg)))
     base = {
         "type": "sunsky",
         "sun_direction": [float(c) for c in sun],
