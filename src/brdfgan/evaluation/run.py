@@ -13,6 +13,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from brdfgan.config_check import check_config
 from brdfgan.data.shards import Sample, iter_shard, list_shards
+from brdfgan.errors import UserError
 from brdfgan.evaluation.evaluator import evaluate_models, markdown_table, write_grid, write_results
 from brdfgan.runs import load_generator, model_name
 
@@ -37,7 +38,7 @@ def fixed_samples(data_dir: Path, split: str, count: int, keys: Sequence[str] | 
         return samples
     missing = [key for key in wanted if key not in found]
     if missing:
-        raise ValueError(f"grid_keys: no sample {missing[0]!r} in the {split} split of {data_dir}")
+        raise UserError(f"grid_keys: no sample {missing[0]!r} in the {split} split of {data_dir}")
     return [found[key] for key in wanted]
 
 

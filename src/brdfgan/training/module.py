@@ -31,6 +31,7 @@ from torch.optim.lr_scheduler import LambdaLR
 from torchmetrics import MetricCollection
 
 from brdfgan.core.sampling import sample_rendering_loss_configs
+from brdfgan.errors import UserError
 from brdfgan.losses.parameter import parameter_loss
 from brdfgan.losses.rendering import rendering_loss
 from brdfgan.losses.total import GANLoss
@@ -82,7 +83,7 @@ class SVBRDFGAN(L.LightningModule):
         self.loss = loss
         self.uses_discriminator = loss.switches.needs_discriminator
         if self.uses_discriminator and discriminator is None:
-            raise ValueError("model.discriminator: the loss needs one (adversarial or feature term)")
+            raise UserError("model.discriminator: the loss needs one (adversarial or feature term)")
         self.discriminator = discriminator() if self.uses_discriminator and discriminator else None
         self.optimizer_factory = optimizer
         self.constant_lr_fraction = constant_lr_fraction
@@ -144,7 +145,7 @@ class SVBRDFGAN(L.LightningModule):
         datamodule = getattr(trainer, "datamodule", None)
         per_epoch = getattr(datamodule, "train_batches_per_epoch", None)
         if per_epoch is None or trainer.max_epochs is None or trainer.max_epochs < 0:
-            raise ValueError("cannot infer the schedule length: set model.total_steps or trainer.max_epochs")
+            raise UserError("cannot infer the schedule length: set model.total_steps or trainer.max_epochs")
         return max(1, trainer.max_epochs * per_epoch)
 
     def configure_optimizers(self) -> Any:

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from brdfgan.errors import UserError
+
 
 @dataclass(frozen=True)
 class LinearDecaySchedule:
@@ -16,9 +18,12 @@ class LinearDecaySchedule:
 
     def __post_init__(self) -> None:
         if self.total_steps < 1:
-            raise ValueError(f"total_steps must be >= 1, got {self.total_steps}")
+            raise UserError(
+                f"the schedule needs >= 1 generator step (model.total_steps, trainer.max_epochs), "
+                f"got {self.total_steps}"
+            )
         if not 0.0 <= self.constant_fraction <= 1.0:
-            raise ValueError(f"constant_fraction must lie in [0, 1], got {self.constant_fraction}")
+            raise UserError(f"model.constant_lr_fraction must lie in [0, 1], got {self.constant_fraction}")
 
     @property
     def decay_start(self) -> int:
