@@ -12,8 +12,8 @@ from PIL import Image
 
 from brdfgan.core import relight as relight_module
 from brdfgan.core.svbrdf import flat_maps, linear_to_srgb, normalize_normal
-from brdfgan.inference import preview
-from brdfgan.inference.preview import (
+from brdfgan.inference.outputs import preview
+from brdfgan.inference.outputs.preview import (
     LABEL_HEIGHT,
     SEPARATOR,
     SEPARATOR_COLOR,

@@ -11,7 +11,7 @@ from brdfgan.core.relight import SKY_LIGHT_DISTANCE, relight, render_sky
 from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
 from brdfgan.core.sky import ProceduralSky, sample_sky
 from brdfgan.core.svbrdf import flat_maps, normalize_normal
-from brdfgan.inference.preview import preview_lights
+from brdfgan.inference.outputs.preview import preview_lights
 from tests.conftest import random_maps
 
 SIZE = 32

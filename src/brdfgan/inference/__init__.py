@@ -6,6 +6,6 @@
   file; :mod:`.model.export_weights`: writing one from a training run), running it with bounded
   memory (:mod:`.model.tiling`) and checking that memory up front (:mod:`.model.memory`).
 - :mod:`~brdfgan.inference.outputs`: texture files, ``material.glb`` and ``material.json``
-  (:mod:`.outputs.export`, :mod:`.outputs.gltf`) and the relit previews (:mod:`.preview`).
+  (:mod:`.outputs.export`, :mod:`.outputs.gltf`) and the relit previews (:mod:`.outputs.preview`).
 - :mod:`~brdfgan.inference.pipeline`: the stages chained per photo and per batch.
 """

@@ -33,7 +33,7 @@ from brdfgan.inference.intake.preprocess import Crop, preprocess
 from brdfgan.inference.model.tiling import TilingConfig, predict_direct, predict_tiled
 from brdfgan.inference.model.weights import Model
 from brdfgan.inference.outputs.export import ExportOptions, recover_outputs, write_material
-from brdfgan.inference.preview import write_animation, write_preview
+from brdfgan.inference.outputs.preview import write_animation, write_preview
 
 log = logging.getLogger(__name__)
 

@@ -46,6 +46,7 @@ import numpy as np
 import torch
 from PIL import Image, UnidentifiedImageError
 
+from brdfgan.core.exposure import LUMINANCE_WEIGHTS
 from brdfgan.core.svbrdf import srgb_to_linear
 from brdfgan.errors import UserError
 from brdfgan.io.images import ImageIOError, read_image
@@ -242,7 +243,7 @@ def colorspace_warning(stored: np.ndarray, colorspace: Colorspace) -> str | None
     Shape:
         - stored: ``(H, W, 3)`` floating point in [0, 1] (any subsample of the photo)
     """
-    luma = stored.astype(np.float32) @ np.asarray([0.2126, 0.7152, 0.0722], dtype=np.float32)
+    luma = stored.astype(np.float32) @ np.asarray(LUMINANCE_WEIGHTS, dtype=np.float32)
     median, p99 = (float(v) for v in np.quantile(luma, [0.5, 0.99]))
     if colorspace == "srgb" and median < LOOKS_LINEAR_MAX_MEDIAN and p99 >= LOOKS_LINEAR_MIN_P99:
         return (

@@ -1,0 +1,55 @@
+"""The package layout keeps its promises: pure maths stays pure, the renderer bridge does not
+depend on the data pipeline, and commands live in one console (issue: one home per concept)."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "src" / "brdfgan"
+
+
+def _imports(path: Path) -> set[str]:
+    """Every module a file imports (absolute names; relative imports resolved), lazily or not."""
+    package = ".".join(path.relative_to(PACKAGE.parent).with_suffix("").parts[:-1])
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                found.add(f"{base}.{node.module}" if node.module else base)
+            elif node.module:
+                found.add(node.module)
+    return found
+
+
+def _files(subpackage: str) -> list[Path]:
+    return sorted((PACKAGE / subpackage).rglob("*.py"))
+
+
+@pytest.mark.parametrize(
+    ("subpackage", "forbidden"),
+    [
+        ("mitsuba_render", ("brdfgan.data",)),
+        ("core", ("lightning", "hydra", "omegaconf", "mitsuba", "brdfgan.data", "brdfgan.inference")),
+        ("models", ("lightning", "hydra", "omegaconf", "brdfgan.data", "brdfgan.training")),
+    ],
+)
+def test_imports_stay_inside_their_layer(subpackage: str, forbidden: tuple[str, ...]) -> None:
+    offending = [
+        f"{path.relative_to(PACKAGE)} imports {name}"
+        for path in _files(subpackage)
+        for name in sorted(_imports(path))
+        if any(name == prefix or name.startswith(prefix + ".") for prefix in forbidden)
+    ]
+    assert not offending, "; ".join(offending)
+
+
+@pytest.mark.parametrize("subpackage", ["models", "data", "inference"])
+def test_no_command_line_modules_outside_the_console(subpackage: str) -> None:
+    mains = [str(p.relative_to(PACKAGE)) for p in _files(subpackage) if "__main__" in p.read_text()]
+    assert not mains, f"run these through `brdfgan <command>` instead: {mains}"
