@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.setup-complete
 TORCH_PIN := torch==2.13.0
-# Mitsuba's LLVM variant needs LLVM >= 17 (Debian's default 14-16 abort, DESIGN.md §4).
+# Mitsuba's LLVM variant needs LLVM >= 17 (Debian's default 14-16 abort, docs/conventions.md#mitsuba-variant).
 LIBLLVM := $(firstword $(wildcard /usr/lib/x86_64-linux-gnu/libLLVM-19.so /usr/lib/aarch64-linux-gnu/libLLVM-19.so))
 ifneq ($(LIBLLVM),)
 export DRJIT_LIBLLVM_PATH ?= $(LIBLLVM)

@@ -176,7 +176,8 @@ def main() -> None:
         "per GAN step (generator + two discriminators, forward+backward) on an A100-class GPU "
         f"(an assumption, not measured) → ≥ {needed:.0f} samples/s per GPU."
     )
-    # At 256² the step costs ~4× fewer FLOPs (DESIGN.md §4: 106 vs 424 GFLOP per image).
+    # At 256² the step costs ~4× fewer FLOPs (docs/conventions.md#generator-cost: 106 vs 424 GFLOP
+    # per image).
     for size, rate_needed in ((512, needed), (256, needed * 4)):
         if size in per_worker:
             workers = math.ceil(rate_needed / per_worker[size])

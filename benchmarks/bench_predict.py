@@ -8,7 +8,7 @@ The generator's share is the time spent inside ``Predictor.maps``; the rest is d
 search, resizing, encoding seven textures, the .glb and the preview.
 
 It also measures the sgemm rate of this machine (4096³ fp32 matmul) and reports the paper
-generator's 512² forward against the floor that rate implies (424 GFLOP, DESIGN.md §4).
+generator's 512² forward against the floor that rate implies (424 GFLOP, docs/conventions.md#generator-cost).
 
     python -m benchmarks.bench_predict [--sizes 512 1024 2048 4096]
 """

@@ -100,8 +100,8 @@ def _directional_albedo(
 @pytest.mark.parametrize("roughness", [0.1, 0.3, 0.6, 1.0])
 @pytest.mark.parametrize("view_deg", [0.0, 30.0, 60.0])
 def test_energy_bound_for_real_albedos(metallic: float, roughness: float, view_deg: float) -> None:
-    # DESIGN.md §2: Burley + single-scattering GGX exceeds 1 only at grazing views or base color 1,
-    # so the bound is checked for a linear base color of 0.8 and views ≤ 60°.
+    # docs/conventions.md#energy: Burley + single-scattering GGX exceeds 1 only at grazing views or
+    # base color 1, so the bound is checked for a linear base color of 0.8 and views ≤ 60°.
     albedo = _directional_albedo(0.8, roughness, metallic, view_deg, samples=40_000)
     assert 0.1 < albedo <= 1.0
 

@@ -45,7 +45,8 @@ def test_relight_light_above_centre_is_centred_and_symmetric() -> None:
 
 
 def test_relight_orientation_convention() -> None:
-    """+X is the right of the image, +Y its top (row 0), as in the renderer and DESIGN.md §2."""
+    """+X is the right of the image, +Y its top (row 0), as in the renderer
+    (docs/conventions.md#scene-and-orientation)."""
     plane = _plane()
     right, up = relight(plane, torch.tensor([[1.5, 0.0, 2.0], [0.0, 1.5, 2.0]])).mean(dim=1)
     half = SIZE // 2

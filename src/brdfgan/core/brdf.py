@@ -1,4 +1,4 @@
-"""Cook–Torrance GGX + Burley diffuse BRDF in the metallic workflow (paper §3, DESIGN.md §2).
+"""Cook–Torrance GGX + Burley diffuse BRDF in the metallic workflow (paper §3, docs/conventions.md#brdf).
 
     f(l, v) = f_d + f_s
     f_d = d/π · (1 + (F_D90 − 1)(1 − n·l)^5) · (1 + (F_D90 − 1)(1 − n·v)^5),  F_D90 = 0.5 + 2 r (h·l)²

@@ -1,4 +1,4 @@
-"""Auto exposure of HDR renderings to linear LDR (paper appendix, DESIGN.md §2).
+"""Auto exposure of HDR renderings to linear LDR (paper appendix, docs/conventions.md#auto-exposure).
 
 Derivation. Exposure values at ISO 100 are ``EV100 = log2(N²/t)`` (aperture N, shutter time t).
 A reflected-light meter with calibration constant K = 12.5 cd·s/m²·ISO picks, for average scene

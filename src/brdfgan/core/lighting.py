@@ -7,8 +7,8 @@ turns Mitsuba's +Y-up emitter into our +Z-up world lives in :mod:`brdfgan.mitsub
 - texel column j is at ``φ = 2π(j + ½)/W`` and row i at ``θ = iπ/(H − 1)`` (measured on Mitsuba
   3.9: rows are point samples that include both poles, columns are cell centres; the emitter
   interpolates bilinearly between them);
-- a texel's world direction (+Z up, DESIGN.md §2) is ``(sinθ sinφ, sinθ cosφ, cosθ)``: φ runs
-  from +Y towards +X and row 0 is the zenith.
+- a texel's world direction (+Z up, docs/conventions.md#scene-and-orientation) is
+  ``(sinθ sinφ, sinθ cosφ, cosθ)``: φ runs from +Y towards +X and row 0 is the zenith.
 
 The sun of sun/sky environments is kept out of the map as a :class:`SunLight` (a delta
 direction; a 0.53° disc would cover about half a 0.7° texel and either vanish or be smeared).

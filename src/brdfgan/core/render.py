@@ -1,10 +1,10 @@
 """Differentiable point-light renderer for a planar SVBRDF sample (pure torch).
 
-Scene (DESIGN.md §2): the sample is the square ``[-s, s]²`` of the plane z = 0 (``s`` =
-``plane_half_size``), texel (i, j) sits at ``x = -s + (j + ½)·2s/W``, ``y = s − (i + ½)·2s/H``
-(row 0 is +Y), the tangent frame is the world frame. Every output pixel is one texel, shaded
-with the exact view direction towards the camera position and lit by point lights with inverse
-square falloff:
+Scene (docs/conventions.md#scene-and-orientation): the sample is the square ``[-s, s]²`` of the
+plane z = 0 (``s`` = ``plane_half_size``), texel (i, j) sits at ``x = -s + (j + ½)·2s/W``,
+``y = s − (i + ½)·2s/H`` (row 0 is +Y), the tangent frame is the world frame. Every output pixel
+is one texel, shaded with the exact view direction towards the camera position and lit by point
+lights with inverse square falloff:
 
     L_o(p) = Σ_k f(l_k, v) · max(n·l_k, 0) · I_k / |x_k − p|²
 
@@ -169,7 +169,7 @@ class PointLightRenderer(nn.Module):
 @dataclass(frozen=True)
 class FlashCapture:
     """The capture set-up: a camera above the sample centre looking down −Z and framing the
-    square exactly, with a point-light flash at the camera (DESIGN.md §2)."""
+    square exactly, with a point-light flash at the camera (docs/conventions.md#scene-and-orientation)."""
 
     fov_deg: float = 45.0
     intensity: float = 1.0

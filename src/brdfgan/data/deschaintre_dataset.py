@@ -21,9 +21,10 @@ roughness gray stored as RGB, raw value                 perceptual roughness, un
 
 - **Albedos.** The maps come from Substance materials converted to the specular/glossiness
   workflow, ``d = b (1 - m)`` and ``s = 0.04 (1 - m) + b m`` with b linear: exactly our derived
-  albedos (DESIGN.md §2), so we invert that model. Their later code linearises albedos and photos
-  with a pure 2.2 power; we use the exact sRGB curve like everywhere else here. (Their 2018 renderer
-  additionally scales the diffuse term by ``1 - s``: a renderer choice, not part of the stored maps.)
+  albedos (docs/conventions.md#derived-albedos), so we invert that model. Their later code
+  linearises albedos and photos with a pure 2.2 power; we use the exact sRGB curve like everywhere
+  else here. (Their 2018 renderer additionally scales the diffuse term by ``1 - s``: a renderer
+  choice, not part of the stored maps.)
 - **Roughness.** Their GGX uses ``alpha = roughness²`` on the stored value, as ours does, so the
   value is our perceptual roughness. The three channels are averaged.
 - **Normals.** The released code does not state the tangent frame of the normal tiles (its

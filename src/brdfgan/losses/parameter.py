@@ -1,8 +1,9 @@
 """Parameter loss L_p (paper §4.1): the predicted maps compared directly with the ground truth.
 
 "For every parameter map except the surface normals the MAE is used"; normals use the angular
-distance ``acos(a·b)/π``. Maps are compared in their stored encoding (DESIGN.md §2): base color
-sRGB-encoded, as the paper compares the parameter maps themselves, not derived quantities.
+distance ``acos(a·b)/π``. Maps are compared in their stored encoding
+(docs/conventions.md#maps-and-encodings): base color sRGB-encoded, as the paper compares the
+parameter maps themselves, not derived quantities.
 
 How the four per-map terms make L_p: the **plain sum of the four per-map means**
 (``param = basecolor + normal + roughness + metallic``). Each map counts once whatever its

@@ -23,8 +23,8 @@ Definitions (``pred`` and ``true`` in the 8-channel layout of :mod:`brdfgan.core
   ========= ========================================================================
 
   The derived albedos are compared in the colour space :data:`ALBEDO_SPACE` (default: linear,
-  the space in which the paper and DESIGN.md §2 define them and the renderer uses them; ``"srgb"``
-  compares them sRGB-encoded, like the albedo files of Deschaintre et al. 2018).
+  the space in which the paper (docs/conventions.md#derived-albedos) defines them and the renderer
+  uses them; ``"srgb"`` compares them sRGB-encoded, like the albedo files of Deschaintre et al. 2018).
 
 - **Downscaled RMSE** (``MapRMSE(downscale_to=256)``, the paper's "downscaled to 256²"): each
   compared image above is first computed at full resolution *in the encoding in which it is

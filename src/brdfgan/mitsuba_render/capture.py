@@ -78,7 +78,7 @@ class CaptureTiming:
 
 def _texture_array(image: Tensor) -> np.ndarray:
     # Same layout as scene._bitmap_texture: (C, H, W) ours → (H, W, C) with rows flipped, since
-    # Mitsuba's rectangle puts bitmap row 0 at y = −s (DESIGN.md §4).
+    # Mitsuba's rectangle puts bitmap row 0 at y = −s (docs/conventions.md#mitsuba-row-flip).
     return np.ascontiguousarray(image.detach().to("cpu", torch.float32).flip(-2).permute(1, 2, 0).numpy())
 
 
@@ -322,7 +322,7 @@ def render_capture(
     flash_rgb_intensity: tuple[float, float, float],
     seed: int = 0,
 ) -> CaptureResult:
-    """Render a capture and auto-expose it to linear LDR (paper appendix, DESIGN.md §2).
+    """Render a capture and auto-expose it to linear LDR (paper appendix, docs/conventions.md#auto-exposure).
 
     Shape:
         - maps: ``(8, H, W)``

@@ -3,7 +3,7 @@
 Geometry matches :mod:`brdfgan.core.render`: the sample covers ``[-s, s]²`` of z = 0, the camera
 looks down −Z from above the centre and frames the square. Mitsuba's ``rectangle`` maps bitmap
 row 0 to y = −s (the bottom of the image) while our row 0 is +Y, so rows are flipped on the way
-in — rows only; the Y component of the normals stays as it is (DESIGN.md §4).
+in — rows only; the Y component of the normals stays as it is (docs/conventions.md#mitsuba-row-flip).
 """
 
 from __future__ import annotations

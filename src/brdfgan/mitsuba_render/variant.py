@@ -1,9 +1,9 @@
 """Choosing and activating a Mitsuba variant: cuda_ad_rgb → llvm_ad_rgb → scalar_rgb.
 
 Dr.Jit's LLVM backend loads ``libLLVM`` at import time. With Debian's default LLVM 14–16 the
-``llvm_ad_rgb`` variant aborts the process ("Cannot select … fminimum", DESIGN.md §4), so unless
-the user already set ``DRJIT_LIBLLVM_PATH`` we look for LLVM ≥ 17 and fall back to ``scalar_rgb``
-when there is none rather than risk a hard crash.
+``llvm_ad_rgb`` variant aborts the process ("Cannot select … fminimum",
+docs/conventions.md#mitsuba-variant), so unless the user already set ``DRJIT_LIBLLVM_PATH`` we look
+for LLVM ≥ 17 and fall back to ``scalar_rgb`` when there is none rather than risk a hard crash.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The conditional GAN as a LightningModule with manual optimization (paper §4, DESIGN.md §5.5).
+"""The conditional GAN as a LightningModule with manual optimization (paper §4, docs/conventions.md#gan-step).
 
 Per training batch: a discriminator step, then a generator step, each inside
 ``toggled_optimizer`` with ``manual_backward`` and optional ``clip_gradients``. The learning

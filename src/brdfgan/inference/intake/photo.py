@@ -1,4 +1,4 @@
-"""Reading a user's flash photo into linear RGB (DESIGN.md §2: the network sees linear LDR).
+"""Reading a user's flash photo into linear RGB (docs/conventions.md#photos-are-linear-ldr).
 
 Formats and how their values are interpreted (``colorspace=None`` picks the format's default):
 

@@ -2,7 +2,8 @@
 
 The paper (§6.1) exported RAW photos linearly and cropped them 1:1 with the camera flash roughly
 at the centre; the training inputs were rendered HDR images auto-exposed to linear LDR (appendix,
-DESIGN.md §2). :func:`preprocess` does the same to a :class:`~brdfgan.inference.intake.photo.Photo`:
+docs/conventions.md#auto-exposure). :func:`preprocess` does the same to a
+:class:`~brdfgan.inference.intake.photo.Photo`:
 
 1. **Crop.** Either the user's ``x,y,size`` square (validated against the photo), or the square
    chosen by :func:`hotspot_crop` around the flash highlight found by :func:`find_hotspot`.
