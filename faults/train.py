@@ -1,6 +1,6 @@
 """Fault scenarios for ``train.py`` and ``evaluate.py``: kills and signals mid-epoch and in the
 middle of a checkpoint write, full disks, unusable checkpoints, crafted run folders and bad
-values — each against the real command on the tiny dataset (``experiment=smoke``: 2 epochs of 6
+values — each against the real command on the tiny dataset (``debug=default``: 2 epochs of 6
 batches, a checkpoint after every batch).
 
 A resumed run must end with the weights of a straight run, bit for bit. The unit-level versions
@@ -37,7 +37,7 @@ from faults.common import (
 STEPS = 24  # 2 epochs × 6 batches × 2 optimizer steps (discriminator and generator)
 STEPS_PER_EPOCH = 12
 SMOKE = [
-    "experiment=smoke",
+    "debug=default",
     "trainer.max_epochs=2",
     "test=false",
     "callbacks.mid_epoch_checkpoint.every_n_train_steps=2",

@@ -52,7 +52,7 @@ def compose_train(overrides: list[str], root: Path | None = None) -> DictConfig:
 def tiny_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The tiny dataset of conf/data/tiny.yaml, made once with Mitsuba."""
     root = tmp_path_factory.mktemp("project")
-    cfg = compose_train(["experiment=smoke"], root)
+    cfg = compose_train(["debug=default"], root)
     module = hydra.utils.instantiate(cfg.data, _convert_="all")
     assert module.data_dir == root / "data" / "tiny"
     module.prepare_data()

@@ -68,7 +68,7 @@ def test_a_kill_mid_write_leaves_the_previous_checkpoint_whole(tmp_path: Path) -
 
 
 def test_the_trainer_writes_checkpoints_through_the_atomic_plugin_and_loads_safely(tmp_path: Path) -> None:
-    _, _, trainer = build(compose_train(["experiment=smoke"], tmp_path))
+    _, _, trainer = build(compose_train(["debug=default"], tmp_path))
     assert isinstance(trainer.strategy.checkpoint_io, AtomicCheckpointIO)
     target = tmp_path / "x.ckpt"
     torch.save({"payload": object.__new__(L.Callback)}, target)  # needs unpickling of a class
@@ -93,7 +93,7 @@ def test_a_full_disk_while_training_names_the_checkpoint_and_leaves_only_whole_f
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(Path, "write_bytes", write_until_full)
-    overrides = ["experiment=smoke", "test=false", "callbacks.mid_epoch_checkpoint.every_n_train_steps=2"]
+    overrides = ["debug=default", "test=false", "callbacks.mid_epoch_checkpoint.every_n_train_steps=2"]
     cfg = compose_train(overrides, tiny_data)
     cfg.paths.output_dir = str(tmp_path / "run")
     with pytest.raises(DiskFullError) as error:
@@ -107,7 +107,7 @@ def test_a_full_disk_while_training_names_the_checkpoint_and_leaves_only_whole_f
 @pytest.mark.mitsuba
 def test_an_interrupted_fit_says_where_to_resume(tiny_data: Path, tmp_path: Path) -> None:
     cfg = compose_train(
-        ["experiment=smoke", "callbacks.mid_epoch_checkpoint.every_n_train_steps=2"], tiny_data
+        ["debug=default", "callbacks.mid_epoch_checkpoint.every_n_train_steps=2"], tiny_data
     )
     cfg.paths.output_dir = str(tmp_path / "run")
     cfg.callbacks.ctrl_c = {"_target_": f"{__name__}.CtrlCAtStep4"}

@@ -50,7 +50,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_a_wrong_value_names_the_key_before_anything_is_built(
     tmp_path: Path, override: str, message: str
 ) -> None:
-    cfg = compose_train(["experiment=smoke", override], tmp_path)
+    cfg = compose_train(["debug=default", override], tmp_path)
     with pytest.raises(ConfigValueError) as error:
         train(cfg)
     assert message in str(error.value)
@@ -60,9 +60,10 @@ def test_a_wrong_value_names_the_key_before_anything_is_built(
 
 @pytest.mark.parametrize(
     "overrides",
-    [[], ["experiment=smoke"], ["experiment=paper"], ["experiment=default_model_finetune"],
-     ["model=deschaintre2018"], ["loss=no_adv"], ["trainer=ddp"], ["logger=many"], ["data=deschaintre"],
-     ["callbacks=none"]],
+    [[], ["debug=default"], ["debug=fdr"], ["debug=overfit"], ["debug=limit"],
+     ["experiment=paper", "debug=default"], ["experiment=paper"], ["experiment=default_model_finetune"],
+     ["model=deschaintre2018"], ["loss=no_adv"], ["loss=supervised"], ["trainer=gpu"], ["trainer=ddp"],
+     ["logger=many"], ["data=deschaintre"], ["callbacks=none"]],
 )  # fmt: skip
 def test_every_shipped_config_passes_the_check(overrides: list[str]) -> None:
     check_config(compose_train(overrides), CHECKED_GROUPS)
@@ -91,7 +92,7 @@ def test_train_and_evaluate_print_one_line_and_exit_2(tmp_path: Path) -> None:
     cases = [
         (
             "train.py",
-            ["experiment=smoke", "trainer.max_epochs=abc"],
+            ["debug=default", "trainer.max_epochs=abc"],
             "error: trainer.max_epochs='abc': expected",
         ),
         ("evaluate.py", ["ckpt=x.ckpt", "data=tiny", "data.batch_size=two"], "error: data.batch_size='two'"),

@@ -97,7 +97,7 @@ def _cli(script: str, *args: str, cwd: Path) -> subprocess.CompletedProcess[str]
 
 @pytest.mark.mitsuba
 def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> None:
-    trained = _cli("train.py", "experiment=smoke", "task_name=evaltest", cwd=tiny_data)
+    trained = _cli("train.py", "debug=default", "task_name=evaltest", cwd=tiny_data)
     assert trained.returncode == 0, trained.stderr[-3000:]
     run = sorted((tiny_data / "logs" / "evaltest" / "runs").iterdir())[-1]
     metrics = json.loads((run / "metrics.json").read_text())["model"]
@@ -237,7 +237,7 @@ def test_exported_test_metrics_belong_to_the_exported_checkpoint(tmp_path: Path)
     from brdfgan.inference.model.export_weights import evaluation_metrics, training_summary
 
     run = tmp_path / "run"
-    last = _fake_training_run(run, ["experiment=smoke"], epoch=5, step=60)
+    last = _fake_training_run(run, ["debug=default"], epoch=5, step=60)
     (run / "metrics.json").write_text(json.dumps({"model": {"rmse/normal": 0.5}}))
 
     def tested(best: Path, best_step: int) -> None:

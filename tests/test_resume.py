@@ -15,7 +15,7 @@ from brdfgan.training.run import TrainConfigError, build, train
 from tests.conftest import compose_train
 
 # tiny: 3 train materials × 2 crops × 2 renders = 12 samples, batch 2 → 6 batches per epoch.
-OVERRIDES = ["experiment=smoke", "logger=csv", "trainer.max_epochs=2", "test=false",
+OVERRIDES = ["debug=default", "logger=csv", "trainer.max_epochs=2", "test=false",
              "callbacks.mid_epoch_checkpoint.every_n_train_steps=2"]  # fmt: skip
 
 
@@ -90,13 +90,13 @@ def test_round_robin_share_follows_the_dataloader_order() -> None:
 def test_an_unreadable_checkpoint_to_resume_is_one_line(tmp_path: Path, content: bytes, message: str) -> None:
     checkpoint = tmp_path / "last.ckpt"
     checkpoint.write_bytes(content)
-    cfg = compose_train(["experiment=smoke", f"ckpt_path={checkpoint}"], tmp_path)
+    cfg = compose_train(["debug=default", f"ckpt_path={checkpoint}"], tmp_path)
     with pytest.raises(TrainConfigError, match=f"ckpt_path: {checkpoint}: {message}"):
         train(cfg)
 
 
 def test_a_truncated_real_checkpoint_is_refused(tmp_path: Path) -> None:
-    cfg = compose_train(["experiment=smoke"], tmp_path)
+    cfg = compose_train(["debug=default"], tmp_path)
     _, module, _ = build(cfg)
     whole = tmp_path / "whole.ckpt"
     torch.save({"state_dict": module.state_dict(), "global_step": 4}, whole)
@@ -108,19 +108,19 @@ def test_a_truncated_real_checkpoint_is_refused(tmp_path: Path) -> None:
 
 
 def test_another_architectures_checkpoint_is_refused_before_training(tmp_path: Path) -> None:
-    wider = compose_train(["experiment=smoke", "model.generator.width=16"], tmp_path)
+    wider = compose_train(["debug=default", "model.generator.width=16"], tmp_path)
     _, module, _ = build(wider)
     checkpoint = tmp_path / "wide.ckpt"
     torch.save({"state_dict": module.state_dict(), "global_step": 4}, checkpoint)
-    cfg = compose_train(["experiment=smoke", f"ckpt_path={checkpoint}"], tmp_path)
+    cfg = compose_train(["debug=default", f"ckpt_path={checkpoint}"], tmp_path)
     with pytest.raises(
         TrainConfigError, match=r"the generator does not fit this run's model \(down\.0\.weight is \(16"
     ):
         train(cfg)
     # A GAN checkpoint for a run without a discriminator (another loss) is refused too.
-    _, gan, _ = build(compose_train(["experiment=smoke"], tmp_path))
+    _, gan, _ = build(compose_train(["debug=default"], tmp_path))
     torch.save({"state_dict": gan.state_dict(), "global_step": 4}, checkpoint)
-    overrides = ["experiment=smoke", "loss=supervised", f"ckpt_path={checkpoint}"]
+    overrides = ["debug=default", "loss=supervised", f"ckpt_path={checkpoint}"]
     cfg = compose_train(overrides, tmp_path)
     with pytest.raises(TrainConfigError, match="holds a discriminator this run's model does not have"):
         train(cfg)

@@ -27,9 +27,10 @@ LOSSES = ["full", "no_adv", "no_feat", "no_param", "no_render"]
 
 
 @pytest.mark.parametrize("loss", LOSSES)
-@pytest.mark.parametrize("experiment", ["null", "cpu", "smoke", "paper", "default_model"])
+@pytest.mark.parametrize("experiment", ["null", "cpu", "debug", "paper", "default_model"])
 def test_every_loss_and_experiment_composes_and_builds(loss: str, experiment: str) -> None:
-    cfg = compose_train([f"loss={loss}"] + ([f"experiment={experiment}"] if experiment != "null" else []))
+    chosen = {"null": [], "debug": ["debug=default"]}.get(experiment, [f"experiment={experiment}"])
+    cfg = compose_train([f"loss={loss}", *chosen])
     if experiment == "paper":
         assert cfg.trainer.devices == 4 and cfg.trainer.strategy.startswith("ddp")
         assert cfg.trainer.max_epochs == 200 and cfg.data.batch_size == 8
@@ -160,7 +161,7 @@ def _fit(cfg: DictConfig, ckpt_path: str | None = None) -> tuple[L.LightningModu
 @pytest.mark.mitsuba
 @pytest.mark.parametrize("loss", ["full", "no_adv"])
 def test_gan_step_counts_and_schedule_follow_generator_steps(tiny_data: Path, loss: str) -> None:
-    cfg = compose_train(["experiment=smoke", f"loss={loss}", "logger=csv", "callbacks=none"], tiny_data)
+    cfg = compose_train(["debug=default", f"loss={loss}", "logger=csv", "callbacks=none"], tiny_data)
     cfg.loss.switches.feature = loss == "full"
     module, trainer = _fit(cfg)
     batches = trainer.datamodule.train_batches_per_epoch * cfg.trainer.max_epochs
@@ -176,8 +177,25 @@ def test_gan_step_counts_and_schedule_follow_generator_steps(tiny_data: Path, lo
 
 
 @pytest.mark.mitsuba
+@pytest.mark.parametrize(("debug", "batches"), [("fdr", 1), ("limit", 3 * 2)])
+def test_debug_configs_run_the_loop_on_the_batches_they_name(
+    tiny_data: Path, debug: str, batches: int
+) -> None:
+    # debug=fdr: one batch per stage; debug=limit: 3 epochs of 2 training batches. Two optimizer
+    # steps per batch (discriminator and generator).
+    module, trainer = _fit(compose_train([f"debug={debug}", "logger=csv"], tiny_data))
+    assert trainer.global_step == 2 * batches and module.generator.config()["width"] == 8
+    assert math.isfinite(float(trainer.callback_metrics["val/loss"]))
+
+
+def test_debug_overfit_trains_on_a_few_batches_for_many_epochs() -> None:
+    trainer = compose_train(["debug=overfit"]).trainer
+    assert trainer.overfit_batches == 3 and trainer.max_epochs == 20 and trainer.accelerator == "cpu"
+
+
+@pytest.mark.mitsuba
 def test_resume_continues_with_the_same_step_count_and_lr(tiny_data: Path, tmp_path: Path) -> None:
-    overrides = ["experiment=smoke", "logger=csv", "trainer.max_epochs=3"]
+    overrides = ["debug=default", "logger=csv", "trainer.max_epochs=3"]
     full = compose_train(overrides, tiny_data)
     full.paths.output_dir = str(tmp_path / "full")
     _, straight = _fit(full)
@@ -226,9 +244,9 @@ def _train_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
 
 @pytest.mark.mitsuba
 def test_train_py_runs_the_loop_and_returns_the_metric(tiny_data: Path) -> None:
-    result = _train_cli("experiment=smoke", cwd=tiny_data)
+    result = _train_cli("debug=default", cwd=tiny_data)
     assert result.returncode == 0, result.stderr[-3000:]
-    runs = sorted((tiny_data / "logs" / "smoke" / "runs").iterdir())
+    runs = sorted((tiny_data / "logs" / "debug" / "runs").iterdir())
     checkpoints = {p.name for p in (runs[-1] / "checkpoints").iterdir()}
     assert "last.ckpt" in checkpoints and any(name.startswith("epoch") for name in checkpoints)
     assert (runs[-1] / "csv").exists()
@@ -248,7 +266,7 @@ def test_train_py_bad_input_is_a_clear_error(tmp_path: Path, override: str, mess
     prefix = "+" if "no_such_arg" in override else ""
     for name in ("a.ckpt", "b.ckpt"):
         (tmp_path / name).write_bytes(b"")
-    result = _train_cli("experiment=smoke", *(prefix + part for part in override.split()), cwd=tmp_path)
+    result = _train_cli("debug=default", *(prefix + part for part in override.split()), cwd=tmp_path)
     assert result.returncode != 0
     assert message in result.stderr, result.stderr[-2000:]
     assert "Traceback" not in result.stderr
@@ -268,7 +286,7 @@ def test_ddp_on_two_cpu_processes_trains_and_tests(tiny_data: Path) -> None:
     # The paper trains with DDP; two gloo processes on the CPU exercise the same code path:
     # per-rank shard splitting, both networks in one module, toggled optimizers.
     result = _train_cli(
-        "experiment=smoke", "trainer.devices=2", "+trainer.strategy=ddp_find_unused_parameters_true",
+        "debug=default", "trainer.devices=2", "+trainer.strategy=ddp_find_unused_parameters_true",
         "task_name=ddp", cwd=tiny_data,
     )  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
