@@ -106,9 +106,7 @@ def test_a_full_disk_while_training_names_the_checkpoint_and_leaves_only_whole_f
 
 @pytest.mark.mitsuba
 def test_an_interrupted_fit_says_where_to_resume(tiny_data: Path, tmp_path: Path) -> None:
-    cfg = compose_train(
-        ["debug=default", "callbacks.mid_epoch_checkpoint.every_n_train_steps=2"], tiny_data
-    )
+    cfg = compose_train(["debug=default", "callbacks.mid_epoch_checkpoint.every_n_train_steps=2"], tiny_data)
     cfg.paths.output_dir = str(tmp_path / "run")
     cfg.callbacks.ctrl_c = {"_target_": f"{__name__}.CtrlCAtStep4"}
     with pytest.raises(KeyboardInterrupt) as error:
