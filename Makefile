@@ -55,6 +55,7 @@ demo-renderer: setup
 lint: setup
 	$(PY) -m ruff check src tests benchmarks faults *.py
 	$(PY) -m ruff format --check src tests benchmarks faults *.py
+	$(PY) -m mypy
 
 format: setup
 	$(PY) -m ruff format src tests benchmarks faults *.py

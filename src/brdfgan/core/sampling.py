@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 from torch import Tensor
@@ -73,7 +74,7 @@ class RenderConfigs:
 
 
 def sample_cosine_hemisphere(
-    shape: tuple[int, ...], generator: torch.Generator | None = None, **kw
+    shape: tuple[int, ...], generator: torch.Generator | None = None, **kw: Any
 ) -> Tensor:
     """Cosine-weighted unit directions on the +Z hemisphere.
 
@@ -89,7 +90,7 @@ def sample_cosine_hemisphere(
 
 
 def _uniform(
-    shape: tuple[int, ...], low: float, high: float, generator: torch.Generator | None, **kw
+    shape: tuple[int, ...], low: float, high: float, generator: torch.Generator | None, **kw: Any
 ) -> Tensor:
     return low + (high - low) * torch.rand(shape, generator=generator, **kw)
 
@@ -129,7 +130,7 @@ def sample_rendering_loss_configs(
           intensity ``(batch, V, 1)``, color ``(batch, V, 1, 3)``
     """
     s = plane_half_size
-    kw = {"dtype": torch.float64}
+    kw: dict[str, Any] = {"dtype": torch.float64}
     n_rand, n_spec = sampling.random_configs, sampling.specular_configs
     dist = (sampling.distance_min * s, sampling.distance_max * s)
 

@@ -24,7 +24,7 @@ random angle about the up axis.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -72,7 +72,7 @@ class EnvironmentSpec:
         return {"env_id": self.env_id, "kind": self.kind, "params": dict(self.params)}
 
 
-def make_spec(env_id: str, kind: EnvironmentKind, params: dict[str, ParamValue]) -> EnvironmentSpec:
+def make_spec(env_id: str, kind: EnvironmentKind, params: Mapping[str, ParamValue]) -> EnvironmentSpec:
     """Spec with its parameters sorted (floats as Python floats, so JSON and hashing are stable)."""
     clean = {k: (v if isinstance(v, str) else float(v)) for k, v in params.items()}
     return EnvironmentSpec(env_id, kind, tuple(sorted(clean.items())))

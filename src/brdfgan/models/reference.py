@@ -35,6 +35,7 @@ class ConstantMaps(nn.Module):
     """Predicts ``values`` (8 channels, stored encodings) at every pixel, whatever the photo."""
 
     size_multiple = 1
+    values: Tensor  # (8,) buffer
 
     def __init__(self) -> None:
         super().__init__()
@@ -55,6 +56,8 @@ class PhotoAsBasecolor(nn.Module):
     """Base colour = the linear photo sRGB-encoded; flat normal; constant roughness and metallic."""
 
     size_multiple = 1
+    roughness: Tensor  # () buffer
+    metallic: Tensor  # () buffer
 
     def __init__(self) -> None:
         super().__init__()

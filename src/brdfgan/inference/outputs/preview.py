@@ -329,7 +329,9 @@ def _write_gif(temp: Path, frames: Iterator[np.ndarray], fps: float) -> None:
 
 
 def _write_mp4(path: Path, temp: Path, frames: Iterator[np.ndarray], fps: float, size: int) -> None:
-    writer = cv2.VideoWriter(str(temp), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (size, size))
+    # cv2.VideoWriter_fourcc exists at run time but is missing from OpenCV's type stubs.
+    fourcc = cv2.VideoWriter_fourcc(*"mp4v")  # type: ignore[attr-defined]
+    writer = cv2.VideoWriter(str(temp), fourcc, float(fps), (size, size))
     try:
         if not writer.isOpened():
             raise ValueError(f"{path}: cannot open an mp4v video writer (OpenCV built without FFmpeg?)")
