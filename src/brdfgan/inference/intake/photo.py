@@ -395,9 +395,10 @@ def _check_mode(path: Path, mode: str) -> None:
         raise PhotoError(path, "is grayscale; a colour photo is needed")
 
 
-def _orientation_tag(value: object, warnings: list[str]) -> int:
+def _orientation_tag(value: Any, warnings: list[str]) -> int:
+    # EXIF values are whatever the file holds (int, bytes, a rational, garbage): untyped.
     try:
-        tag = int(value)  # type: ignore[call-overload]
+        tag = int(value)
     except (TypeError, ValueError):
         tag = 0
     if 1 <= tag <= 8:

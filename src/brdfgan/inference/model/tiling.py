@@ -243,6 +243,7 @@ def frozen_instance_norm(model: nn.Module, stats: NormStatistics) -> Iterator[No
                 raise ValueError(f"statistics for {name!r} do not belong to an InstanceNorm2d")
             # An instance attribute shadows the class's forward; remember any existing one.
             saved.append((module, module.__dict__.get("forward", _MISSING)))
+            # Replacing a method on one instance is the point here (and what mypy warns about).
             module.forward = _frozen_forward(module, entries)  # type: ignore[method-assign]
         yield
     finally:

@@ -26,6 +26,7 @@ import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -233,12 +234,12 @@ def preview_image(
     return np.ascontiguousarray(np.concatenate(columns, axis=1))
 
 
-def write_preview(path: str | os.PathLike[str], photo: Tensor, maps: Tensor, **kwargs: object) -> Path:
+def write_preview(path: str | os.PathLike[str], photo: Tensor, maps: Tensor, **kwargs: Any) -> Path:
     """Write :func:`preview_image` (``kwargs`` passed on) as a PNG, atomically. Returns the path."""
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise ValueError(f"{path}: preview must be a .png file")
-    image = preview_image(photo, maps, **kwargs)  # type: ignore[arg-type]
+    image = preview_image(photo, maps, **kwargs)
     ok, encoded = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
     if not ok:
         raise ValueError(f"{path}: PNG encoding failed")
@@ -348,7 +349,7 @@ def write_animation(
     frames: int = 36,
     size: int = 256,
     fps: float = 12,
-    **kwargs: object,
+    **kwargs: Any,
 ) -> Path:
     """Write :func:`animation_frames` (``kwargs`` passed on) as a looping ``.gif`` (Pillow) or an
     ``.mp4`` (OpenCV, ``mp4v``), atomically. Returns the path.
@@ -362,7 +363,7 @@ def write_animation(
         raise ValueError(f"{path}: animation must be one of {sorted(ANIMATION_SUFFIXES)}, got {suffix!r}")
     if not fps > 0:
         raise ValueError(f"fps must be > 0, got {fps}")
-    images = animation_frames(maps, frames=frames, size=size, **kwargs)  # type: ignore[arg-type]
+    images = animation_frames(maps, frames=frames, size=size, **kwargs)
     with _atomic_replace_keeping_suffix(path) as temp:
         if suffix == ".gif":
             _write_gif(temp, images, fps)
