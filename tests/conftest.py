@@ -36,14 +36,15 @@ register_generate_configs()
 register_evaluate_configs()
 
 
-def compose_train(overrides: list[str], root: Path | None = None) -> DictConfig:
+def compose_train(overrides: list[str], root: Path) -> DictConfig:
+    """``conf/train.yaml`` with ``overrides``, its project root at ``root`` (a test's ``tmp_path``,
+    so two test runs on one machine never share a folder)."""
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose(config_name="train", overrides=overrides, return_hydra_config=True)
     # Outside a Hydra run there is no runtime.output_dir: pin the paths the run would get.
-    base = root or Path("/tmp/brdfgan-test-runs")
     OmegaConf.set_struct(cfg, False)
-    cfg.paths.root_dir = str(base)
-    cfg.paths.output_dir = str(base / "run")
+    cfg.paths.root_dir = str(root)
+    cfg.paths.output_dir = str(root / "run")
     del cfg["hydra"]
     return cfg
 

@@ -65,8 +65,8 @@ def test_a_wrong_value_names_the_key_before_anything_is_built(
      ["model=deschaintre2018"], ["loss=no_adv"], ["loss=supervised"], ["trainer=gpu"], ["trainer=ddp"],
      ["logger=many"], ["data=deschaintre"], ["callbacks=none"]],
 )  # fmt: skip
-def test_every_shipped_config_passes_the_check(overrides: list[str]) -> None:
-    check_config(compose_train(overrides), CHECKED_GROUPS)
+def test_every_shipped_config_passes_the_check(tmp_path: Path, overrides: list[str]) -> None:
+    check_config(compose_train(overrides, tmp_path), CHECKED_GROUPS)
 
 
 def test_fits_and_describe_on_the_annotation_kinds() -> None:

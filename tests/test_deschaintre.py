@@ -9,8 +9,7 @@ import hydra
 import numpy as np
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
-from omegaconf import DictConfig, OmegaConf
+from hydra.errors import InstantiationException
 from torch import Tensor, nn
 
 from brdfgan.cli import main
@@ -35,15 +34,11 @@ from brdfgan.data.deschaintre_dataset import (
 from brdfgan.data.shards import iter_shard, list_shards, read_manifest
 from brdfgan.io.images import write_image
 from brdfgan.models.deschaintre2018 import Deschaintre2018
-from brdfgan.training.config import register_configs
 from brdfgan.training.run import build
-from tests.conftest import random_maps
+from tests.conftest import compose_train, random_maps
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
 # 8-bit files: a quantisation step is 1/255; in linear units up to ~1.2/255 near 1 (sRGB slope).
 STEP = 1.0 / 255.0
-
-register_configs()
 
 
 def rand(*shape: int, seed: int) -> Tensor:
@@ -303,24 +298,13 @@ def test_wrong_input_is_a_value_error() -> None:
 # --- config ------------------------------------------------------------------------------------------
 
 
-def compose_train(overrides: list[str], root: Path) -> DictConfig:
-    # As tests/test_training.py: outside a Hydra run, pin the paths a run would get.
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose(config_name="train", overrides=overrides, return_hydra_config=True)
-    OmegaConf.set_struct(cfg, False)
-    cfg.paths.root_dir = str(root)
-    cfg.paths.output_dir = str(root / "run")
-    del cfg["hydra"]
-    return cfg
-
-
 def test_config_composes_and_builds_without_discriminator(tmp_path: Path) -> None:
     cfg = compose_train(["model=deschaintre2018", "loss=no_adv", "loss.switches.feature=false"], tmp_path)
     assert set(cfg.model.generator) == {"_target_", "in_channels", "width", "levels"}  # nothing leaked
     _, module, _ = build(cfg)
     assert isinstance(module.generator, Deschaintre2018) and module.discriminator is None
     assert module.generator.config() == {"in_channels": 3, "width": 16, "levels": 8}
-    with pytest.raises(Exception, match="discriminator"):
+    with pytest.raises(InstantiationException, match="discriminator"):
         hydra.utils.instantiate(
             compose_train(["model=deschaintre2018", "loss=no_adv"], tmp_path).model,
             loss=hydra.utils.instantiate(compose_train(["loss=no_adv"], tmp_path).loss),

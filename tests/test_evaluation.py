@@ -205,7 +205,7 @@ def _fake_training_run(run_dir: Path, overrides: list[str], epoch: int, step: in
     from tests.conftest import compose_train
 
     (run_dir / ".hydra").mkdir(parents=True)
-    OmegaConf.save(compose_train(overrides), run_dir / ".hydra" / "config.yaml")
+    OmegaConf.save(compose_train(overrides, run_dir), run_dir / ".hydra" / "config.yaml")
     checkpoint = run_dir / "checkpoints" / "last.ckpt"
     checkpoint.parent.mkdir()
     torch.save({"epoch": epoch, "global_step": step}, checkpoint)

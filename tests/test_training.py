@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -13,11 +14,13 @@ import hydra
 import lightning as L
 import pytest
 import torch
+from hydra.errors import ConfigCompositionException
 from omegaconf import DictConfig
 from safetensors.torch import save_file
 from torch import nn
 
-from brdfgan.training.run import TrainConfigError, build, warm_start
+from brdfgan.config_check import ConfigValueError
+from brdfgan.training.run import TrainConfigError, build, train, warm_start
 from brdfgan.training.schedule import LinearDecaySchedule
 from tests.conftest import compose_train
 
@@ -28,9 +31,9 @@ LOSSES = ["full", "no_adv", "no_feat", "no_param", "no_render"]
 
 @pytest.mark.parametrize("loss", LOSSES)
 @pytest.mark.parametrize("experiment", ["null", "cpu", "debug", "paper", "default_model"])
-def test_every_loss_and_experiment_composes_and_builds(loss: str, experiment: str) -> None:
+def test_every_loss_and_experiment_composes_and_builds(tmp_path: Path, loss: str, experiment: str) -> None:
     chosen = {"null": [], "debug": ["debug=default"]}.get(experiment, [f"experiment={experiment}"])
-    cfg = compose_train([f"loss={loss}", *chosen])
+    cfg = compose_train([f"loss={loss}", *chosen], tmp_path)
     if experiment == "paper":
         assert cfg.trainer.devices == 4 and cfg.trainer.strategy.startswith("ddp")
         assert cfg.trainer.max_epochs == 200 and cfg.data.batch_size == 8
@@ -49,43 +52,43 @@ def test_every_loss_and_experiment_composes_and_builds(loss: str, experiment: st
     assert isinstance(trainer, L.Trainer)
 
 
-def test_default_model_finetune_is_stage_one_without_a_discriminator() -> None:
-    stage1 = compose_train(["experiment=default_model"])
-    stage2 = compose_train(["experiment=default_model_finetune"])
+def test_default_model_finetune_is_stage_one_without_a_discriminator(tmp_path: Path) -> None:
+    stage1 = compose_train(["experiment=default_model"], tmp_path)
+    stage2 = compose_train(["experiment=default_model_finetune"], tmp_path)
     assert stage2.init_from.endswith("logs/default_model/gan/checkpoints/last.ckpt")
     assert stage2.data == stage1.data and stage2.model.generator == stage1.model.generator
-    assert stage2.loss == compose_train(["loss=supervised"]).loss
+    assert stage2.loss == compose_train(["loss=supervised"], tmp_path).loss
     _, module, _ = build(stage2)
     assert module.discriminator is None and module.loss.switches.parameter and module.loss.switches.rendering
 
 
 @pytest.mark.parametrize("group", ["trainer=gpu", "trainer=ddp", "logger=tensorboard", "logger=wandb"])
-def test_other_groups_compose(group: str) -> None:
-    cfg = compose_train([group])
+def test_other_groups_compose(tmp_path: Path, group: str) -> None:
+    cfg = compose_train([group], tmp_path)
     assert cfg.trainer._target_ == "lightning.pytorch.Trainer"
 
 
-def test_paper_model_has_the_paper_generator() -> None:
-    cfg = compose_train(["model=paper", "loss=no_adv"])
+def test_paper_model_has_the_paper_generator(tmp_path: Path) -> None:
+    cfg = compose_train(["model=paper", "loss=no_adv"], tmp_path)
     generator = hydra.utils.instantiate(cfg.model.generator)
     assert abs(sum(p.numel() for p in generator.parameters()) / 1e6 - 45.6) < 0.2
 
 
-def test_wrong_key_or_type_fails_at_composition() -> None:
-    with pytest.raises(Exception, match="no_such_key"):
-        compose_train(["no_such_key=1"])
-    with pytest.raises(Exception, match="seed"):
-        compose_train(["seed=abc"])
+def test_wrong_key_or_type_fails_at_composition(tmp_path: Path) -> None:
+    with pytest.raises(ConfigCompositionException, match="no_such_key"):
+        compose_train(["no_such_key=1"], tmp_path)
+    with pytest.raises(ConfigCompositionException, match="seed=abc"):
+        compose_train(["seed=abc"], tmp_path)
 
 
-def test_without_adversarial_and_feature_terms_there_is_no_discriminator() -> None:
-    cfg = compose_train(["loss=supervised"])
-    assert cfg.loss == compose_train(["loss=no_adv", "loss.switches.feature=false"]).loss
+def test_without_adversarial_and_feature_terms_there_is_no_discriminator(tmp_path: Path) -> None:
+    cfg = compose_train(["loss=supervised"], tmp_path)
+    assert cfg.loss == compose_train(["loss=no_adv", "loss.switches.feature=false"], tmp_path).loss
     _, module, _ = build(cfg)
     assert module.discriminator is None
     assert module.loss.switches.parameter and module.loss.switches.rendering
     assert not any("discriminator" in name for name, _ in module.named_parameters())
-    cfg = compose_train(["loss=full"])
+    cfg = compose_train(["loss=full"], tmp_path)
     _, module, _ = build(cfg)
     assert module.discriminator is not None
 
@@ -110,25 +113,25 @@ def _same(a: nn.Module | list[torch.Tensor], b: nn.Module, atol: float = 0.0) ->
 
 def test_warm_start_takes_the_weights_and_nothing_else(tmp_path: Path) -> None:
     torch.manual_seed(1)
-    _, gan, _ = build(compose_train(["loss=full"]))
+    _, gan, _ = build(compose_train(["loss=full"], tmp_path))
     checkpoint = _state_dict_file(gan, tmp_path / "gan.ckpt")
     content_loss = ["loss=supervised"]
     # A GAN checkpoint into a run without a discriminator: the generator only.
     torch.manual_seed(2)
-    _, content_only, _ = build(compose_train(content_loss))
+    _, content_only, _ = build(compose_train(content_loss, tmp_path))
     assert not _same(gan.generator, content_only.generator)
     assert warm_start(content_only, checkpoint) == ["generator"]
     assert _same(gan.generator, content_only.generator)
     # Both networks when both sides have one.
     torch.manual_seed(3)
-    _, other_gan, _ = build(compose_train(["loss=full"]))
+    _, other_gan, _ = build(compose_train(["loss=full"], tmp_path))
     assert warm_start(other_gan, checkpoint) == ["generator", "discriminator"]
     assert _same(gan.discriminator, other_gan.discriminator)
     # A safetensors weights file (fp16) holds the generator; the discriminator stays as it was.
     safetensors = tmp_path / "g.safetensors"
     save_file({k: v.half().contiguous() for k, v in gan.generator.state_dict().items()}, str(safetensors))
     torch.manual_seed(4)
-    _, from_weights, _ = build(compose_train(["loss=no_adv"]))
+    _, from_weights, _ = build(compose_train(["loss=no_adv"], tmp_path))
     discriminator = [p.clone() for p in from_weights.discriminator.state_dict().values()]
     assert warm_start(from_weights, safetensors) == ["generator"]
     assert _same(discriminator, from_weights.discriminator)
@@ -136,8 +139,8 @@ def test_warm_start_takes_the_weights_and_nothing_else(tmp_path: Path) -> None:
 
 
 def test_warm_start_errors_name_the_file(tmp_path: Path) -> None:
-    _, module, _ = build(compose_train(["loss=supervised"]))
-    _, wider, _ = build(compose_train(["loss=no_adv", "model.generator.width=8"]))
+    _, module, _ = build(compose_train(["loss=supervised"], tmp_path))
+    _, wider, _ = build(compose_train(["loss=no_adv", "model.generator.width=8"], tmp_path))
     narrow = _state_dict_file(wider, tmp_path / "narrow.ckpt")
     with pytest.raises(TrainConfigError, match=r"init_from: the generator in .*narrow.ckpt does not fit"):
         warm_start(module, narrow)
@@ -188,8 +191,8 @@ def test_debug_configs_run_the_loop_on_the_batches_they_name(
     assert math.isfinite(float(trainer.callback_metrics["val/loss"]))
 
 
-def test_debug_overfit_trains_on_a_few_batches_for_many_epochs() -> None:
-    trainer = compose_train(["debug=overfit"]).trainer
+def test_debug_overfit_trains_on_a_few_batches_for_many_epochs(tmp_path: Path) -> None:
+    trainer = compose_train(["debug=overfit"], tmp_path).trainer
     assert trainer.overfit_batches == 3 and trainer.max_epochs == 20 and trainer.accelerator == "cpu"
 
 
@@ -231,7 +234,7 @@ def test_resume_continues_with_the_same_step_count_and_lr(tiny_data: Path, tmp_p
     assert [resumed_lrs[step] for step in after_resume] == pytest.approx(
         [straight_lrs[step] for step in after_resume]
     )
-    assert (tmp_path / "interrupted" / "checkpoints").glob("epoch*.ckpt")
+    assert list((tmp_path / "interrupted" / "checkpoints").glob("epoch*.ckpt"))
 
 
 def _train_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
@@ -253,23 +256,31 @@ def test_train_py_runs_the_loop_and_returns_the_metric(tiny_data: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    ("override", "message"),
+    ("overrides", "error", "message"),
     [
-        ("ckpt_path=/nonexistent.ckpt", "ckpt_path: checkpoint /nonexistent.ckpt does not exist"),
-        ("init_from=/nonexistent.ckpt", "init_from: /nonexistent.ckpt does not exist"),
-        ("init_from=a.ckpt ckpt_path=b.ckpt", "init_from and ckpt_path: set one"),
-        ("model.generator.no_such_arg=1", "no_such_arg"),
-        ("seed=abc", "seed"),
+        (["ckpt_path=/no.ckpt"], TrainConfigError, "ckpt_path: checkpoint /no.ckpt does not exist"),
+        (["init_from=/no.ckpt"], TrainConfigError, "init_from: /no.ckpt does not exist"),
+        (["init_from={tmp}/a.ckpt", "ckpt_path={tmp}/b.ckpt"], TrainConfigError, "set one"),
+        (["+model.generator.no_such_arg=1"], ConfigValueError, "model.generator.no_such_arg: not a"),
     ],
 )
-def test_train_py_bad_input_is_a_clear_error(tmp_path: Path, override: str, message: str) -> None:
-    prefix = "+" if "no_such_arg" in override else ""
+def test_bad_run_input_is_a_user_error_before_any_work(
+    tmp_path: Path, overrides: list[str], error: type[Exception], message: str
+) -> None:
     for name in ("a.ckpt", "b.ckpt"):
         (tmp_path / name).write_bytes(b"")
-    result = _train_cli("debug=default", *(prefix + part for part in override.split()), cwd=tmp_path)
-    assert result.returncode != 0
-    assert message in result.stderr, result.stderr[-2000:]
-    assert "Traceback" not in result.stderr
+    cfg = compose_train(["debug=default", *(o.format(tmp=tmp_path) for o in overrides)], tmp_path)
+    with pytest.raises(error, match=re.escape(message)):
+        train(cfg)
+    assert not (tmp_path / "data").exists()  # nothing was prepared
+
+
+def test_train_py_reports_a_user_error_in_one_line(tmp_path: Path) -> None:
+    # The command-line property the in-process cases above rely on: one line, exit 2, no traceback.
+    result = _train_cli("debug=default", "ckpt_path=/nonexistent.ckpt", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr[-2000:]
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert lines == ["error: ckpt_path: checkpoint /nonexistent.ckpt does not exist"], result.stderr[-2000:]
 
 
 def test_ablation_sweep_config_lists_the_grid(tmp_path: Path) -> None:
