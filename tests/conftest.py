@@ -9,7 +9,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig, OmegaConf
 from torch import Tensor
 
-from brdfgan.core.svbrdf import join_maps, normalize_normal
+from brdfgan.core.svbrdf import flat_maps, join_maps, normalize_normal
 from brdfgan.data.generate_config import register_configs as register_generate_configs
 from brdfgan.evaluation.config import register_configs as register_evaluate_configs
 from brdfgan.training.config import register_configs
@@ -28,6 +28,19 @@ def random_maps(
     ramp = torch.linspace(-0.4, 0.25, height, dtype=dtype).view(height, 1).expand(shape)
     normal = torch.cat([0.5 * rand() - 0.1, ramp + 0.1 * rand(), torch.ones(shape, dtype=dtype)], dim=-3)
     return join_maps(rand(3), normalize_normal(normal), 0.1 + 0.9 * rand(), (rand() > 0.5).to(dtype))
+
+
+def tilted_plane(size: int = 32, normal: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> Tensor:
+    """A white-ish dielectric plane ``(8, size, size)``, optionally with every normal tilted the same
+    way (for relighting and preview tests)."""
+    maps = flat_maps(size, size, basecolor=(0.8, 0.8, 0.8), roughness=0.5, metallic=0.0)
+    maps[3:6] = normalize_normal(torch.tensor(normal).view(3, 1, 1).expand(3, size, size).clone())
+    return maps
+
+
+def relative_l1(a: Tensor, b: Tensor) -> float:
+    """``Σ|a − b| / Σ|b|``."""
+    return float((a - b).abs().sum() / b.abs().sum())
 
 
 CONF = Path(__file__).resolve().parents[1] / "conf"

@@ -11,7 +11,7 @@ import torch.nn.functional as F
 from PIL import Image
 
 from brdfgan.core import relight as relight_module
-from brdfgan.core.svbrdf import flat_maps, linear_to_srgb, normalize_normal
+from brdfgan.core.svbrdf import linear_to_srgb
 from brdfgan.inference.outputs import preview
 from brdfgan.inference.outputs.preview import (
     LABEL_HEIGHT,
@@ -25,20 +25,9 @@ from brdfgan.inference.outputs.preview import (
     write_animation,
     write_preview,
 )
-from tests.conftest import random_maps
+from tests.conftest import random_maps, tilted_plane
 
 SIZE = 32
-
-
-def _plane(size: int = SIZE, normal: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> torch.Tensor:
-    """A white-ish dielectric plane, optionally with every normal tilted the same way."""
-    maps = flat_maps(size, size, basecolor=(0.8, 0.8, 0.8), roughness=0.5, metallic=0.0)
-    maps[3:6] = normalize_normal(torch.tensor(normal).view(3, 1, 1).expand(3, size, size).clone())
-    return maps
-
-
-def _relative_l1(a: torch.Tensor, b: torch.Tensor) -> float:
-    return float((a - b).abs().sum() / b.abs().sum())
 
 
 # ------------------------------------------------------------------------------------------- lights
@@ -68,7 +57,7 @@ def test_resize_maps_averages_and_keeps_normals_unit() -> None:
     assert small.shape == (8, 16, 16)
     torch.testing.assert_close(small[3:6].norm(dim=0), torch.ones(16, 16))
     torch.testing.assert_close(small[6:], F.avg_pool2d(maps[6:], 4))
-    torch.testing.assert_close(resize_maps(_plane(64), 16), _plane(16))
+    torch.testing.assert_close(resize_maps(tilted_plane(64), 16), tilted_plane(16))
     assert resize_maps(maps, 64) is maps
     big = resize_maps(small, (24, 40))
     assert big.shape == (8, 24, 40)
@@ -141,7 +130,7 @@ def test_write_preview_png_reads_back_identical(tmp_path: Path) -> None:
 
 
 def test_animation_frames_move_the_light_with_a_fixed_exposure() -> None:
-    frames = list(animation_frames(_plane(normal=(0.4, 0.0, 1.0)), frames=12, size=SIZE))
+    frames = list(animation_frames(tilted_plane(normal=(0.4, 0.0, 1.0)), frames=12, size=SIZE))
     assert len(frames) == 12
     assert all(f.shape == (SIZE, SIZE, 3) and f.dtype == np.uint8 for f in frames)
     assert all(not np.array_equal(a, b) for a, b in itertools.pairwise(frames))
@@ -155,13 +144,14 @@ def test_animation_frames_move_the_light_with_a_fixed_exposure() -> None:
 
 def test_animation_frames_check_arguments_on_call() -> None:
     with pytest.raises(ValueError, match="frames"):
-        animation_frames(_plane(), frames=0)
+        animation_frames(tilted_plane(), frames=0)
     with pytest.raises(ValueError, match="elevation"):
-        animation_frames(_plane(), elevation_deg=0.0)
+        animation_frames(tilted_plane(), elevation_deg=0.0)
 
 
 def test_write_animation_gif(tmp_path: Path) -> None:
-    path = write_animation(tmp_path / "turn.gif", _plane(normal=(0.3, 0.1, 1.0)), frames=8, size=SIZE, fps=10)
+    maps = tilted_plane(normal=(0.3, 0.1, 1.0))
+    path = write_animation(tmp_path / "turn.gif", maps, frames=8, size=SIZE, fps=10)
     with Image.open(path) as gif:
         assert gif.format == "GIF"
         assert gif.n_frames == 8
@@ -183,7 +173,8 @@ def _mp4v_available(directory: Path) -> bool:
 def test_write_animation_mp4(tmp_path: Path) -> None:
     if not _mp4v_available(tmp_path):
         pytest.skip("this OpenCV build cannot write mp4v video")
-    path = write_animation(tmp_path / "turn.mp4", _plane(normal=(0.3, 0.1, 1.0)), frames=9, size=SIZE, fps=12)
+    maps = tilted_plane(normal=(0.3, 0.1, 1.0))
+    path = write_animation(tmp_path / "turn.mp4", maps, frames=9, size=SIZE, fps=12)
     capture = cv2.VideoCapture(str(path))
     try:
         assert capture.isOpened()
@@ -205,7 +196,7 @@ def test_write_animation_rejects_bad_suffix_and_unwritable_video(
 ) -> None:
     for name in ("turn.avi", "turn.png", "turn"):
         with pytest.raises(ValueError, match="animation must be one of"):
-            write_animation(tmp_path / name, _plane(8), frames=2, size=8)
+            write_animation(tmp_path / name, tilted_plane(8), frames=2, size=8)
 
     class ClosedWriter:
         def __init__(self, *args: object) -> None:
@@ -219,5 +210,5 @@ def test_write_animation_rejects_bad_suffix_and_unwritable_video(
 
     monkeypatch.setattr(preview.cv2, "VideoWriter", ClosedWriter)
     with pytest.raises(ValueError, match=r"turn\.mp4: cannot open"):
-        write_animation(tmp_path / "turn.mp4", _plane(8), frames=2, size=8)
+        write_animation(tmp_path / "turn.mp4", tilted_plane(8), frames=2, size=8)
     assert list(tmp_path.iterdir()) == []

@@ -10,29 +10,17 @@ import torch
 from brdfgan.core.relight import SKY_LIGHT_DISTANCE, relight, render_sky
 from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
 from brdfgan.core.sky import ProceduralSky, sample_sky
-from brdfgan.core.svbrdf import flat_maps, normalize_normal
 from brdfgan.inference.outputs.preview import preview_lights
-from tests.conftest import random_maps
+from tests.conftest import random_maps, relative_l1, tilted_plane
 
 SIZE = 32
-
-
-def _plane(size: int = SIZE, normal: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> torch.Tensor:
-    """A white-ish dielectric plane, optionally with every normal tilted the same way."""
-    maps = flat_maps(size, size, basecolor=(0.8, 0.8, 0.8), roughness=0.5, metallic=0.0)
-    maps[3:6] = normalize_normal(torch.tensor(normal).view(3, 1, 1).expand(3, size, size).clone())
-    return maps
-
-
-def _relative_l1(a: torch.Tensor, b: torch.Tensor) -> float:
-    return float((a - b).abs().sum() / b.abs().sum())
 
 
 # ------------------------------------------------------------------------------------------ relight
 
 
 def test_relight_light_above_centre_is_centred_and_symmetric() -> None:
-    image = relight(_plane(), torch.tensor([[0.0, 0.0, 2.0]]))
+    image = relight(tilted_plane(), torch.tensor([[0.0, 0.0, 2.0]]))
     assert image.shape == (1, 3, SIZE, SIZE)
     image = image[0]
     torch.testing.assert_close(image, image.flip(-1), rtol=1e-5, atol=1e-7)
@@ -47,7 +35,7 @@ def test_relight_light_above_centre_is_centred_and_symmetric() -> None:
 def test_relight_orientation_convention() -> None:
     """+X is the right of the image, +Y its top (row 0), as in the renderer
     (docs/conventions.md#scene-and-orientation)."""
-    plane = _plane()
+    plane = tilted_plane()
     right, up = relight(plane, torch.tensor([[1.5, 0.0, 2.0], [0.0, 1.5, 2.0]])).mean(dim=1)
     half = SIZE // 2
     assert right[:, half:].mean() > 1.5 * right[:, :half].mean()
@@ -56,9 +44,9 @@ def test_relight_orientation_convention() -> None:
 
 def test_relight_normals_tilted_to_plus_x_face_a_plus_x_light() -> None:
     lights = torch.tensor([[2.0, 0.0, 1.0], [-2.0, 0.0, 1.0]])
-    plus, minus = relight(_plane(normal=(0.5, 0.0, 1.0)), lights).mean(dim=(1, 2, 3))
+    plus, minus = relight(tilted_plane(normal=(0.5, 0.0, 1.0)), lights).mean(dim=(1, 2, 3))
     assert plus > 2.0 * minus
-    flat_plus, flat_minus = relight(_plane(), lights)
+    flat_plus, flat_minus = relight(tilted_plane(), lights)
     torch.testing.assert_close(flat_plus, flat_minus.flip(-1), rtol=1e-5, atol=1e-7)  # control: mirror images
 
 
@@ -145,7 +133,7 @@ def test_concentrated_sky_acts_as_one_distant_light() -> None:
     )
     camera = torch.tensor([0.0, 0.0, FlashCapture().camera_height], dtype=torch.float64).view(1, 1, 3)
     reference = render_point_lights(maps[None].double(), camera, lights)[0, 0]
-    assert _relative_l1(rendered.double(), reference) < 0.01
+    assert relative_l1(rendered.double(), reference) < 0.01
 
 
 def test_render_sky_converges_and_chunks_agree() -> None:
@@ -155,7 +143,7 @@ def test_render_sky_converges_and_chunks_agree() -> None:
     coarse = render_sky(maps, env, samples=64)
     torch.testing.assert_close(render_sky(maps, env, samples=64, chunk=64), coarse, rtol=1e-4, atol=1e-6)
     fine = render_sky(maps, env, samples=512)
-    assert _relative_l1(coarse, fine) < 0.05
+    assert relative_l1(coarse, fine) < 0.05
     assert coarse.shape == (3, 16, 16) and (coarse >= 0).all()
 
 
