@@ -1,4 +1,4 @@
-"""Generate a synthetic SVBRDF dataset: ``python generate.py [dataset=paper] [shard=N] [plan=true]``.
+"""Generate a synthetic SVBRDF dataset: ``python generate.py [dataset_spec=paper] [shard=N] [plan=true]``.
 
 Thin entry point: the config (``conf/generate.yaml``) becomes a
 :class:`brdfgan.data.generation.DatasetSpec` (every value checked, naming its key, before
@@ -35,8 +35,8 @@ def generate(cfg: DictConfig) -> None:
     from brdfgan.data.contact_sheet import write_contact_sheet
     from brdfgan.data.generation import dataset_ready, plan_shards, run_generation, spec_from_config
 
-    check_config(cfg, ["dataset"])  # types, naming the key; the spec checks ranges
-    spec = spec_from_config(cfg.dataset)
+    check_config(cfg, ["dataset_spec"])  # types, naming the key; the spec checks ranges
+    spec = spec_from_config(cfg.dataset_spec)
     shard = OmegaConf.to_object(cfg.shard) if isinstance(cfg.shard, DictConfig | list) else cfg.shard
     if cfg.plan:
         jobs = plan_shards(spec)

@@ -28,12 +28,12 @@ from faults.common import (
     tail,
 )
 
-# dataset=tiny with small environment pools: 4 shards (train 0-1, val 0, test 0), seconds to make.
+# dataset_spec=tiny with small environment pools: 4 shards (train 0-1, val 0, test 0), seconds to make.
 DATASET = [
-    "dataset=tiny",
-    "dataset.lighting.train_count=2",
-    "dataset.lighting.test_count=1",
-    "dataset.lighting.resolution=16",
+    "dataset_spec=tiny",
+    "dataset_spec.lighting.train_count=2",
+    "dataset_spec.lighting.test_count=1",
+    "dataset_spec.lighting.resolution=16",
 ]
 INTERRUPTED = "interrupted: complete shards are kept; re-run the same command to finish"
 
@@ -178,10 +178,10 @@ def bad_value(workdir: Path) -> str:
     out = workdir / "out"
     seen = []
     for overrides, key in (
-        (["dataset.flash.intensity_min=-3"], "dataset.flash.intensity_min=-3"),
+        (["dataset_spec.flash.intensity_min=-3"], "dataset_spec.flash.intensity_min=-3"),
         (
-            ["dataset.flash.temperature_min_k=9000", "dataset.flash.temperature_max_k=1000"],
-            "dataset.flash.temperature_min_k=9000 > dataset.flash.temperature_max_k=1000",
+            ["dataset_spec.flash.temperature_min_k=9000", "dataset_spec.flash.temperature_max_k=1000"],
+            "dataset_spec.flash.temperature_min_k=9000 > dataset_spec.flash.temperature_max_k=1000",
         ),
     ):
         result = run(generate(workdir, out, *overrides))
@@ -206,7 +206,7 @@ def corrupt_environment(workdir: Path) -> str:
     bad = envs / "attic.exr"
     bad.write_bytes(good[: len(good) // 2])  # an interrupted copy
     out = workdir / "out"
-    result = run(generate(workdir, out, f"dataset.lighting.folder={envs}"))
+    result = run(generate(workdir, out, f"dataset_spec.lighting.folder={envs}"))
     line = expect_one_line_error(result, exit_code=2, contains=str(bad.resolve()))
     if out.exists():
         raise ScenarioFailed(f"wrote {sorted(out.rglob('*'))[:3]} before the check")
@@ -237,7 +237,7 @@ SCENARIOS = [
         bad_value,
     ),
     Scenario(
-        "corrupt .exr in dataset.lighting.folder",
+        "corrupt .exr in dataset_spec.lighting.folder",
         "one line naming the file, exit 2, before anything is written",
         corrupt_environment,
     ),

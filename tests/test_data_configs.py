@@ -1,4 +1,4 @@
-"""The dataset and data configs compose and build what they say (no data is generated)."""
+"""The dataset_spec and data configs compose and build what they say (no data is generated)."""
 
 from __future__ import annotations
 
@@ -27,13 +27,13 @@ def _compose(overrides: list[str], config_name: str = "generate"):  # type: igno
 
 @pytest.mark.parametrize("name", ["default", "tiny", "paper"])
 def test_every_dataset_config_builds_a_valid_spec(name: str) -> None:
-    spec = hydra.utils.instantiate(_compose([f"dataset={name}"]).dataset, _convert_="all")
+    spec = hydra.utils.instantiate(_compose([f"dataset_spec={name}"]).dataset_spec, _convert_="all")
     assert isinstance(spec, DatasetSpec)
     assert plan_shards(spec)
 
 
 def test_paper_dataset_follows_the_paper_protocol() -> None:
-    spec = hydra.utils.instantiate(_compose(["dataset=paper"]).dataset, _convert_="all")
+    spec = hydra.utils.instantiate(_compose(["dataset_spec=paper"]).dataset_spec, _convert_="all")
     assert (spec.material_resolution, spec.resolution, spec.spp) == (2048, 512, 196)
     assert (spec.crops_per_material, spec.train_renders, spec.eval_renders) == (7, 3, 1)
     assert spec.test_fraction == 0.2
@@ -53,7 +53,7 @@ def test_data_configs_instantiate_a_datamodule(name: str) -> None:
     # The prepare hook generates exactly the dataset generate.py makes for the same name.
     prepare = module._prepare
     assert prepare is not None and prepare.keywords["out_dir"] == f"./data/{name}"
-    generated = hydra.utils.instantiate(_compose([f"dataset={name}"]).dataset, _convert_="all")
+    generated = hydra.utils.instantiate(_compose([f"dataset_spec={name}"]).dataset_spec, _convert_="all")
     assert prepare.keywords["spec"] == generated
 
 
@@ -70,16 +70,16 @@ def _numeric_keys(node: DictConfig, prefix: str) -> list[str]:
 
 
 # Composed once; each case edits a copy, as a command-line override would.
-BASE = _compose(["dataset=default"])
+BASE = _compose(["dataset_spec=default"])
 # Any integer is a usable seed; every other number of the spec has a range.
-NUMERIC_KEYS = [key for key in _numeric_keys(BASE.dataset, "dataset") if key != "dataset.seed"]
+NUMERIC_KEYS = [key for key in _numeric_keys(BASE.dataset_spec, "dataset_spec") if key != "dataset_spec.seed"]
 
 
 def _spec_with(**values: object) -> DatasetSpec:
     cfg = copy.deepcopy(BASE)
     for key, value in values.items():
         OmegaConf.update(cfg, key, value)
-    return spec_from_config(cfg.dataset)
+    return spec_from_config(cfg.dataset_spec)
 
 
 def _spec_numeric_fields(cls: type, prefix: str) -> set[str]:
@@ -95,7 +95,7 @@ def _spec_numeric_fields(cls: type, prefix: str) -> set[str]:
 
 
 def test_the_config_walk_covers_every_numeric_field_of_the_spec_classes() -> None:
-    assert set(NUMERIC_KEYS) == _spec_numeric_fields(DatasetSpec, "dataset") - {"dataset.seed"}
+    assert set(NUMERIC_KEYS) == _spec_numeric_fields(DatasetSpec, "dataset_spec") - {"dataset_spec.seed"}
 
 
 @pytest.mark.parametrize("key", NUMERIC_KEYS)
@@ -118,9 +118,11 @@ def test_an_inverted_min_max_pair_is_refused(low_key: str) -> None:
 
 def test_the_issue_example_names_both_keys() -> None:
     with pytest.raises(DatasetConfigError) as error:
-        _spec_with(**{"dataset.flash.temperature_min_k": 9000, "dataset.flash.temperature_max_k": 1000})
+        _spec_with(
+            **{"dataset_spec.flash.temperature_min_k": 9000, "dataset_spec.flash.temperature_max_k": 1000}
+        )
     assert str(error.value).startswith(
-        "dataset.flash.temperature_min_k=9000 > dataset.flash.temperature_max_k=1000"
+        "dataset_spec.flash.temperature_min_k=9000 > dataset_spec.flash.temperature_max_k=1000"
     )
 
 
@@ -128,6 +130,6 @@ def test_other_instantiation_errors_keep_hydras_message() -> None:
     # An unknown key inside a nested spec is not a value error: Hydra's message (naming the key) stays.
     cfg = copy.deepcopy(BASE)
     OmegaConf.set_struct(cfg, False)
-    cfg.dataset.flash.no_such_key = 1
+    cfg.dataset_spec.flash.no_such_key = 1
     with pytest.raises(InstantiationException, match="no_such_key"):
-        spec_from_config(cfg.dataset)
+        spec_from_config(cfg.dataset_spec)

@@ -35,16 +35,22 @@ def test_flash_sampling_ranges_and_seeding() -> None:
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        ({"intensity_min": -3}, "dataset.flash.intensity_min=-3: must be > 0"),
-        ({"intensity_min": 5.0}, "dataset.flash.intensity_min=5 > dataset.flash.intensity_max=4"),
+        ({"intensity_min": -3}, "dataset_spec.flash.intensity_min=-3: must be > 0"),
+        ({"intensity_min": 5.0}, "dataset_spec.flash.intensity_min=5 > dataset_spec.flash.intensity_max=4"),
         (
             {"temperature_min_k": 9000, "temperature_max_k": 1000},
-            "dataset.flash.temperature_min_k=9000 > dataset.flash.temperature_max_k=1000",
+            "dataset_spec.flash.temperature_min_k=9000 > dataset_spec.flash.temperature_max_k=1000",
         ),
-        ({"temperature_min_k": 1000}, r"dataset.flash.temperature_min_k=1000: must be in \[1667, 25000\]"),
-        ({"temperature_max_k": 30000}, r"dataset.flash.temperature_max_k=30000: must be in \[1667, 25000\]"),
-        ({"intensity_max": "abc"}, "dataset.flash.intensity_max='abc': must be a number"),
-        ({"intensity_max": float("inf")}, "dataset.flash.intensity_max=inf: must be a finite number"),
+        (
+            {"temperature_min_k": 1000},
+            r"dataset_spec.flash.temperature_min_k=1000: must be in \[1667, 25000\]",
+        ),
+        (
+            {"temperature_max_k": 30000},
+            r"dataset_spec.flash.temperature_max_k=30000: must be in \[1667, 25000\]",
+        ),
+        ({"intensity_max": "abc"}, "dataset_spec.flash.intensity_max='abc': must be a number"),
+        ({"intensity_max": float("inf")}, "dataset_spec.flash.intensity_max=inf: must be a finite number"),
     ],
 )
 def test_flash_sampling_rejects_bad_ranges_naming_the_key(change: dict[str, object], message: str) -> None:

@@ -283,7 +283,7 @@ def test_a_corrupt_environment_file_fails_before_anything_is_written(tmp_path: P
 def test_a_directory_of_another_spec_is_refused(tmp_path: Path) -> None:
     run_generation(tiny_spec(materials=3, val_fraction=0.0), tmp_path, progress=False,
                    photographer=torch_photographer)  # fmt: skip
-    with pytest.raises(DatasetConfigError, match=r"different config \(dataset.spp differs\)"):
+    with pytest.raises(DatasetConfigError, match=r"different config \(dataset_spec.spp differs\)"):
         run_generation(tiny_spec(materials=3, val_fraction=0.0, spp=9), tmp_path, progress=False,
                        photographer=torch_photographer)  # fmt: skip
 
@@ -291,13 +291,16 @@ def test_a_directory_of_another_spec_is_refused(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        ({"materials": 0}, "dataset.materials=0: must be an integer >= 1"),
-        ({"spp": 10}, "dataset.spp=10: must be a perfect square"),
-        ({"resolution": 128}, "dataset.resolution=128 > dataset.material_resolution=64"),
-        ({"test_fraction": 1.5}, r"dataset.test_fraction=1.5: must be in \[0, 1\)"),
-        ({"test_fraction": 0.5, "val_fraction": 0.5}, r"dataset.test_fraction=0.5 \+ dataset.val_fraction"),
-        ({"fov_deg": 0.5}, r"dataset.fov_deg=0.5: must be in \[1, 170\)"),
-        ({"spp": "abc"}, "dataset.spp='abc': must be an integer"),
+        ({"materials": 0}, "dataset_spec.materials=0: must be an integer >= 1"),
+        ({"spp": 10}, "dataset_spec.spp=10: must be a perfect square"),
+        ({"resolution": 128}, "dataset_spec.resolution=128 > dataset_spec.material_resolution=64"),
+        ({"test_fraction": 1.5}, r"dataset_spec.test_fraction=1.5: must be in \[0, 1\)"),
+        (
+            {"test_fraction": 0.5, "val_fraction": 0.5},
+            r"dataset_spec.test_fraction=0.5 \+ dataset_spec.val_fraction",
+        ),
+        ({"fov_deg": 0.5}, r"dataset_spec.fov_deg=0.5: must be in \[1, 170\)"),
+        ({"spp": "abc"}, "dataset_spec.spp='abc': must be an integer"),
         ({"families": ("wood_planks", "woood")}, "unknown material family 'woood'"),
         ({"materials": 2, "test_fraction": 0.5, "val_fraction": 0.4}, "leaves no training material"),
     ],
@@ -350,11 +353,11 @@ def _generate_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
 @pytest.mark.parametrize(
     ("override", "message"),
     [
-        ("dataset.families=[woood]", "unknown material family 'woood'"),
-        ("dataset.materials=-1", "dataset.materials=-1: must be an integer >= 1"),
-        ("dataset.flash.intensity_min=-3", "error: dataset.flash.intensity_min=-3: must be > 0"),
-        ("dataset.lighting.folder=EMPTY", "EMPTY: no .exr or .hdr environment maps"),
-        ("dataset.no_such_key=1", "no_such_key"),
+        ("dataset_spec.families=[woood]", "unknown material family 'woood'"),
+        ("dataset_spec.materials=-1", "dataset_spec.materials=-1: must be an integer >= 1"),
+        ("dataset_spec.flash.intensity_min=-3", "error: dataset_spec.flash.intensity_min=-3: must be > 0"),
+        ("dataset_spec.lighting.folder=EMPTY", "EMPTY: no .exr or .hdr environment maps"),
+        ("dataset_spec.no_such_key=1", "no_such_key"),
     ],
 )
 def test_cli_bad_input_is_one_line_and_writes_nothing(tmp_path: Path, override: str, message: str) -> None:
@@ -364,7 +367,10 @@ def test_cli_bad_input_is_one_line_and_writes_nothing(tmp_path: Path, override: 
     message = message.replace("EMPTY", str(empty))
     prefix = "+" if "no_such_key" in override else ""
     result = _generate_cli(
-        "dataset=tiny", f"out_dir={tmp_path / 'out'}", *(prefix + o for o in override.split()), cwd=tmp_path
+        "dataset_spec=tiny",
+        f"out_dir={tmp_path / 'out'}",
+        *(prefix + o for o in override.split()),
+        cwd=tmp_path,
     )
     assert result.returncode != 0
     errors = [line for line in result.stderr.splitlines() if line.strip()]
@@ -374,7 +380,7 @@ def test_cli_bad_input_is_one_line_and_writes_nothing(tmp_path: Path, override: 
 
 
 def test_cli_plan_lists_every_shard(tmp_path: Path) -> None:
-    result = _generate_cli("dataset=tiny", "plan=true", cwd=tmp_path)
+    result = _generate_cli("dataset_spec=tiny", "plan=true", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert "shards; run them all with: python generate.py -m shard='range(0," in result.stdout
     assert json.dumps("train")[1:-1] in result.stdout

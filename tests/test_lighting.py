@@ -86,15 +86,15 @@ def test_kind_mix_and_spec_json() -> None:
     [
         (
             {"env_to_flash_min": 1.0, "env_to_flash_max": 0.5},
-            "dataset.lighting.env_to_flash_min=1 > dataset.lighting.env_to_flash_max=0.5",
+            "dataset_spec.lighting.env_to_flash_min=1 > dataset_spec.lighting.env_to_flash_max=0.5",
         ),
-        ({"env_to_flash_min": 0.0}, "dataset.lighting.env_to_flash_min=0: must be > 0"),
+        ({"env_to_flash_min": 0.0}, "dataset_spec.lighting.env_to_flash_min=0: must be > 0"),
         ({"sunsky_fraction": 0.0, "room_fraction": 0.0}, "no environment source"),
-        ({"sunsky_fraction": -0.5}, "dataset.lighting.sunsky_fraction=-0.5: must be >= 0"),
-        ({"resolution": 2}, "dataset.lighting.resolution=2: must be an integer >= 4"),
-        ({"test_count": 0}, "dataset.lighting.test_count=0: must be an integer >= 1"),
-        ({"file_test_fraction": 1.0}, r"dataset.lighting.file_test_fraction=1: must be in \(0, 1\)"),
-        ({"train_count": "abc"}, "dataset.lighting.train_count='abc'"),
+        ({"sunsky_fraction": -0.5}, "dataset_spec.lighting.sunsky_fraction=-0.5: must be >= 0"),
+        ({"resolution": 2}, "dataset_spec.lighting.resolution=2: must be an integer >= 4"),
+        ({"test_count": 0}, "dataset_spec.lighting.test_count=0: must be an integer >= 1"),
+        ({"file_test_fraction": 1.0}, r"dataset_spec.lighting.file_test_fraction=1: must be in \(0, 1\)"),
+        ({"train_count": "abc"}, "dataset_spec.lighting.train_count='abc'"),
     ],
 )
 def test_config_rejects_bad_values_naming_the_key(change: dict[str, object], message: str) -> None:

@@ -56,7 +56,7 @@ class CropSampling:
     rotate: bool = True
 
     def __post_init__(self) -> None:
-        key = "dataset.crop"  # where a crop spec is configured; messages name the key as typed
+        key = "dataset_spec.crop"  # where a crop spec is configured; messages name the key as typed
         ordered(key, self, "scale_min", "scale_max")
         in_range(f"{key}.scale_min", self.scale_min, 0.0, 1.0, low_open=True)  # log-uniform
         in_range(f"{key}.scale_max", self.scale_max, 0.0, 1.0, low_open=True)

@@ -59,7 +59,7 @@ def blackbody_rgb(temperature_k: float) -> tuple[float, float, float]:
 class FlashSampling:
     """Ranges of the random flash: radiant intensity (W/sr, log-uniform) and colour temperature
     (uniform, within the range of :func:`planckian_xy`). Checked on construction, naming the keys
-    under ``dataset.flash``, the only place a flash spec is configured."""
+    under ``dataset_spec.flash``, the only place a flash spec is configured."""
 
     intensity_min: float = 0.5
     intensity_max: float = 4.0
@@ -67,7 +67,7 @@ class FlashSampling:
     temperature_max_k: float = 6500.0
 
     def __post_init__(self) -> None:
-        key = "dataset.flash"
+        key = "dataset_spec.flash"
         ordered(key, self, "intensity_min", "intensity_max")
         in_range(f"{key}.intensity_min", self.intensity_min, 0.0, low_open=True)  # log-uniform
         ordered(key, self, "temperature_min_k", "temperature_max_k")

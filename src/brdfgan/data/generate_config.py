@@ -1,5 +1,5 @@
 """The typed top level of ``conf/generate.yaml``: a wrong key or type is one line at composition.
-The ``dataset`` node is type-checked against :class:`~brdfgan.data.generation.DatasetSpec` by
+The ``dataset_spec`` node is type-checked against :class:`~brdfgan.data.generation.DatasetSpec` by
 :func:`brdfgan.config_check.check_config`, then range-checked by the spec itself."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ class GenerateConfig:
     progress: bool = True
     contact_sheet: int = 16
     paths: dict[str, Any] = field(default_factory=dict)
-    dataset: dict[str, Any] = field(default_factory=dict)
+    dataset_spec: dict[str, Any] = field(default_factory=dict)
 
 
 def register_configs() -> None:

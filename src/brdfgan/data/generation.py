@@ -89,7 +89,7 @@ SPEC_FILE = "dataset.json"
 class DatasetSpec:
     """Everything that determines the bytes of a dataset. Defaults: a small CPU-sized set; the
     paper's protocol is ``material_resolution=2048, resolution=512, spp=196`` with the default
-    crop, render and split counts (``conf/dataset/paper.yaml``)."""
+    crop, render and split counts (``conf/dataset_spec/paper.yaml``)."""
 
     seed: int = 0
     materials: int = 40
@@ -120,29 +120,30 @@ class DatasetSpec:
             "materials_per_shard",
             "spp",
         ):
-            integer(f"dataset.{key}", getattr(self, key), minimum=1)
+            integer(f"dataset_spec.{key}", getattr(self, key), minimum=1)
         if math.isqrt(self.spp) ** 2 != self.spp:
             raise DatasetConfigError(
-                f"dataset.spp={self.spp}: must be a perfect square (stratified sampler; paper: 196 = 14²)"
+                f"dataset_spec.spp={self.spp}: must be a perfect square "
+                "(stratified sampler; paper: 196 = 14²)"
             )
         if self.resolution > self.material_resolution:
             raise DatasetConfigError(
-                f"dataset.resolution={self.resolution} > dataset.material_resolution="
+                f"dataset_spec.resolution={self.resolution} > dataset_spec.material_resolution="
                 f"{self.material_resolution}: crops are cut from the material maps"
             )
-        test = in_range("dataset.test_fraction", self.test_fraction, 0.0, 1.0, high_open=True)
-        val = in_range("dataset.val_fraction", self.val_fraction, 0.0, 1.0, high_open=True)
+        test = in_range("dataset_spec.test_fraction", self.test_fraction, 0.0, 1.0, high_open=True)
+        val = in_range("dataset_spec.val_fraction", self.val_fraction, 0.0, 1.0, high_open=True)
         if test + val >= 1.0:
             raise DatasetConfigError(
-                f"dataset.test_fraction={test:g} + dataset.val_fraction={val:g}: must be below 1"
+                f"dataset_spec.test_fraction={test:g} + dataset_spec.val_fraction={val:g}: must be below 1"
             )
         counts = held_out_counts(self.materials, test, val)
         if counts["test"] + counts["val"] >= self.materials:
             raise DatasetConfigError(
-                f"dataset.materials={self.materials} leaves no training material after the "
+                f"dataset_spec.materials={self.materials} leaves no training material after the "
                 f"{counts['test']} test and {counts['val']} validation ones"
             )
-        in_range("dataset.fov_deg", self.fov_deg, 1.0, 170.0, high_open=True)
+        in_range("dataset_spec.fov_deg", self.fov_deg, 1.0, 170.0, high_open=True)
         resolve_families(self.families)  # unknown names fail here, before any work
 
     def to_json(self) -> dict[str, Any]:
@@ -154,9 +155,9 @@ class DatasetSpec:
 
 
 def spec_from_config(config: Any) -> DatasetSpec:
-    """The spec of a Hydra ``dataset`` node (``conf/dataset/*.yaml``). A value rejected by one of
-    the spec classes is re-raised as that class's own one-line error (``dataset.flash.… must
-    be …``) instead of Hydra's multi-line wrapper around it."""
+    """The spec of a Hydra ``dataset_spec`` node (``conf/dataset_spec/*.yaml``). A value rejected
+    by one of the spec classes is re-raised as that class's own one-line error
+    (``dataset_spec.flash.… must be …``) instead of Hydra's multi-line wrapper around it."""
     import hydra
     from hydra.errors import InstantiationException
 
@@ -167,7 +168,7 @@ def spec_from_config(config: Any) -> DatasetSpec:
             raise error.__cause__ from None
         raise
     if not isinstance(spec, DatasetSpec):
-        raise DatasetConfigError(f"dataset: builds a {type(spec).__name__}, expected a DatasetSpec")
+        raise DatasetConfigError(f"dataset_spec: builds a {type(spec).__name__}, expected a DatasetSpec")
     return spec
 
 
@@ -391,7 +392,7 @@ def prepare_output_dir(spec: DatasetSpec, out_dir: str | os.PathLike[str]) -> Pa
     return root
 
 
-def _first_difference(a: Any, b: Any, prefix: str = "dataset") -> str:
+def _first_difference(a: Any, b: Any, prefix: str = "dataset_spec") -> str:
     if isinstance(a, dict) and isinstance(b, dict):
         for key in sorted(set(a) | set(b)):
             if a.get(key) != b.get(key):

@@ -352,7 +352,7 @@ class LightingConfig:
     env_to_flash_max: float = 1.0
 
     def __post_init__(self) -> None:
-        key = "dataset.lighting"  # where a lighting spec is configured; messages name the key
+        key = "dataset_spec.lighting"  # where a lighting spec is configured; messages name the key
         # Without a folder the procedural pools are all there is, and neither may be empty.
         least = 0 if self.folder is not None else 1
         integer(f"{key}.train_count", self.train_count, minimum=least)

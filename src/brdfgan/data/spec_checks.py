@@ -4,7 +4,7 @@ The spec dataclasses (:class:`~brdfgan.data.generation.DatasetSpec` and the flas
 lighting specs nested in it) call these from ``__post_init__``, so a bad value fails when the
 config is composed, before ``generate.py`` writes ``dataset.json`` or starts Mitsuba; the
 corrected command then runs in the same output directory. Messages read
-``dataset.flash.intensity_min=-3: must be > 0``. Values of the wrong type are reported too
+``dataset_spec.flash.intensity_min=-3: must be > 0``. Values of the wrong type are reported too
 (``must be a number, got 'abc'``) instead of failing inside a comparison.
 """
 
