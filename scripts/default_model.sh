@@ -10,7 +10,7 @@ BASELINE=(model=deschaintre2018 model.generator.levels=7 loss=supervised)
 # Grid samples, fixed before training: the first crop of the first test material of every family.
 GRID='[test-m000008-c0-r0,test-m000020-c0-r0,test-m000029-c0-r0,test-m000031-c0-r0,test-m000033-c0-r0,test-m000066-c0-r0,test-m000067-c0-r0,test-m000082-c0-r0]'
 
-$PY generate.py dataset=default_model                                    # 672 samples, ~4.5 min
+$PY generate.py dataset_spec=default_model                               # 672 samples, ~4.5 min
 # The GAN and the baseline: same data and batches of 4 × 128² crops, one thread each; 5 epochs
 # (1 750 batches), then both resumed to 8 epochs (the schedule follows the new length).
 OMP_NUM_THREADS=1 $PY train.py experiment=default_model hydra.run.dir=$OUT/gan &
