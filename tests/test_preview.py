@@ -11,8 +11,7 @@ import torch.nn.functional as F
 from PIL import Image
 
 from brdfgan.core import relight as relight_module
-from brdfgan.core.svbrdf import linear_to_srgb
-from brdfgan.inference.outputs import preview
+from brdfgan.core.svbrdf import linear_to_srgb, resize_maps
 from brdfgan.inference.outputs.preview import (
     LABEL_HEIGHT,
     SEPARATOR,
@@ -21,10 +20,10 @@ from brdfgan.inference.outputs.preview import (
     preview_image,
     preview_lights,
     preview_size,
-    resize_maps,
     write_animation,
     write_preview,
 )
+from brdfgan.io import video
 from tests.conftest import random_maps, tilted_plane
 
 SIZE = 32
@@ -208,7 +207,7 @@ def test_write_animation_rejects_bad_suffix_and_unwritable_video(
         def release(self) -> None:
             pass
 
-    monkeypatch.setattr(preview.cv2, "VideoWriter", ClosedWriter)
+    monkeypatch.setattr(video.cv2, "VideoWriter", ClosedWriter)
     with pytest.raises(ValueError, match=r"turn\.mp4: cannot open"):
         write_animation(tmp_path / "turn.mp4", tilted_plane(8), frames=2, size=8)
     assert list(tmp_path.iterdir()) == []

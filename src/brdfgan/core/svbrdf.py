@@ -24,6 +24,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 
 NUM_CHANNELS = 8
@@ -227,3 +228,46 @@ def flat_maps(
         .expand(*batch, NUM_CHANNELS, height, width)
         .clone()
     )
+
+
+def resize_image(image: Tensor, height: int, width: int) -> Tensor:
+    """Area averaging when shrinking (every texel counts, no aliasing), bilinear when enlarging.
+
+    Shape:
+        - image: ``(C, H, W)``
+        - output: ``(C, height, width)``
+    """
+    if tuple(image.shape[-2:]) == (height, width):
+        return image
+    batch = image.unsqueeze(0)
+    if height <= image.shape[-2] and width <= image.shape[-1]:
+        return F.interpolate(batch, size=(height, width), mode="area")[0]
+    return F.interpolate(batch, size=(height, width), mode="bilinear", align_corners=False)[0]
+
+
+def resize_maps(maps: Tensor, size: int | tuple[int, int]) -> Tensor:
+    """Resize one map set (e.g. for rendering a preview at a smaller size).
+
+    Base color is averaged in linear (what light does) and re-encoded; normals are averaged and
+    renormalised; roughness and metallic are averaged as stored. Averaging normals and roughness
+    separately loses the sub-pixel normal variation a prefiltered roughness would keep — fine
+    for a preview, not for training data.
+
+    Shape:
+        - maps: ``(8, H, W)``
+        - output: ``(8, h, w)`` with ``(h, w) = size`` (an int means square)
+    """
+    check_map_shape(maps)
+    if maps.ndim != 3:
+        raise ValueError(f"maps must have shape (8, H, W), got {tuple(maps.shape)}")
+    height, width = (size, size) if isinstance(size, int) else size
+    if height < 1 or width < 1:
+        raise ValueError(f"size must be positive, got {size}")
+    if tuple(maps.shape[-2:]) == (height, width):
+        return maps
+    parts = split_maps(maps)
+    basecolor = linear_to_srgb(resize_image(srgb_to_linear(parts.basecolor), height, width).clamp(0.0, 1.0))
+    normal = normalize_normal(resize_image(parts.normal, height, width))
+    roughness = resize_image(parts.roughness, height, width).clamp(0.0, 1.0)
+    metallic = resize_image(parts.metallic, height, width).clamp(0.0, 1.0)
+    return join_maps(basecolor, normal, roughness, metallic)

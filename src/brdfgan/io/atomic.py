@@ -18,9 +18,11 @@ from pathlib import Path
 from brdfgan.errors import DiskFullError, is_disk_full
 
 
-def temp_path(path: Path) -> Path:
-    """``.<name>.<random>.tmp`` in the target's directory (same filesystem, so rename is atomic)."""
-    return path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+def temp_path(path: Path, *, keep_suffix: bool = False) -> Path:
+    """``.<name>.<random>.tmp`` in the target's directory (same filesystem, so rename is atomic);
+    ``keep_suffix``: ``.<name>.<random>.tmp.<suffix>``, for writers that pick the format from it."""
+    temp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    return temp.with_name(temp.name + path.suffix) if keep_suffix else temp
 
 
 def stale_temp_files(path: Path) -> list[Path]:
@@ -36,11 +38,12 @@ def stale_temp_files(path: Path) -> list[Path]:
 
 
 @contextmanager
-def atomic_replace(path: str | os.PathLike[str]) -> Iterator[Path]:
+def atomic_replace(path: str | os.PathLike[str], *, keep_suffix: bool = False) -> Iterator[Path]:
     """Yield a fresh temporary path to write; on success it is fsynced and renamed over ``path``
-    (and the directory entry fsynced), on any error it is removed and ``path`` is untouched."""
+    (and the directory entry fsynced), on any error it is removed and ``path`` is untouched.
+    ``keep_suffix``: the temporary name ends with the target's suffix (see :func:`temp_path`)."""
     path = Path(path)
-    temp = temp_path(path)
+    temp = temp_path(path, keep_suffix=keep_suffix)
     try:
         yield temp
         with temp.open("rb+") as handle:

@@ -24,15 +24,12 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 import torch
-import torch.nn.functional as F
-from PIL import Image
 from torch import Tensor
 
 from brdfgan.core.exposure import auto_expose, auto_exposure_scale
@@ -40,21 +37,14 @@ from brdfgan.core.lighting import spherical_direction
 from brdfgan.core.relight import check_single_maps, relight, render_sky
 from brdfgan.core.render import FlashCapture
 from brdfgan.core.sky import ProceduralSky
-from brdfgan.core.svbrdf import (
-    join_maps,
-    linear_to_srgb,
-    normalize_normal,
-    split_maps,
-    srgb_to_linear,
-)
-from brdfgan.io.atomic import atomic_replace, fsync_directory, temp_path
+from brdfgan.core.svbrdf import linear_to_srgb, resize_image, resize_maps
+from brdfgan.io.atomic import atomic_replace
+from brdfgan.io.video import write_video
 
 __all__ = [
-    "ANIMATION_SUFFIXES",
     "animation_frames",
     "preview_image",
     "preview_lights",
-    "resize_maps",
     "write_animation",
     "write_preview",
 ]
@@ -66,51 +56,9 @@ ANIMATION_ELEVATION_DEG = 30.0
 SEPARATOR = 4  # px between tiles
 SEPARATOR_COLOR = (48, 48, 48)
 LABEL_HEIGHT = 18  # px strip above each tile for its label
-ANIMATION_SUFFIXES = frozenset({".gif", ".mp4"})
 
 
 # ---------------------------------------------------------------------------------------------- maps
-
-
-def _resize_image(image: Tensor, height: int, width: int) -> Tensor:
-    """Area averaging when shrinking (every texel counts, no aliasing), bilinear when enlarging.
-
-    Shape:
-        - image: ``(C, H, W)``
-        - output: ``(C, height, width)``
-    """
-    if tuple(image.shape[-2:]) == (height, width):
-        return image
-    batch = image.unsqueeze(0)
-    if height <= image.shape[-2] and width <= image.shape[-1]:
-        return F.interpolate(batch, size=(height, width), mode="area")[0]
-    return F.interpolate(batch, size=(height, width), mode="bilinear", align_corners=False)[0]
-
-
-def resize_maps(maps: Tensor, size: int | tuple[int, int]) -> Tensor:
-    """Resize a map set for rendering at preview resolution.
-
-    Base color is averaged in linear (what light does) and re-encoded; normals are averaged and
-    renormalised; roughness and metallic are averaged as stored. Averaging normals and roughness
-    separately loses the sub-pixel normal variation a prefiltered roughness would keep — acceptable
-    for a preview.
-
-    Shape:
-        - maps: ``(8, H, W)``
-        - output: ``(8, h, w)`` with ``(h, w) = size`` (an int means square)
-    """
-    check_single_maps(maps)
-    height, width = (size, size) if isinstance(size, int) else size
-    if height < 1 or width < 1:
-        raise ValueError(f"size must be positive, got {size}")
-    if tuple(maps.shape[-2:]) == (height, width):
-        return maps
-    parts = split_maps(maps)
-    basecolor = linear_to_srgb(_resize_image(srgb_to_linear(parts.basecolor), height, width).clamp(0.0, 1.0))
-    normal = normalize_normal(_resize_image(parts.normal, height, width))
-    roughness = _resize_image(parts.roughness, height, width).clamp(0.0, 1.0)
-    metallic = _resize_image(parts.metallic, height, width).clamp(0.0, 1.0)
-    return join_maps(basecolor, normal, roughness, metallic)
 
 
 # -------------------------------------------------------------------------------------------- lights
@@ -220,7 +168,7 @@ def preview_image(
         if lights:
             renders.insert(0, relight(small, positions, capture=capture))
         ldr, _ = auto_expose(torch.cat(renders))
-        input_tile = _resize_image(photo.detach().float().to(small.device), tile, tile)
+        input_tile = resize_image(photo.detach().float().to(small.device), tile, tile)
         tiles = [_to_uint8_srgb(input_tile), *(_to_uint8_srgb(image) for image in ldr)]
     names = ["input", *(_light_label(p) for p in positions), "environment"]
     rows = tile + (LABEL_HEIGHT if labels else 0)
@@ -303,45 +251,6 @@ def animation_frames(
     return generate()
 
 
-@contextmanager
-def _atomic_replace_keeping_suffix(path: Path) -> Iterator[Path]:
-    """Like :func:`brdfgan.io.atomic.atomic_replace`, but the temporary name ends with the target's
-    suffix (``.<name>.<random>.tmp.mp4``): video writers choose the container from it."""
-    temp = temp_path(path)
-    temp = temp.with_name(temp.name + path.suffix)
-    try:
-        yield temp
-        with temp.open("rb+") as handle:
-            os.fsync(handle.fileno())
-        os.replace(temp, path)
-    except BaseException:
-        temp.unlink(missing_ok=True)
-        raise
-    fsync_directory(path.parent)
-
-
-def _write_gif(temp: Path, frames: Iterator[np.ndarray], fps: float) -> None:
-    images = [Image.fromarray(frame) for frame in frames]
-    # GIF delays are in centiseconds; Pillow rounds the millisecond duration. Pillow merges
-    # consecutive identical frames, which only happens for maps no light changes (e.g. all black).
-    images[0].save(
-        temp, format="GIF", save_all=True, append_images=images[1:], duration=round(1000.0 / fps), loop=0
-    )
-
-
-def _write_mp4(path: Path, temp: Path, frames: Iterator[np.ndarray], fps: float, size: int) -> None:
-    # cv2.VideoWriter_fourcc exists at run time but is missing from OpenCV's type stubs.
-    fourcc = cv2.VideoWriter_fourcc(*"mp4v")  # type: ignore[attr-defined]
-    writer = cv2.VideoWriter(str(temp), fourcc, float(fps), (size, size))
-    try:
-        if not writer.isOpened():
-            raise ValueError(f"{path}: cannot open an mp4v video writer (OpenCV built without FFmpeg?)")
-        for frame in frames:
-            writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
-    finally:
-        writer.release()
-
-
 def write_animation(
     path: str | os.PathLike[str],
     maps: Tensor,
@@ -357,16 +266,5 @@ def write_animation(
     Raises:
         ValueError: another suffix, a bad argument, or no mp4v writer in this OpenCV build.
     """
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in ANIMATION_SUFFIXES:
-        raise ValueError(f"{path}: animation must be one of {sorted(ANIMATION_SUFFIXES)}, got {suffix!r}")
-    if not fps > 0:
-        raise ValueError(f"fps must be > 0, got {fps}")
-    images = animation_frames(maps, frames=frames, size=size, **kwargs)
-    with _atomic_replace_keeping_suffix(path) as temp:
-        if suffix == ".gif":
-            _write_gif(temp, images, fps)
-        else:
-            _write_mp4(path, temp, images, fps, size)
-    return path
+    # animation_frames checks its arguments now and renders lazily, frame by frame, as written.
+    return write_video(path, animation_frames(maps, frames=frames, size=size, **kwargs), fps=fps, size=size)
