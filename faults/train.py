@@ -165,7 +165,12 @@ def kill_mid_checkpoint_write(workdir: Path) -> str:
     checkpoints = run_dir / "checkpoints"
 
     def half_written() -> bool:
-        for temp in hidden_leftovers(checkpoints) if checkpoints.is_dir() else []:
+        # Writes 1-6 of last.ckpt (steps 2-12) are whole once it holds step 12; the next
+        # last.ckpt temp is the patched, sleeping write 7. Other checkpoints' temps don't count.
+        if step_of(last_checkpoint(run_dir)) != STEPS_PER_EPOCH:
+            return False
+        temps = hidden_leftovers(checkpoints) if checkpoints.is_dir() else []
+        for temp in (t for t in temps if t.name.startswith(".last.ckpt.")):
             try:
                 if temp.stat().st_size > 0:
                     return True
