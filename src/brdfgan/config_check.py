@@ -81,12 +81,11 @@ def _check_target_node(node: DictConfig, key: str) -> None:
             known = ", ".join(p for p in parameters if p not in ("self", "args", "kwargs"))
             raise ConfigValueError(f"{child_key}: not a parameter of {target_name} (parameters: {known})")
         child = node._get_node(name)
-        if isinstance(child, DictConfig) and "_target_" in child:
-            _check_target_node(child, child_key)
-            continue
-        value = OmegaConf.to_container(child, resolve=True) if OmegaConf.is_config(child) else node[name]
         if isinstance(child, DictConfig | ListConfig):
-            check_node(child, child_key)  # nested _target_ nodes inside lists or plain mappings
+            check_node(child, child_key)  # nested _target_ nodes, themselves or in lists and mappings
+            if isinstance(child, DictConfig) and "_target_" in child:
+                continue  # its value is what the target builds: checked as a node, not as a value
+        value = OmegaConf.to_container(child, resolve=True) if OmegaConf.is_config(child) else node[name]
         hint = hints.get(name, Any)
         if fits(value, hint) is False:
             raise ConfigValueError(f"{child_key}={value!r}: expected {describe(hint)} ({_qualified(target)})")

@@ -50,29 +50,25 @@ class DiskFullError(OSError):
         return f"{self.filename}: no space left on device"
 
 
-def is_disk_full(error: BaseException) -> bool:
-    """Whether ``error`` (or an error it was raised from) is a full filesystem."""
+def _disk_full_errors(error: BaseException) -> Iterator[OSError]:
+    """The full-filesystem ``OSError``s among ``error`` and the errors it was raised from."""
     seen: set[int] = set()
     current: BaseException | None = error
     while current is not None and id(current) not in seen:
         seen.add(id(current))
         if isinstance(current, OSError) and current.errno in DISK_FULL_ERRNOS:
-            return True
+            yield current
         current = current.__cause__ or current.__context__
-    return False
+
+
+def is_disk_full(error: BaseException) -> bool:
+    """Whether ``error`` (or an error it was raised from) is a full filesystem."""
+    return next(_disk_full_errors(error), None) is not None
 
 
 def disk_full_message(error: BaseException) -> str:
-    """``<path>: no space left on device`` for a disk-full error (the innermost path known)."""
-    current: BaseException | None = error
-    path = None
-    seen: set[int] = set()
-    while current is not None and id(current) not in seen:
-        seen.add(id(current))
-        if isinstance(current, OSError) and current.errno in DISK_FULL_ERRNOS and current.filename:
-            path = current.filename
-            break
-        current = current.__cause__ or current.__context__
+    """``<path>: no space left on device`` for a disk-full error (the outermost path known)."""
+    path = next((e.filename for e in _disk_full_errors(error) if e.filename), None)
     return f"{path}: no space left on device" if path else "no space left on device"
 
 
@@ -159,15 +155,13 @@ def run_hydra_app(app: Callable[[], object]) -> None:
     logging.raiseExceptions = False
     try:
         app()
-    except OSError as error:  # Hydra writing the run folder's .hydra/ files on a full disk
-        if not is_disk_full(error):
-            raise
-        print(f"error: {disk_full_message(error)}", file=sys.stderr)
-        raise SystemExit(DISK_FULL_EXIT_CODE) from None
-    except (HydraException, OmegaConfBaseException) as error:
+    except (OSError, HydraException, OmegaConfBaseException) as error:
+        # An OSError here is Hydra writing the run folder's .hydra/ files on a full disk.
         if is_disk_full(error):
             print(f"error: {disk_full_message(error)}", file=sys.stderr)
             raise SystemExit(DISK_FULL_EXIT_CODE) from None
+        if isinstance(error, OSError):
+            raise
         # "Error merging override seed=abc" says where; its cause says what is wrong.
         cause = f": {one_line(error.__cause__)}" if error.__cause__ is not None else ""
         print(f"error: {one_line(error)}{cause}", file=sys.stderr)

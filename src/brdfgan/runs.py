@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import pickle
 import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -220,31 +221,29 @@ def _reject_nested_targets(value: Any, where: str | os.PathLike[str], target: st
 # -- checkpoints ----------------------------------------------------------------------------
 
 
-def read_checkpoint(path: str | os.PathLike[str], what: str = "checkpoint") -> dict[str, Any]:
+def read_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
     """A Lightning checkpoint's contents, loaded without arbitrary unpickling.
 
     Raises :class:`WeightsError` naming ``path`` for a missing, truncated or corrupt file.
     """
     path = Path(path)
     if not path.is_file():
-        raise WeightsError(f"{path}: {what} not found")
+        raise WeightsError(f"{path}: checkpoint not found")
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as error:  # weights_only refusing a pickle that wants code
+        raise WeightsError(f"{path}: not a brdfgan checkpoint ({_short(error)})") from None
     except (RuntimeError, OSError, EOFError, ValueError, zipfile.BadZipFile, KeyError) as error:
-        raise WeightsError(f"{path}: not a readable {what} (truncated or corrupt: {_short(error)})") from None
-    except Exception as error:  # weights_only's UnpicklingError for a pickle that wants code
-        if type(error).__name__ == "UnpicklingError":
-            raise WeightsError(f"{path}: not a brdfgan {what} ({_short(error)})") from None
-        raise
+        reason = f"truncated or corrupt: {_short(error)}"
+        raise WeightsError(f"{path}: not a readable checkpoint ({reason})") from None
     if not isinstance(state, dict):
-        raise WeightsError(f"{path}: not a Lightning {what} ({type(state).__name__}, not a mapping)")
+        raise WeightsError(f"{path}: not a Lightning checkpoint ({type(state).__name__}, not a mapping)")
     return state
 
 
-def checkpoint_networks(
-    state: Mapping[str, Any], path: str | os.PathLike[str]
-) -> dict[str, dict[str, Tensor]]:
-    """The state dicts per network (``generator``, ``discriminator``) of a checkpoint's contents."""
+def checkpoint_networks(path: str | os.PathLike[str]) -> dict[str, dict[str, Tensor]]:
+    """The state dicts per network (``generator``, ``discriminator``) of a training checkpoint."""
+    state = read_checkpoint(path)
     if not isinstance(state.get("state_dict"), Mapping):
         raise WeightsError(f"{path}: not a Lightning checkpoint (no state_dict)")
     networks: dict[str, dict[str, Tensor]] = {}
@@ -261,7 +260,7 @@ def network_weights(path: str | os.PathLike[str]) -> dict[str, dict[str, Tensor]
     if path.suffix.lower() == ".safetensors":
         tensors, _ = _read_safetensors(path)
         return {"generator": {name: value.float() for name, value in tensors.items()}}
-    return checkpoint_networks(read_checkpoint(path), path)
+    return checkpoint_networks(path)
 
 
 def load_checkpoint_generator(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str, Any]]:
@@ -277,14 +276,13 @@ def load_checkpoint_generator(path: str | os.PathLike[str]) -> tuple[nn.Module, 
     node = OmegaConf.select(run.config(), "model.generator", default=None)
     if node is None:
         raise WeightsError(f"{run.config_path}: not a brdfgan model config (no model.generator)")
-    generator = network_from_config(node, run.config_path)
-    networks = checkpoint_networks(read_checkpoint(path), path)
-    try:
-        generator.load_state_dict(networks.get("generator", {}))
-    except RuntimeError as error:
-        raise WeightsError(f"{path}: checkpoint does not fit its run's generator ({_short(error)})") from None
     config = _plain_arguments(node, run.config_path)
     target = str(config.pop("_target_"))
+    generator = build_network(target, config, run.config_path)
+    try:
+        generator.load_state_dict(checkpoint_networks(path).get("generator", {}))
+    except RuntimeError as error:
+        raise WeightsError(f"{path}: checkpoint does not fit its run's generator ({_short(error)})") from None
     meta = {"model_id": run.name, "target": target, "config": config, "extra": {}}
     return generator.eval(), meta
 
@@ -292,7 +290,7 @@ def load_checkpoint_generator(path: str | os.PathLike[str]) -> tuple[nn.Module, 
 def check_resume_checkpoint(path: str | os.PathLike[str], networks: Mapping[str, nn.Module]) -> None:
     """Refuse (one line) a checkpoint that ``ckpt_path`` cannot resume this run from: unreadable,
     or holding networks of another architecture than ``networks`` (name → this run's module)."""
-    stored = checkpoint_networks(read_checkpoint(path), path)
+    stored = checkpoint_networks(path)
     for name, network in networks.items():
         expected = {k: tuple(v.shape) for k, v in network.state_dict().items()}
         found = {k: tuple(v.shape) for k, v in stored.get(name, {}).items()}

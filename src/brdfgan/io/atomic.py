@@ -17,11 +17,14 @@ from pathlib import Path
 
 from brdfgan.errors import DiskFullError, is_disk_full
 
+# Hex digits of the random part of a temporary name (temp_path writes it, stale_temp_files reads it).
+TEMP_TOKEN_LENGTH = 12
+
 
 def temp_path(path: Path, *, keep_suffix: bool = False) -> Path:
     """``.<name>.<random>.tmp`` in the target's directory (same filesystem, so rename is atomic);
     ``keep_suffix``: ``.<name>.<random>.tmp.<suffix>``, for writers that pick the format from it."""
-    temp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    temp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:TEMP_TOKEN_LENGTH]}.tmp")
     return temp.with_name(temp.name + path.suffix) if keep_suffix else temp
 
 
@@ -31,7 +34,7 @@ def stale_temp_files(path: Path) -> list[Path]:
     Only call this where no other process may be writing ``path`` at the same time (a training
     run's own checkpoints): a live writer's temporary file looks the same.
     """
-    pattern = re.compile(rf"^\.{re.escape(path.name)}\.[0-9a-f]{{12}}\.tmp$")
+    pattern = re.compile(rf"^\.{re.escape(path.name)}\.[0-9a-f]{{{TEMP_TOKEN_LENGTH}}}\.tmp$")
     if not path.parent.is_dir():
         return []
     return sorted(p for p in path.parent.iterdir() if pattern.match(p.name) and p.is_file())

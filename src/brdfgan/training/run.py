@@ -24,7 +24,7 @@ from brdfgan.config_check import check_config
 from brdfgan.errors import UserError
 from brdfgan.evaluation.evaluator import evaluate_models, write_results
 from brdfgan.io.atomic import stale_temp_files
-from brdfgan.runs import WeightsError, check_resume_checkpoint, network_weights
+from brdfgan.runs import LAST_CHECKPOINT, WeightsError, check_resume_checkpoint, network_weights
 from brdfgan.training.checkpoint_io import AtomicCheckpointIO
 
 log = logging.getLogger(__name__)
@@ -110,7 +110,7 @@ def _last_checkpoint(trainer: L.Trainer) -> Path | None:
     for callback in trainer.checkpoint_callbacks:
         dirpath = getattr(callback, "dirpath", None)
         if dirpath and getattr(callback, "filename", None) == "last":
-            last = Path(dirpath) / "last.ckpt"
+            last = Path(dirpath) / LAST_CHECKPOINT
             if last.is_file():
                 return last
     return None
