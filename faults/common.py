@@ -107,6 +107,17 @@ def expect_one_line_error(
     return lines[0]
 
 
+def expect_interrupted(result: subprocess.CompletedProcess[str], message: str) -> str:
+    """The command ended on a signal the way it should: exit 130, no traceback, and ``message``
+    as its last line. Returns that line."""
+    if "Traceback" in result.stderr or result.returncode != 130:
+        raise ScenarioFailed(f"exit {result.returncode}: {tail(result.stderr)}")
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    if lines[-1:] != [message]:
+        raise ScenarioFailed(f"last line is not the interrupt message: {tail(result.stderr)}")
+    return lines[-1]
+
+
 def hidden_leftovers(folder: Path) -> list[Path]:
     """Temporary files and folders (``.NAME.<hex>.tmp`` and the like) anywhere under ``folder``."""
     return sorted(p for p in folder.rglob(".*") if p.name.endswith((".tmp", ".old", ".partial")))

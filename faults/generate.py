@@ -19,6 +19,7 @@ from faults.common import (
     PYTHON,
     Scenario,
     ScenarioFailed,
+    expect_interrupted,
     expect_one_line_error,
     fill_disk,
     hidden_leftovers,
@@ -112,18 +113,14 @@ def interrupt_mid_shard(sig: signal.Signals) -> Scenario:
     def scenario(workdir: Path) -> str:
         out = workdir / "out"
         result = run_until(generate(workdir, out), lambda: mid_shard(out), sig=sig)
-        if "Traceback" in result.stderr or result.returncode != 130:
-            raise ScenarioFailed(f"exit {result.returncode}: {tail(result.stderr)}")
-        lines = [line for line in result.stderr.splitlines() if line.strip()]
-        if lines[-1:] != [INTERRUPTED]:
-            raise ScenarioFailed(f"last line is not the interrupt message: {tail(result.stderr)}")
+        line = expect_interrupted(result, INTERRUPTED)
         if not (out / "train" / "train-000000.tar").exists() or hidden_leftovers(out):
             raise ScenarioFailed("the complete shard is gone or a temporary file is left")
         expected = shard_bytes(reference())
         kept = shard_bytes(out)
         if any(kept[name] != expected[name] for name in kept) or "train/train-000000.tar.sha256" not in kept:
             raise ScenarioFailed(f"kept files differ from a straight run: {sorted(kept)}")
-        return f"exit 130, '{lines[-1][:40]}…'; kept {', '.join(sorted(kept))}, no temporary file"
+        return f"exit 130, '{line[:40]}…'; kept {', '.join(sorted(kept))}, no temporary file"
 
     return Scenario(
         f"{sig.name} mid-shard",

@@ -22,6 +22,7 @@ from faults.common import (
     REPO,
     Scenario,
     ScenarioFailed,
+    expect_interrupted,
     expect_one_line_error,
     fill_disk,
     hidden_leftovers,
@@ -121,18 +122,14 @@ def interrupt_mid_batch(sig: signal.Signals) -> Scenario:
             return (out / NAMES[0]).exists() and staging_with_files(out)
 
         result = run_until(predict(out), in_second_photo, sig=sig)
-        if "Traceback" in result.stderr or result.returncode != 130:
-            raise ScenarioFailed(f"exit {result.returncode}: {tail(result.stderr)}")
-        lines = [line for line in result.stderr.splitlines() if line.strip()]
-        if lines[-1:] != [INTERRUPTED]:
-            raise ScenarioFailed(f"last line is not the interrupt message: {tail(result.stderr)}")
+        line = expect_interrupted(result, INTERRUPTED)
         leftovers = hidden_leftovers(out)
         if leftovers:
             raise ScenarioFailed(f"left {leftovers[0].name}")
         kept = sorted(p.name for p in out.iterdir())
         if kept != NAMES[:1] or not complete(out / NAMES[0]):
             raise ScenarioFailed(f"expected the complete first result only, found {kept}")
-        return f"exit 130, '{lines[-1][:40]}…'; kept {kept}, no hidden folder"
+        return f"exit 130, '{line[:40]}…'; kept {kept}, no hidden folder"
 
     return Scenario(
         f"{sig.name} mid-batch",
@@ -151,15 +148,25 @@ def kill_mid_batch(workdir: Path) -> str:
     return f"kill -9 left {left[0]}; the rerun removed it and wrote {', '.join(NAMES)}"
 
 
-def kill_after_exchange(workdir: Path) -> str:
-    out = workdir / "out"
+def first_result(out: Path) -> None:
+    """A complete earlier result in ``out`` for the swap scenarios to replace."""
     first = run(predict(out, "--no-preview"))
     if first.returncode != 0:
         raise ScenarioFailed(f"first run failed: {tail(first.stderr)}")
-    before = (out / NAMES[0] / "material.json").stat().st_mtime_ns
-    killed = run([PYTHON, "-c", KILL_IN_SWAP, "exchange", *predict(out, "--no-preview")[1:]])
+
+
+def killed_in_swap(out: Path, step: str) -> None:
+    """Rerun into ``out`` with the process killed at ``step`` of the result swap (KILL_IN_SWAP)."""
+    killed = run([PYTHON, "-c", KILL_IN_SWAP, step, *predict(out, "--no-preview")[1:]])
     if killed.returncode != -signal.SIGKILL:
         raise ScenarioFailed(f"exit {killed.returncode}, expected the injected kill: {tail(killed.stderr)}")
+
+
+def kill_after_exchange(workdir: Path) -> str:
+    out = workdir / "out"
+    first_result(out)
+    before = (out / NAMES[0] / "material.json").stat().st_mtime_ns
+    killed_in_swap(out, "exchange")
     target = out / NAMES[0]
     if not complete(target) or (target / "material.json").stat().st_mtime_ns == before:
         raise ScenarioFailed(f"{target} is not the complete new result right after the kill")
@@ -172,12 +179,8 @@ def kill_after_exchange(workdir: Path) -> str:
 
 def kill_between_renames(workdir: Path) -> str:
     out = workdir / "out"
-    first = run(predict(out, "--no-preview"))
-    if first.returncode != 0:
-        raise ScenarioFailed(f"first run failed: {tail(first.stderr)}")
-    killed = run([PYTHON, "-c", KILL_IN_SWAP, "fallback", *predict(out, "--no-preview")[1:]])
-    if killed.returncode != -signal.SIGKILL:
-        raise ScenarioFailed(f"exit {killed.returncode}, expected the injected kill: {tail(killed.stderr)}")
+    first_result(out)
+    killed_in_swap(out, "fallback")
     if (out / NAMES[0]).exists():
         raise ScenarioFailed("the kill did not land between the renames")
     retired = [p.name for p in out.glob(f".{NAMES[0]}.*.old")]
