@@ -2,15 +2,26 @@
 
 from __future__ import annotations
 
+import importlib
+import pkgutil
+
 import pytest
 import torch
+
+import brdfgan.data.materials.families as families_package
 
 from brdfgan.core.svbrdf import split_maps, validate_maps
 from brdfgan.data.materials.base import MaterialFamily
 from brdfgan.data.materials.families import FAMILIES, UnknownFamilyError, get_family, resolve_families
 
 SIZE = 64
-ALL = list(FAMILIES.values())
+# Every module of the package that defines a FAMILY, registered or not: a family under
+# construction is held to the same standards before it joins the registry.
+MODULE_FAMILIES = {
+    info.name: importlib.import_module(f"{families_package.__name__}.{info.name}").FAMILY
+    for info in pkgutil.iter_modules(families_package.__path__)
+}
+ALL = list(FAMILIES.values()) + [f for f in MODULE_FAMILIES.values() if f.name not in FAMILIES]
 
 
 @pytest.fixture(params=ALL, ids=lambda f: f.name)
@@ -23,6 +34,11 @@ def test_registry_has_ten_distinct_families() -> None:
     assert all(name == f.name for name, f in FAMILIES.items())
     assert resolve_families(None) == tuple(ALL)
     assert resolve_families(["marble", "bricks"]) == (FAMILIES["marble"], FAMILIES["bricks"])
+
+
+def test_every_family_module_is_registered() -> None:
+    unregistered = sorted(f.name for f in MODULE_FAMILIES.values() if FAMILIES.get(f.name) is not f)
+    assert not unregistered, f"families defined but not in the registry: {unregistered}"
 
 
 def test_unknown_or_repeated_family_is_a_one_line_error() -> None:
