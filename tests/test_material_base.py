@@ -22,6 +22,16 @@ def test_parameter_sampling_is_clipped_normal_around_the_default() -> None:
         Parameter(default=2.0, low=0.0, high=1.0, doc="bad")
 
 
+def test_uniform_parameter_sampling_covers_the_range_evenly() -> None:
+    hue = Parameter(default=0.5, low=0.0, high=1.0, doc="hue", uniform=True)
+    g = torch.Generator().manual_seed(0)
+    draws = torch.tensor([hue.sample(g) for _ in range(4000)])
+    counts = torch.histc(draws, bins=10, min=0.0, max=1.0)
+    # No pile-up on the bounds (a clipped normal puts ~16 % on each) and every tenth near 10 %.
+    assert ((draws == 0.0) | (draws == 1.0)).sum() == 0
+    assert counts.min() > 330 and counts.max() < 470
+
+
 def test_height_to_normal_golden_slopes() -> None:
     # Height rising to the right (+X) by 1 texel per texel: normal (−1, 0, 1)/√2.
     ramp_x = torch.arange(8.0).view(1, 1, 8).expand(1, 8, 8)

@@ -2,7 +2,8 @@
 
 A family is a pure function of documented parameters producing a map set. A sample draws every
 parameter from a normal distribution centred on its default with σ spanning its range, clipped
-to the range (paper §5: "parameters … sampled from a normal distribution … clipped").
+to the range (paper §5: "parameters … sampled from a normal distribution … clipped"), or
+uniformly for parameters marked ``uniform`` (hues).
 """
 
 from __future__ import annotations
@@ -18,19 +19,29 @@ from brdfgan.core.svbrdf import join_maps, normalize_normal
 
 @dataclass(frozen=True)
 class Parameter:
-    """One family parameter: default, range ``[low, high]`` and what it means."""
+    """One family parameter: default, range ``[low, high]`` and what it means.
+
+    ``uniform`` draws it uniformly over the range instead: for quantities with no preferred
+    value, such as a hue, where the clipped normal would pile a third of the draws onto the two
+    bounds (red, for a hue in turns).
+    """
 
     default: float
     low: float
     high: float
     doc: str
+    uniform: bool = False
 
     def __post_init__(self) -> None:
         if not self.low <= self.default <= self.high:
             raise ValueError(f"default {self.default} outside [{self.low}, {self.high}]")
 
     def sample(self, generator: torch.Generator) -> float:
-        """Normal centred on the default with σ = (high − low)/2, clipped to the range."""
+        """Normal centred on the default with σ = (high − low)/2, clipped to the range (or
+        uniform over the range for ``uniform`` parameters)."""
+        if self.uniform:
+            u = torch.rand((), generator=generator, dtype=torch.float64).item()
+            return float(self.low + (self.high - self.low) * u)
         sigma = (self.high - self.low) / 2.0
         value = self.default + sigma * torch.randn((), generator=generator, dtype=torch.float64).item()
         return float(min(max(value, self.low), self.high))
