@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from brdfgan.core.svbrdf import validate_maps
+from brdfgan.data.materials.albedo import metal_basecolor
 from brdfgan.data.materials.base import MaterialFamily
 from brdfgan.data.materials.families import brushed_metal, concrete, ground, leather, rusted_metal
 
@@ -19,7 +20,9 @@ FAMILIES: list[MaterialFamily] = [
 SIZE = 128
 
 
-def _maps(family: MaterialFamily, params: dict[str, float] | None = None, seed: int = 0, size: int = SIZE):
+def _maps(
+    family: MaterialFamily, params: dict[str, float] | None = None, seed: int = 0, size: int = SIZE
+) -> torch.Tensor:
     return family.make_maps(params or {}, size, torch.Generator().manual_seed(seed))
 
 
@@ -58,10 +61,13 @@ def test_brushed_metal_metallic_and_scratches() -> None:
 
 
 def test_brushed_metal_base_colour_is_metal_f0() -> None:
-    for metal in (0.0, 1.0, 2.0, 3.0):
-        maps = _maps(brushed_metal.FAMILY, {"metal": metal, "scratch_density": 0.0})
-        mean = maps[0:3].mean(dim=(1, 2))
-        assert mean.min() > 0.5 and maps[0:3].max() <= 0.97
+    for metal, name in zip((0.0, 1.0, 2.0, 3.0), ("steel", "aluminium", "brass", "copper"), strict=True):
+        f0 = torch.tensor(metal_basecolor(name)).view(3, 1, 1)
+        maps = _maps(brushed_metal.FAMILY, {"metal": metal + 0.5, "scratch_density": 0.0})
+        # The measured F0, only shaded by smudges (darker, ≤ 6 %) and the brushing (± 1.5 %).
+        ratio = maps[0:3] / f0
+        assert ratio.max() <= 1.016 and ratio.min() >= 0.92, name
+        assert torch.allclose(maps[0:3].mean(dim=(1, 2)), f0.flatten(), atol=0.03), name
 
 
 def test_brushing_is_streaky_along_its_direction() -> None:

@@ -26,20 +26,17 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.data.materials.albedo import metal_basecolor
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
 from brdfgan.data.materials.noise import fbm
 
-# F0 of real metals as sRGB base colour (clipped to 0.97 so no channel is a perfect mirror).
-METAL_COLORS: tuple[tuple[float, float, float], ...] = (
-    (0.77, 0.78, 0.78),  # steel / iron
-    (0.96, 0.96, 0.97),  # aluminium
-    (0.97, 0.86, 0.57),  # brass (gold-like yellow)
-    (0.97, 0.82, 0.76),  # copper
-)
+# The metals of the ``metal`` parameter, in index order; base colour = measured F0 (albedo.py).
+METALS: tuple[str, ...] = ("steel", "aluminium", "brass", "copper")
+METAL_COLORS: tuple[tuple[float, float, float], ...] = tuple(metal_basecolor(name) for name in METALS)
 MAX_SCRATCHES = 120
 
 
-def _stretched_value_noise(size: int, cells_u: int, cells_v: int, generator: torch.Generator) -> Tensor:
+def stretched_value_noise(size: int, cells_u: int, cells_v: int, generator: torch.Generator) -> Tensor:
     """Periodic value noise on a ``cells_v × cells_u`` lattice (anisotropic cells) in [0, 1].
 
     With ``cells_u ≪ cells_v`` the features are long streaks along the rows, like brushing marks.
@@ -109,7 +106,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     norm = 0.0
     for octave, weight in enumerate((1.0, 0.6, 0.35)):
         cells_v = min(lines * 2**octave, size)
-        streak += weight * _stretched_value_noise(size, 2 * 2**octave, cells_v, generator)
+        streak += weight * stretched_value_noise(size, 2 * 2**octave, cells_v, generator)
         norm += weight
     streak = streak / norm - 0.5  # roughly [-0.5, 0.5]
 
@@ -133,11 +130,12 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     ).clamp(0.04, 0.95)
 
     color = torch.tensor(metal).view(3, 1, 1)
-    # Slight darkening in smudges / deep scratches (oxide, dirt); stays within metal F0 values.
+    # Slight darkening in smudges / deep scratches (oxide, dirt) and ±1.5 % along the brushing:
+    # the colour stays the metal's F0 up to that shading.
     shade = (
         1.0 - 0.06 * params["smudge"] * (smudge_field + 1.0) / 2.0 - 0.08 * scratch + 0.03 * strength * streak
     )
-    basecolor = (color * shade[None]).clamp(0.0, 0.97)
+    basecolor = (color * shade[None]).clamp(0.0, 1.0)
     return MaterialLayers(
         basecolor=basecolor,
         height=height[None],
@@ -166,4 +164,4 @@ FAMILY = MaterialFamily(
     tags=("metal", "brushed", "scratched", "metallic", "tileable"),
 )
 
-__all__ = ["FAMILY"]
+__all__ = ["FAMILY", "METALS", "METAL_COLORS", "stretched_value_noise"]
