@@ -25,6 +25,7 @@ out-of-range data raises :class:`MapIOError` naming the file.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Literal
 
@@ -46,7 +47,7 @@ from brdfgan.core.svbrdf import (
 )
 from brdfgan.io.images import BitDepth, ExrPrecision, ImageIOError, read_image, write_image
 
-__all__ = ["MAP_FORMATS", "MapFormat", "MapIOError", "map_paths", "read_maps", "write_maps"]
+__all__ = ["MAP_FORMATS", "MapFormat", "MapIOError", "map_paths", "read_map_files", "read_maps", "write_maps"]
 
 MapFormat = Literal["png", "exr"]
 MAP_FORMATS: tuple[str, ...] = ("png", "exr")
@@ -140,13 +141,31 @@ def read_maps(directory: str | os.PathLike[str], *, format: MapFormat | None = N
     if format is None:
         format = _detect_format(directory)
     _check_format(format)
-    paths = map_paths(directory, format)
-    for path in paths.values():
-        if not path.is_file():
+    return read_map_files(map_paths(directory, format), linear_basecolor=format == "exr", where=directory)
+
+
+def read_map_files(
+    paths: Mapping[str, Path | None], *, linear_basecolor: bool = False, where: str | os.PathLike[str]
+) -> Tensor:
+    """Read the map set stored in the files ``paths`` (keys ``basecolor``, ``normal``,
+    ``roughness``, ``metallic``) under this module's encodings — for texture packs that name
+    their files otherwise. A ``None`` metallic path means a dielectric (metallic 0);
+    ``linear_basecolor`` says the base colour file is linear (EXR). ``where`` names the set in
+    messages.
+
+    Shape:
+        - output: ``(8, H, W)`` float32, passes :func:`validate_maps`
+    """
+    for name in MAP_NAMES:
+        path = paths.get(name)
+        if path is None and name != "metallic":
+            raise MapIOError(f"{where}: no {name} map given")
+        if path is not None and not path.is_file():
             raise MapIOError(f"{path}: map file missing")
 
     images: dict[str, np.ndarray] = {}
-    for name, path in paths.items():
+    files = {name: path for name, path in paths.items() if path is not None}
+    for name, path in files.items():
         try:
             images[name] = read_image(path)
         except ImageIOError as error:
@@ -155,20 +174,22 @@ def read_maps(directory: str | os.PathLike[str], *, format: MapFormat | None = N
     for name, image in images.items():
         if image.shape[:2] != size:
             raise MapIOError(
-                f"{paths[name]}: size {image.shape[1]}x{image.shape[0]} (WxH) differs from "
+                f"{files[name]}: size {image.shape[1]}x{image.shape[0]} (WxH) differs from "
                 f"basecolor's {size[1]}x{size[0]}"
             )
 
-    stored = _in_unit_range(paths["basecolor"], _colour(images["basecolor"]))
+    stored = _in_unit_range(files["basecolor"], _colour(images["basecolor"]))
     basecolor = torch.from_numpy(stored).permute(2, 0, 1).double()
-    if format == "exr":
+    if linear_basecolor:
         basecolor = linear_to_srgb(basecolor)
-    encoded = _in_unit_range(paths["normal"], _normal_channels(paths["normal"], images["normal"]))
-    normal = _decode_normal(paths["normal"], torch.from_numpy(encoded).permute(2, 0, 1).double())
+    encoded = _in_unit_range(files["normal"], _normal_channels(files["normal"], images["normal"]))
+    normal = _decode_normal(files["normal"], torch.from_numpy(encoded).permute(2, 0, 1).double())
     scalars = [
-        torch.from_numpy(_in_unit_range(paths[name], _grayscale(paths[name], images[name])))
+        torch.from_numpy(_in_unit_range(files[name], _grayscale(files[name], images[name])))
         .permute(2, 0, 1)
         .double()
+        if name in files
+        else torch.zeros(1, *size, dtype=torch.float64)
         for name in ("roughness", "metallic")
     ]
     # The clamp absorbs the last ulp the sRGB curve can add at the ends of [0, 1].
@@ -176,7 +197,7 @@ def read_maps(directory: str | os.PathLike[str], *, format: MapFormat | None = N
     try:
         validate_maps(maps)
     except InvalidMapsError as error:
-        raise MapIOError(f"{directory}: {error}") from error
+        raise MapIOError(f"{where}: {error}") from error
     return maps
 
 

@@ -88,18 +88,32 @@ class MaterialFamily:
     def sample_parameters(self, generator: torch.Generator) -> dict[str, float]:
         return {key: p.sample(generator) for key, p in self.parameters.items()}
 
-    def make_maps(self, params: Mapping[str, float], size: int, generator: torch.Generator) -> Tensor:
-        """The 8-channel map set ``(8, size, size)`` of these parameters."""
+    def make_layers(
+        self, params: Mapping[str, float], size: int, generator: torch.Generator
+    ) -> MaterialLayers:
+        """The painted layers of these parameters (defaults for the missing ones), before the
+        height becomes normals: what material mixing blends (:mod:`.mixing`)."""
         unknown = set(params) - set(self.parameters)
         if unknown:
             raise KeyError(f"{self.name}: unknown parameter(s) {', '.join(sorted(unknown))}")
-        layers = self.generate({**self.defaults(), **params}, size, generator)
-        return join_maps(
-            layers.basecolor.clamp(0.0, 1.0),
-            height_to_normal(layers.height),
-            layers.roughness.clamp(0.0, 1.0),
-            layers.metallic.clamp(0.0, 1.0),
-        )
+        return self.generate({**self.defaults(), **params}, size, generator)
+
+    def make_maps(self, params: Mapping[str, float], size: int, generator: torch.Generator) -> Tensor:
+        """The 8-channel map set ``(8, size, size)`` of these parameters."""
+        return layers_to_maps(self.make_layers(params, size, generator))
+
+
+def layers_to_maps(layers: MaterialLayers) -> Tensor:
+    """The 8-channel map set of painted layers: values clipped to [0, 1], height → normals.
+
+    Shape: layers of ``(C, H, W)`` → ``(8, H, W)``.
+    """
+    return join_maps(
+        layers.basecolor.clamp(0.0, 1.0),
+        height_to_normal(layers.height),
+        layers.roughness.clamp(0.0, 1.0),
+        layers.metallic.clamp(0.0, 1.0),
+    )
 
 
 def height_to_normal(height: Tensor) -> Tensor:
