@@ -1,0 +1,115 @@
+"""Tests of the mosaic, relief tile, painted wood, plastic and fabric material families.
+
+The generic standards (valid maps, seeding, tiling, parameter ranges) are in
+tests/test_material_library.py; these check what each surface is physically made of.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+
+import kornia
+import pytest
+import torch
+from torch import Tensor
+
+from brdfgan.core.svbrdf import split_maps, srgb_to_linear
+from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
+from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
+
+SIZE = 128
+MODULES = ("mosaic",)
+
+
+def _family(module: str) -> MaterialFamily:
+    return importlib.import_module(f"brdfgan.data.materials.families.{module}").FAMILY
+
+
+def _layers(
+    module: str, params: dict[str, float] | None = None, size: int = SIZE, seed: int = 0
+) -> MaterialLayers:
+    family = _family(module)
+    return family.generate({**family.defaults(), **(params or {})}, size, torch.Generator().manual_seed(seed))
+
+
+def _maps(module: str, params: dict[str, float] | None = None, size: int = SIZE, seed: int = 0) -> Tensor:
+    return _family(module).make_maps(params or {}, size, torch.Generator().manual_seed(seed))
+
+
+def _hue_turns(basecolor: Tensor) -> Tensor:
+    """Per-texel hue in turns. Shape: ``(3, H, W)`` → ``(H, W)``."""
+    return kornia.color.rgb_to_hsv(basecolor[None])[0, 0] / (2.0 * math.pi)
+
+
+def _mean_hue(hue: Tensor) -> tuple[float, float]:
+    """Circular mean of hues in turns and its resultant length (1 = all the same hue)."""
+    angle = 2.0 * math.pi * hue.flatten()
+    s, c = angle.sin().mean(), angle.cos().mean()
+    return float(torch.atan2(s, c) / (2.0 * math.pi) % 1.0), float(torch.hypot(s, c))
+
+
+def _tilt(maps: Tensor) -> Tensor:
+    """Per-texel 1 − n_z of a map set: 0 on flat texels. Shape: ``(8, H, W)`` → ``(H, W)``."""
+    return 1.0 - split_maps(maps).normal[2]
+
+
+@pytest.mark.parametrize("module", MODULES)
+def test_dielectric_with_plausible_albedo_and_relief(module: str) -> None:
+    family = _family(module)
+    generator = torch.Generator().manual_seed(3)
+    for params in [family.defaults()] + [family.sample_parameters(generator) for _ in range(3)]:
+        maps = family.make_maps(params, SIZE, generator)
+        parts = split_maps(maps)
+        assert torch.equal(parts.metallic, torch.zeros_like(parts.metallic)), params
+        linear = srgb_to_linear(parts.basecolor)
+        low, high = DIELECTRIC_ALBEDO_LINEAR
+        assert linear.min() >= low - 1e-4 and linear.max() <= high + 1e-4, params
+        # Every one of these surfaces has visible relief: normals are not near-flat.
+        assert _tilt(maps).mean() > 0.004, params
+
+
+def test_mosaic_grout_is_lower_and_rougher_than_the_tesserae() -> None:
+    for irregular in (0.0, 1.0):
+        layers = _layers("mosaic", {"irregular": irregular})
+        height, roughness = layers.height.flatten(), layers.roughness.flatten()
+        grout = height <= height.quantile(0.10)
+        tesserae = height >= height.quantile(0.50)
+        assert roughness[grout].mean() > 0.8 and roughness[tesserae].mean() < 0.2
+        # Deep grout: most of its nominal depth (0.004 of the width) below the tessera faces.
+        assert height[tesserae].mean() - height[grout].mean() > 0.8 * 0.004 * SIZE
+
+
+def test_mosaic_palette_follows_hue_and_spread() -> None:
+    for hue in (0.05, 0.3, 0.7):
+        layers = _layers("mosaic", {"hue": hue, "hue_spread": 0.0, "saturation": 0.9})
+        tesserae = layers.height[0] >= layers.height.quantile(0.5)
+        mean, concentration = _mean_hue(_hue_turns(layers.basecolor)[tesserae])
+        assert abs(mean - hue) < 0.015 and concentration > 0.99, hue
+    for seed in range(3):
+        layers = _layers("mosaic", {"hue_spread": 0.5, "saturation": 0.9}, seed=seed)
+        tesserae = layers.height[0] >= layers.height.quantile(0.5)
+        assert _mean_hue(_hue_turns(layers.basecolor)[tesserae])[1] < 0.95, seed
+
+
+def test_mosaic_square_grid_repeats_at_the_pitch_and_cells_do_not() -> None:
+    # 16 tesserae over 128 texels: a square grid repeats every 8 texels; Worley cells do not.
+    def steps(irregular: float) -> tuple[float, float]:
+        height = _layers("mosaic", {"irregular": irregular, "tilt": 0.0, "tesserae": 16.0}).height[0]
+        return (height - height.roll(8, 1)).abs().mean().item(), (
+            height - height.roll(4, 1)
+        ).abs().mean().item()
+
+    pitch, half_pitch = steps(0.0)
+    assert pitch < 0.2 * half_pitch
+    pitch, half_pitch = steps(1.0)
+    assert pitch > 0.6 * half_pitch
+
+
+def test_mosaic_tilt_tilts_the_tessera_faces() -> None:
+    def face_tilt(tilt: float) -> float:
+        height = _layers("mosaic", {"tilt": tilt}).height[0]
+        faces = height >= height.quantile(0.6)
+        return _tilt(_maps("mosaic", {"tilt": tilt}))[faces].mean().item()
+
+    assert face_tilt(0.7) > 1.2 * face_tilt(0.0)
