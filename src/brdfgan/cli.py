@@ -210,6 +210,19 @@ def build_parser() -> argparse.ArgumentParser:
     references.add_argument("data_dir", type=Path, metavar="DATA_DIR", help="its train split is averaged")
     references.add_argument("--out", type=Path, required=True, metavar="DIR")
     references.set_defaults(run=references_command, interrupted="interrupted")
+
+    stats = commands.add_parser(
+        "dataset-stats",
+        help="a dataset split (and scanned sets) → coverage statistics: families, metallic, HSV, relief",
+        description="Print a markdown table of the maps' distribution in DATA_DIR's split and, with "
+        "--scanned, in a folder of scanned sets (e.g. the out-of-distribution benchmark).",
+    )
+    stats.add_argument("data_dir", type=Path, metavar="DATA_DIR")
+    stats.add_argument("--split", default="train", help="default: train")
+    stats.add_argument(
+        "--scanned", type=Path, default=None, metavar="DIR", help="scanned sets to compare with"
+    )
+    stats.set_defaults(run=dataset_stats_command, interrupted="interrupted")
     return parser
 
 
@@ -336,6 +349,16 @@ def references_command(args: argparse.Namespace) -> int:
 
     for path in write_reference_weights(args.data_dir, args.out):
         print(path)
+    return 0
+
+
+def dataset_stats_command(args: argparse.Namespace) -> int:
+    from brdfgan.data.statistics import dataset_statistics, scanned_statistics, statistics_table
+
+    stats = [dataset_statistics(args.data_dir, args.split)]
+    if args.scanned is not None:
+        stats.append(scanned_statistics(args.scanned))
+    print(statistics_table(stats), end="")
     return 0
 
 
