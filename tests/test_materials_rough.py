@@ -1,0 +1,118 @@
+"""Tests of the paper, plaster, terrazzo, pavers, asphalt and leaves material families."""
+
+from __future__ import annotations
+
+import colorsys
+import importlib
+
+import pytest
+import torch
+
+from brdfgan.core.svbrdf import split_maps, srgb_to_linear
+from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
+from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
+from brdfgan.data.materials.families import paper
+
+SIZE = 64
+MODULES = ("paper",)
+
+
+def _family(module: str) -> MaterialFamily:
+    return importlib.import_module(f"brdfgan.data.materials.families.{module}").FAMILY
+
+
+def _layers(
+    family: MaterialFamily, params: dict[str, float], seed: int = 0, size: int = SIZE
+) -> MaterialLayers:
+    return family.generate({**family.defaults(), **params}, size, torch.Generator().manual_seed(seed))
+
+
+def _maps(family: MaterialFamily, params: dict[str, float], seed: int = 0, size: int = SIZE) -> torch.Tensor:
+    return family.make_maps(params, size, torch.Generator().manual_seed(seed))
+
+
+def _tilt(maps: torch.Tensor) -> float:
+    """Mean normal tilt 1 − n_z: 0 for a flat surface."""
+    return (1.0 - split_maps(maps).normal[2]).mean().item()
+
+
+def _mean_hue(basecolor: torch.Tensor) -> float:
+    r, g, b = basecolor.mean(dim=(1, 2)).tolist()
+    return colorsys.rgb_to_hsv(r, g, b)[0]
+
+
+def _hue_distance(a: float, b: float) -> float:
+    d = abs(a - b) % 1.0
+    return min(d, 1.0 - d)
+
+
+@pytest.mark.parametrize("module", MODULES)
+def test_dielectric_with_plausible_albedo_and_relief(module: str) -> None:
+    family = _family(module)
+    generator = torch.Generator().manual_seed(3)
+    low, high = DIELECTRIC_ALBEDO_LINEAR
+    for params in [family.defaults()] + [family.sample_parameters(generator) for _ in range(3)]:
+        maps = family.make_maps(params, SIZE, generator)
+        parts = split_maps(maps)
+        assert torch.equal(parts.metallic, torch.zeros_like(parts.metallic)), params
+        linear = srgb_to_linear(parts.basecolor)
+        assert linear.min() >= low - 1e-4 and linear.max() <= high + 1e-4, params
+        assert (parts.normal[2] < 0.9999).float().mean() > 0.05, params  # some relief everywhere
+        assert parts.roughness.std() > 1e-3, params
+
+
+# --- paper, cardboard, cork -------------------------------------------------------------------
+
+PAPER, CARDBOARD, CORK = 0.5, 1.5, 2.5
+
+
+def test_cork_is_rougher_and_deeper_than_cardboard_and_paper() -> None:
+    family = paper.FAMILY
+    for seed in range(3):
+        maps = {
+            mode: _maps(family, {"mode": mode, "creases": 0.0}, seed) for mode in (PAPER, CARDBOARD, CORK)
+        }
+        tilts = {mode: _tilt(m) for mode, m in maps.items()}
+        assert tilts[PAPER] < tilts[CARDBOARD] < tilts[CORK], tilts
+        rough = {mode: split_maps(m).roughness.mean().item() for mode, m in maps.items()}
+        assert rough[CORK] > max(rough[PAPER], rough[CARDBOARD]) + 0.05, rough
+
+
+@pytest.mark.parametrize("flutes", [9, 16])
+def test_cardboard_flutes_repeat_scale_times_per_width(flutes: int) -> None:
+    for seed in range(2):
+        height = _layers(paper.FAMILY, {"mode": CARDBOARD, "scale": flutes, "creases": 0.0}, seed).height[0]
+        # The flutes run along rows or columns: the axis whose profile varies most crosses them.
+        profiles = (height.mean(dim=0), height.mean(dim=1))
+        profile = max(profiles, key=lambda p: p.std().item())
+        spectrum = torch.fft.rfft(profile - profile.mean()).abs()
+        assert int(spectrum.argmax()) == flutes
+
+
+@pytest.mark.parametrize("hue", [0.0, 0.33, 0.62, 0.85])
+def test_paper_colour_follows_hue(hue: float) -> None:
+    maps = _maps(paper.FAMILY, {"mode": PAPER, "hue": hue, "saturation": 0.6, "ink": 0.0})
+    assert _hue_distance(_mean_hue(split_maps(maps).basecolor), hue) < 0.02
+
+
+@pytest.mark.parametrize("mode", [PAPER, CARDBOARD])
+def test_print_is_darker_and_smoother_than_the_sheet(mode: float) -> None:
+    # Print is painted last, so the same seed gives the same sheet with and without it: the texels
+    # that change are the printed ones.
+    params = {"mode": mode, "saturation": 0.5, "value": 0.85}
+    blank = split_maps(_maps(paper.FAMILY, {**params, "ink": 0.0}, seed=4))
+    printed = split_maps(_maps(paper.FAMILY, {**params, "ink": 1.0}, seed=4))
+    ink = (printed.basecolor - blank.basecolor).abs().sum(dim=0) > 1e-4
+    assert 0.05 < ink.float().mean() < 0.8
+    assert printed.basecolor[:, ink].mean() < blank.basecolor[:, ink].mean() - 0.2
+    assert (printed.roughness[0][ink] < blank.roughness[0][ink]).all()
+    assert torch.equal(printed.normal, blank.normal)  # ink has no thickness
+
+
+def test_folds_are_narrow_ridges_or_grooves() -> None:
+    assert torch.equal(paper.crease_field(32, 0, torch.Generator()), torch.zeros(32, 32))
+    for seed in range(4):
+        fold = paper.crease_field(128, 1, torch.Generator().manual_seed(seed))
+        assert 0.8 < fold.abs().max() <= 1.0  # peak ±1 on the fold line
+        assert fold.abs().median() < 0.3  # most of the sheet is away from the fold
+        assert (fold >= 0).all() or (fold <= 0).all()  # one fold: a ridge or a groove
