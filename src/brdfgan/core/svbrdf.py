@@ -142,6 +142,21 @@ def srgb_to_linear(srgb: Tensor) -> Tensor:
     return torch.where(srgb <= 0.04045, low, high)
 
 
+def srgb_decoding_table(levels: int = 255) -> Tensor:
+    """The linear value of every code ``0..levels`` of an sRGB-encoded integer image.
+
+    This is how an 8-bit (``levels=255``) or 16-bit (``65535``) sRGB file is linearised: the code
+    ``c`` stands for ``srgb_to_linear(c / levels)``, evaluated in float64 and stored as float32.
+    ``brdfgan predict`` decodes JPEG/PNG photos with it and the training sensor simulation
+    (:mod:`brdfgan.data.sensor`) decodes its simulated JPEGs with it, so both see the same values.
+
+    Shape:
+        - output: ``(levels + 1,)`` float32; index it with the codes (as int64)
+    """
+    codes = torch.arange(levels + 1, dtype=torch.float64) / levels
+    return srgb_to_linear(codes).to(torch.float32)
+
+
 def linear_to_srgb(linear: Tensor) -> Tensor:
     """The IEC 61966-2-1 sRGB encoding curve, elementwise, for values in [0, 1].
 

@@ -52,6 +52,16 @@ Rank and world size are read once in :meth:`ShardDataModule.setup` (from the tra
 stored in the dataset: webdataset's ``split_by_node`` asks ``torch.distributed`` inside the
 worker, which is not initialised in spawned workers and would make every rank read every shard.
 
+Sensor effects. With a :class:`~brdfgan.data.sensor.SensorEffects` (``sensor``), the photos of the
+splits in ``sensor_splits`` (default: train only, so validation and test metrics stay comparable
+across models) go through the simulated phone capture and ``predict``'s decoding in the worker,
+on the whole sample and before the train crop: the vignetting is centred on the frame and the
+auto exposure sees the whole photo, as in ``predict``. Each sample's noise comes from a generator
+seeded by ``(seed, epoch, repeat, key)`` in training (``repeat``: its pass over the shards within
+the epoch) and ``(seed, key)`` in val/test, so a rerun and a resumed run draw the same values; what
+was drawn is in ``meta["sensor"]``. The crop draws are separate, so switching the sensor on or
+off leaves every crop where it was.
+
 Corrupt data. :meth:`setup` verifies every shard's structure (headers only, see
 :func:`~brdfgan.data.shards.verify_shard`); truncated or garbage shards are skipped with a
 :class:`ShardWarning` naming them. Errors while streaming (a sample that does not decode, a read
@@ -67,7 +77,7 @@ import multiprocessing
 import random
 import warnings
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from itertools import count, islice
 from pathlib import Path
 from typing import Any, cast
@@ -78,6 +88,7 @@ import webdataset as wds
 from lightning.pytorch.loops.progress import _ProcessedTracker
 from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
+from brdfgan.data.sensor import SensorEffects
 from brdfgan.data.shards import (
     MANIFEST_NAME,
     Sample,
@@ -87,6 +98,7 @@ from brdfgan.data.shards import (
     read_manifest,
     verify_shard,
 )
+from brdfgan.data.spec_checks import DatasetConfigError
 
 __all__ = ["ShardDataModule", "ShardStream", "ShardWarning", "SkipStats", "collate_samples"]
 
@@ -199,6 +211,7 @@ class ShardStream(IterableDataset):
         batches_per_epoch: int | None = None,
         max_samples: int | None = None,
         crop: int | None = None,
+        sensor: SensorEffects | None = None,
     ) -> None:
         super().__init__()
         if kind not in _KINDS:
@@ -216,6 +229,7 @@ class ShardStream(IterableDataset):
         self.batches_per_epoch = batches_per_epoch
         self.max_samples = max_samples
         self.crop = crop
+        self.sensor = sensor if sensor is not None and sensor.enabled else None
         # Counts the iterations of this copy of the dataset: in the main process (no workers)
         # or in a persistent worker, which keeps its copy between epochs.
         self.epoch = 0
@@ -272,6 +286,8 @@ class ShardStream(IterableDataset):
             crop_rng = random.Random(_mix(self.seed, epoch, repeat, self.rank, worker, 2))
             for sample in self._decode(records):
                 delivered += 1
+                if self.sensor is not None:
+                    sample = self._sensed(sample, _mix(self.seed, "sensor", epoch, repeat, sample.key))
                 yield sample if self.crop is None else random_crop(sample, self.crop, crop_rng)
             if delivered == 0:
                 warnings.warn(
@@ -299,6 +315,8 @@ class ShardStream(IterableDataset):
             quotas = _fill(self.max_samples, held)
             mine = rank * num_workers + worker
             samples = islice(samples, quotas[mine])
+        if self.sensor is not None:  # the same draws every epoch: comparable metrics
+            samples = (self._sensed(sample, _mix(self.seed, "sensor", sample.key)) for sample in samples)
         return _batches(samples, self.batch_size, partial=True)
 
     # -- shared ---------------------------------------------------------------------------
@@ -328,6 +346,12 @@ class ShardStream(IterableDataset):
         )
         self.counter.add(self.kind, _ERRORS)
         return True  # continue with the next member or shard
+
+    def _sensed(self, sample: Sample, seed: int) -> Sample:
+        """The sample with :attr:`sensor` applied to its photo, seeded by ``seed``."""
+        assert self.sensor is not None
+        photo, record = self.sensor.apply(sample.photo, torch.Generator().manual_seed(seed))
+        return Sample(sample.key, photo, sample.maps, {**sample.meta, "sensor": record}, check=False)
 
     def _decode(self, records: Iterator[dict]) -> Iterator[Sample]:
         for record in records:
@@ -386,8 +410,8 @@ def _round_robin_share(quotas: Sequence[int], first: int) -> list[int]:
     return taken
 
 
-def _mix(*parts: int) -> int:
-    """A 64-bit seed from integers, stable across processes and Python versions."""
+def _mix(*parts: int | str) -> int:
+    """A 64-bit seed from integers and strings, stable across processes and Python versions."""
     return int.from_bytes(hashlib.sha256(repr(parts).encode()).digest()[:8], "little")
 
 
@@ -451,6 +475,9 @@ class ShardDataModule(L.LightningDataModule):
             :func:`random_crop`), e.g. 128² crops of 256² data for 4× cheaper steps; validation
             and test always see whole samples. ``None``: whole samples.
         prepare: called by :meth:`prepare_data` (rank 0 only), e.g. to generate a missing dataset.
+        sensor: simulated phone sensor and file effects on the photos (see the module docstring);
+            ``None`` or ``enabled: false``: the stored photos as they are.
+        sensor_splits: the splits ``sensor`` applies to, among ``"train"``, ``"val"``, ``"test"``.
 
     After :meth:`setup`, :attr:`skipped` reports skipped shards and samples.
     """
@@ -470,6 +497,8 @@ class ShardDataModule(L.LightningDataModule):
         epoch_samples: int | None = None,
         train_crop: int | None = None,
         prepare: Callable[[], None] | None = None,
+        sensor: SensorEffects | None = None,
+        sensor_splits: Sequence[str] = ("train",),
     ) -> None:
         super().__init__()
         if batch_size < 1:
@@ -482,7 +511,14 @@ class ShardDataModule(L.LightningDataModule):
         for name, value in named:
             if value is not None and value < 1:
                 raise ValueError(f"{name} must be >= 1 or None, got {value}")
-        self.save_hyperparameters(ignore=["prepare"])
+        unknown = sorted(set(sensor_splits) - set(_KINDS))
+        if isinstance(sensor_splits, str) or unknown:
+            raise DatasetConfigError(
+                f"data.sensor_splits={sensor_splits!r}: must be a list of {', '.join(_KINDS)}"
+            )
+        self.save_hyperparameters(ignore=["prepare", "sensor"])
+        # As plain values: checkpoints are read with torch.load(weights_only=True).
+        self.hparams["sensor"] = None if sensor is None else asdict(sensor)
         self.data_dir = Path(data_dir)
         self.batch_size = batch_size
         self.num_workers = num_workers
@@ -493,6 +529,8 @@ class ShardDataModule(L.LightningDataModule):
         self.pin_memory = pin_memory
         self.epoch_samples = epoch_samples
         self.train_crop = train_crop
+        self.sensor = sensor
+        self.sensor_splits = tuple(sensor_splits)
         self._prepare = prepare
         self._indices: dict[str, _SplitIndex] = {}
         self._skipped_shards = 0
@@ -656,6 +694,7 @@ class ShardDataModule(L.LightningDataModule):
             seed=self.seed,
             counter=self._counter,
             batches_per_epoch=self.train_batches_per_epoch if kind == "train" else None,
+            sensor=self.sensor if kind in self.sensor_splits else None,
             **options,
         )
 

@@ -47,7 +47,7 @@ import torch
 from PIL import Image, UnidentifiedImageError
 
 from brdfgan.core.exposure import LUMINANCE_WEIGHTS
-from brdfgan.core.svbrdf import srgb_to_linear
+from brdfgan.core.svbrdf import srgb_decoding_table, srgb_to_linear
 from brdfgan.errors import UserError
 from brdfgan.io.images import ImageIOError, read_image
 
@@ -366,14 +366,16 @@ def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
         if warning:
             warnings.append(warning)
 
-    # A lookup table built with the project's sRGB curve decodes every code exactly once and
-    # avoids the several full-size float temporaries of srgb_to_linear on a 24 MP photo.
-    table = torch.arange(levels + 1, dtype=torch.float64) / levels
+    # A lookup table decodes every code exactly once and avoids the several full-size float
+    # temporaries of srgb_to_linear on a 24 MP photo. The sRGB table is the one the training
+    # sensor simulation (brdfgan.data.sensor) decodes its JPEGs with: both see the same values.
     if colorspace == "srgb":
-        table = srgb_to_linear(table)
+        table = srgb_decoding_table(levels)
+    else:
+        table = (torch.arange(levels + 1, dtype=torch.float64) / levels).to(torch.float32)
     oriented = apply_orientation(stored, orientation)
     # Indexing with the (C, H, W) view writes the result directly in channel-first order.
-    linear = table.to(torch.float32).numpy()[oriented.transpose(2, 0, 1)]
+    linear = table.numpy()[oriented.transpose(2, 0, 1)]
     return Photo(
         path=path,
         linear=torch.from_numpy(np.ascontiguousarray(linear)),
