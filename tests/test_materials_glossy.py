@@ -19,7 +19,7 @@ from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
 
 SIZE = 128
-MODULES = ("mosaic",)
+MODULES = ("mosaic", "relief_tiles")
 
 
 def _family(module: str) -> MaterialFamily:
@@ -113,3 +113,49 @@ def test_mosaic_tilt_tilts_the_tessera_faces() -> None:
         return _tilt(_maps("mosaic", {"tilt": tilt}))[faces].mean().item()
 
     assert face_tilt(0.7) > 1.2 * face_tilt(0.0)
+
+
+def _tile_interiors(size: int, tiles: int, margin: int) -> Tensor:
+    """Texels at least ``margin`` texels inside a tile of a ``tiles × tiles`` grid.
+
+    Shape: ``(size, size)``.
+    """
+    local = torch.arange(size) % (size // tiles)
+    inside = (local >= margin) & (local < size // tiles - margin)
+    return inside[:, None] & inside[None, :]
+
+
+@pytest.mark.parametrize("pattern", [0.0, 1.0, 2.0, 3.0])
+def test_relief_tiles_glaze_pools_dark_and_saturated_in_recesses(pattern: float) -> None:
+    faces = _tile_interiors(SIZE, 2, margin=5)  # clear of grout and bevel
+    for pooling in (0.0, 1.0):
+        layers = _layers("relief_tiles", {"tile_count": 2.0, "pattern": pattern, "pooling": pooling})
+        hsv = kornia.color.rgb_to_hsv(layers.basecolor[None])[0]
+        height = layers.height[0][faces]
+        brightness = torch.corrcoef(torch.stack([height, hsv[2][faces]]))[0, 1]
+        saturation = torch.corrcoef(torch.stack([height, hsv[1][faces]]))[0, 1]
+        if pooling:
+            assert brightness > 0.8 and saturation < -0.4
+        else:  # without pooling the glaze colour ignores the relief
+            assert brightness.abs() < 0.1 and saturation.abs() < 0.1
+
+
+@pytest.mark.parametrize("pattern", [0.0, 1.0, 2.0, 3.0])
+def test_relief_tiles_motif_relief_is_strong_and_follows_the_parameter(pattern: float) -> None:
+    def tilt(relief: float) -> float:
+        maps = _maps("relief_tiles", {"tile_count": 2.0, "pattern": pattern, "relief": relief})
+        return _tilt(maps)[_tile_interiors(SIZE, 2, margin=5)].mean().item()
+
+    # A flat glazed tile face has 1 − n_z ≈ 0; these motifs tilt the face by 10–25° on average.
+    assert tilt(0.05) > 0.02
+    assert tilt(0.12) > 2.0 * tilt(0.02)
+
+
+def test_relief_tiles_glaze_has_the_hue_and_is_smoother_than_grout() -> None:
+    faces = _tile_interiors(SIZE, 2, margin=5)
+    for hue in (0.1, 0.45, 0.8):
+        layers = _layers("relief_tiles", {"tile_count": 2.0, "hue": hue, "saturation": 0.8})
+        mean, concentration = _mean_hue(_hue_turns(layers.basecolor)[faces])
+        assert abs(mean - hue) < 0.01 and concentration > 0.99, hue
+        grout = layers.height[0] <= layers.height.quantile(0.02)
+        assert layers.roughness[0][grout].mean() > layers.roughness[0][faces].mean() + 0.6

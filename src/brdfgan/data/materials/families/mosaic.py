@@ -52,6 +52,8 @@ _GROUT_DEPTH = 0.004
 # Width of the rounded tessera edge, as a fraction of the pitch.
 _BEVEL = 0.12
 # Colours per mosaic: a sheet mixes a few glass or glaze batches.
+# Grout colour at value 1: a warm grey (hue 0.1, saturation 0.08).
+_GROUT_TINT = hsv_to_rgb(torch.tensor([0.1]), torch.tensor([0.08]), torch.tensor([1.0]))[:, 0]
 PALETTE_SIZE = 5
 
 
@@ -118,8 +120,8 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     pick = (attrs[0] * PALETTE_SIZE).long().clamp(max=PALETTE_SIZE - 1)
     shade = (0.9 + 0.2 * attrs[1]) * (1.0 + 0.04 * grain)
     tessera = palette[pick].permute(2, 0, 1) * shade[None]
-    grout_v = (params["grout_value"] * (1.0 + 0.12 * grain)).clamp(0.0, 1.0)
-    grout = hsv_to_rgb(torch.full_like(grout_v, 0.1), torch.full_like(grout_v, 0.08), grout_v)
+    # Warm grey; HSV is linear in the value, so a constant tint times the value field.
+    grout = _GROUT_TINT.view(3, 1, 1) * (params["grout_value"] * (1.0 + 0.12 * grain))[None]
     basecolor = clamp_dielectric_albedo(grout + (tessera - grout) * face[None])
 
     # Glossy tesserae (each a little different), rough porous grout.
