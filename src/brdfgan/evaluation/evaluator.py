@@ -27,9 +27,12 @@ from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
 from brdfgan.data.shards import Sample
 from brdfgan.io.atomic import atomic_replace, write_text_atomic
 from brdfgan.io.images import write_image
+from brdfgan.metrics import hotspot_centres
 
 PAPER_MAPS = ("diffuse", "specular", "normal", "roughness")
 ALL_MAPS = (*PAPER_MAPS, "basecolor", "metallic")
+# The predicted maps whose hotspot ratio the table shows (metrics.json/.csv hold all of them).
+HOTSPOT_COLUMNS = {"basecolor": "basecolor", "normal": "normal", "roughness": "rough", "metallic": "metal"}
 
 
 @torch.no_grad()
@@ -40,15 +43,19 @@ def evaluate_models(
     device: torch.device | str = "cpu",
 ) -> dict[str, dict[str, float]]:
     """Metric values per model name. ``make_metrics()`` builds a fresh metric per model; every
-    model sees the same batches in the same order."""
+    model sees the same batches in the same order. The flash positions of ``batch["meta"]``
+    (:func:`~brdfgan.metrics.hotspot_centres`) go to the metrics as ``hotspot``; a batch without
+    ``meta`` has them at the image centres."""
     metrics = {name: make_metrics().to(device) for name in models}
     for model in models.values():
         model.to(device).eval()
     for batch in batches:
         photo = batch["photo"].to(device)
         truth = batch["maps"].to(device)
+        meta = batch.get("meta")
+        hotspot = None if meta is None else hotspot_centres(meta, *truth.shape[-2:]).to(device)
         for name, model in models.items():
-            metrics[name].update(model(photo), truth)
+            metrics[name].update(model(photo), truth, hotspot=hotspot)
     return {name: {k: float(v) for k, v in metric.compute().items()} for name, metric in metrics.items()}
 
 
@@ -71,9 +78,11 @@ def write_results(results: Mapping[str, Mapping[str, float]], out_dir: str | os.
 
 
 def markdown_table(results: Mapping[str, Mapping[str, float]]) -> str:
-    """Per-map RMSE at full and downscaled resolution, angular and re-render error, per model."""
+    """Per-map RMSE at full and downscaled resolution, angular and re-render error, and the hotspot
+    ratios of the predicted maps (RMSE near the flash highlight / elsewhere), per model."""
     columns = [(f"rmse/{m}", f"{m}") for m in ALL_MAPS] + [(f"rmse256/{m}", f"{m} ↓256") for m in PAPER_MAPS]
     columns += [("normal_angle_deg", "normal °"), ("rerender_rmse", "re-render")]
+    columns += [(f"hotspot/{m}", f"hot {label}") for m, label in HOTSPOT_COLUMNS.items()]
     present = [(key, label) for key, label in columns if any(key in v for v in results.values())]
     lines = ["| model | " + " | ".join(label for _, label in present) + " |"]
     lines.append("|---|" + "---|" * len(present))

@@ -1,30 +1,41 @@
 """Evaluation metrics (paper §6.2) as DDP-correct torchmetrics: per-map RMSE at full and
-downscaled resolution, normal angular error, and a fixed-configuration re-rendering error.
+downscaled resolution, normal angular error, a fixed-configuration re-rendering error, and the
+error near the flash highlight relative to elsewhere.
 Definitions in :mod:`brdfgan.metrics.svbrdf_metrics`.
 """
 
 from brdfgan.metrics.svbrdf_metrics import (
     ALBEDO_SPACE,
+    HOTSPOT_RADIUS_FRACTION,
     RMSE_MAPS,
+    HotspotError,
     MapRMSE,
     NormalAngularError,
     RerenderError,
     SVBRDFMetrics,
     area_downscale,
+    check_hotspot_radius,
     compared_maps,
     downscaled_size,
     fixed_render_configs,
+    hotspot_centres,
+    hotspot_disk,
 )
 
 __all__ = [
     "ALBEDO_SPACE",
+    "HOTSPOT_RADIUS_FRACTION",
     "RMSE_MAPS",
+    "HotspotError",
     "MapRMSE",
     "NormalAngularError",
     "RerenderError",
     "SVBRDFMetrics",
     "area_downscale",
+    "check_hotspot_radius",
     "compared_maps",
     "downscaled_size",
     "fixed_render_configs",
+    "hotspot_centres",
+    "hotspot_disk",
 ]

@@ -42,10 +42,18 @@ Definitions (``pred`` and ``true`` in the 8-channel layout of :mod:`brdfgan.core
 - **Re-rendering error** (:class:`RerenderError`): ``sqrt(mean((log(1 + R(p)) − log(1 + R(t)))²))``
   over all pixels, colour channels and configurations, ``R`` the point-light renderer of the
   rendering loss under a fixed set of light/view configurations drawn once from the seed.
+
+- **Hotspot error ratio** (:class:`HotspotError`): per map, the RMSE (as above, full resolution)
+  over the pixels within a disk around each sample's flash highlight divided by the RMSE over the
+  other pixels. A model whose maps carry a mark where the highlight was in the photo scores > 1;
+  an error spread evenly scores 1. Highlight positions come from the batch metadata
+  (:func:`hotspot_centres`).
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
 import torch
@@ -53,6 +61,7 @@ import torch.nn.functional as F
 from torch import Tensor
 from torchmetrics import Metric, MetricCollection
 
+from brdfgan.config_check import ConfigValueError
 from brdfgan.core.render import PointLights, render_point_lights
 from brdfgan.core.sampling import (
     RenderConfigs,
@@ -339,13 +348,212 @@ class RerenderError(Metric):
         return (self.sse / self.values).sqrt()
 
 
+# Radius of the hotspot disk as a fraction of the shorter image side. Measured with
+# brdfgan.core.render.render_flash on flat planes (capture set-up of FlashCapture): the highlight
+# falls to half its height over the base level at 0.03 of the side for perceptual roughness 0.2,
+# 0.07 at 0.3, 0.10 at 0.35, 0.13 at 0.4 and 0.21 at 0.5. 0.125 covers the highlight of the
+# glossy to mid-rough samples, where the photo is brightest (and clips), and is of the size of
+# the marks in the shipped model's maps (README grid: radii of roughly 0.1–0.2 of the side). A
+# smaller disk would hold too few pixels for a stable RMSE (0.125 keeps π·0.125² = 4.9 % of the
+# image, ~3,200 pixels per 256² sample); a larger one would dilute a local mark with unaffected
+# surroundings.
+HOTSPOT_RADIUS_FRACTION = 0.125
+
+
+def hotspot_centres(meta: Sequence[Mapping[str, Any]], height: int, width: int) -> Tensor:
+    """The flash highlight position of every sample of a batch, in the batch's pixel coordinates.
+
+    Continuous pixel coordinates: ``x`` along columns from the left edge, ``y`` along rows from the
+    top; pixel ``(i, j)`` spans ``[j, j + 1) × [i, i + 1)``, so the image centre is
+    ``(width / 2, height / 2)``. Per sample:
+
+    - ``meta["capture"]["hotspot_px"] = [x, y]``: the position in the stored photo;
+    - without it (older datasets: flash at the lens, camera centred over the sample): the centre
+      of the stored photo, which is the batch image unless the sample was cropped;
+    - ``meta["train_crop"] = [x0, y0, size]`` (:func:`brdfgan.data.datamodule.random_crop`)
+      shifts the position by ``(-x0, -y0)``. A crop of a sample without ``hotspot_px`` is an
+      error: the stored photo's size, hence its centre, is not recorded.
+
+    A position may lie outside the image (a crop that missed the highlight).
+
+    Args:
+        meta: one metadata dict per sample (``batch["meta"]``).
+        height, width: size of the batch's images.
+
+    Shape:
+        - output: ``(B, 2)`` float64 ``(x, y)``, on the CPU
+    """
+    centres = []
+    for index, sample in enumerate(meta):
+        capture = sample.get("capture")
+        position = capture.get("hotspot_px") if isinstance(capture, Mapping) else None
+        crop = sample.get("train_crop")
+        if position is None:
+            if crop is not None:
+                raise ValueError(
+                    f"sample {index}: a train crop without meta['capture']['hotspot_px'] "
+                    "has no known flash position (the stored photo's size is not recorded)"
+                )
+            x, y = width / 2.0, height / 2.0
+        else:
+            x, y = _point(position, f"sample {index}: meta['capture']['hotspot_px']")
+        if crop is not None:
+            x0, y0 = _point(list(crop)[:2], f"sample {index}: meta['train_crop']")
+            x, y = x - x0, y - y0
+        centres.append((x, y))
+    return torch.tensor(centres, dtype=torch.float64).reshape(len(centres), 2)
+
+
+def _point(values: Any, where: str) -> tuple[float, float]:
+    """Two finite numbers ``(x, y)`` from a metadata list."""
+    if not isinstance(values, Sequence) or len(values) != 2:
+        raise ValueError(f"{where} must be [x, y], got {values!r}")
+    x, y = values
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in (x, y)):
+        raise ValueError(f"{where} must hold two finite numbers, got {values!r}")
+    return float(x), float(y)
+
+
+def hotspot_disk(centres: Tensor, height: int, width: int, radius: float) -> Tensor:
+    """Pixels whose centre lies within ``radius`` pixels of each sample's hotspot.
+
+    Pixel ``(i, j)`` has its centre at ``(j + 0.5, i + 0.5)`` (the coordinates of
+    :func:`hotspot_centres`); distances in float64.
+
+    Shape:
+        - centres: ``(B, 2)`` ``(x, y)``
+        - output: ``(B, H, W)`` bool, on ``centres``' device
+    """
+    cx = centres[:, 0].to(torch.float64).view(-1, 1, 1)
+    cy = centres[:, 1].to(torch.float64).view(-1, 1, 1)
+    xs = torch.arange(width, dtype=torch.float64, device=centres.device).view(1, 1, width) + 0.5
+    ys = torch.arange(height, dtype=torch.float64, device=centres.device).view(1, height, 1) + 0.5
+    return (xs - cx).square() + (ys - cy).square() <= radius * radius
+
+
+def check_hotspot_radius(radius_fraction: Any) -> float:
+    """``metrics.hotspot_radius_fraction`` as a float in (0, 0.5] (a disk at most as wide as the
+    shorter side); :class:`~brdfgan.config_check.ConfigValueError` otherwise."""
+    valid = isinstance(radius_fraction, int | float) and not isinstance(radius_fraction, bool)
+    if not valid or not 0.0 < radius_fraction <= 0.5:
+        raise ConfigValueError(f"metrics.hotspot_radius_fraction={radius_fraction!r}: must be in (0, 0.5]")
+    return float(radius_fraction)
+
+
+class HotspotError(Metric):
+    """Per-map RMSE near the flash highlight over the RMSE elsewhere, over a whole dataset.
+
+    For every sample the disk of radius ``radius_fraction × min(H, W)`` pixels around its hotspot
+    (:func:`hotspot_disk`) splits the pixels into *inside* and *outside*; the squared errors of
+    every map of :func:`compared_maps` (stored base colour, normal, roughness, metallic and the
+    derived diffuse and specular albedos) are summed over each part, with the pixel counts, over
+    all updates. Then, per map, ``RMSE_in = sqrt(SSE_in / (N_in · channels))`` (likewise outside)
+    and the ratio ``RMSE_in / RMSE_out``: 1 for an error spread evenly over the image, > 1 when the
+    highlight leaks into the maps. See :data:`HOTSPOT_RADIUS_FRACTION` for the default size.
+
+    The ratio is NaN when the outside error is 0 (a perfect prediction away from the highlight:
+    no scale to compare with) or when either part holds no pixel (e.g. every hotspot far outside
+    its crop); before any update every value is NaN.
+
+    Args:
+        radius_fraction: disk radius as a fraction of the shorter image side, in (0, 0.5].
+        albedo_space: colour space of the derived albedos (default :data:`ALBEDO_SPACE`).
+        rmse: also report the inside and outside RMSE themselves.
+        prefix: prepended to the keys of ``compute``.
+        kwargs: passed to :class:`torchmetrics.Metric`.
+
+    ``compute()`` returns ``{prefix + map: ratio}`` for the maps of :data:`RMSE_MAPS`, and with
+    ``rmse`` also ``prefix + map + "/inside"`` and ``"/outside"`` (float64 scalars).
+
+    ``update(pred, true, hotspot=None)``: ``hotspot`` holds each sample's highlight position in
+    pixels (:func:`hotspot_centres`); ``None`` puts it at the image centre.
+
+    Shape:
+        - pred, true: ``(B, 8, H, W)`` or ``(8, H, W)``
+        - hotspot: ``(B, 2)`` ``(x, y)`` (``(1, 2)`` or ``(2,)`` for unbatched maps)
+    """
+
+    is_differentiable = False
+    higher_is_better = False
+    full_state_update = False
+
+    pixels_in: Tensor
+    pixels_out: Tensor
+
+    def __init__(
+        self,
+        radius_fraction: float = HOTSPOT_RADIUS_FRACTION,
+        albedo_space: AlbedoSpace = ALBEDO_SPACE,
+        rmse: bool = False,
+        prefix: str = "",
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(**kwargs)
+        if albedo_space not in ("linear", "srgb"):
+            raise ValueError(f"albedo_space must be 'linear' or 'srgb', got {albedo_space!r}")
+        self.radius_fraction = check_hotspot_radius(radius_fraction)
+        self.albedo_space = albedo_space
+        self.rmse = rmse
+        self.prefix = prefix
+        for name in RMSE_MAPS:
+            for part in ("in", "out"):
+                self.add_state(
+                    f"sse_{part}_{name}", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum"
+                )
+        self.add_state("pixels_in", torch.zeros((), dtype=torch.int64), dist_reduce_fx="sum")
+        self.add_state("pixels_out", torch.zeros((), dtype=torch.int64), dist_reduce_fx="sum")
+
+    def update(self, pred: Tensor, true: Tensor, hotspot: Tensor | None = None) -> None:
+        unbatched = pred.ndim == 3
+        pred, true = _as_batch(pred, true)
+        batch, _, height, width = pred.shape
+        if hotspot is None:
+            centres = pred.new_tensor([[width / 2.0, height / 2.0]], dtype=torch.float64).expand(batch, 2)
+        else:
+            centres = hotspot.detach().to(device=pred.device, dtype=torch.float64)
+            if unbatched and centres.shape == (2,):
+                centres = centres.unsqueeze(0)
+            if centres.shape != (batch, 2):
+                raise ValueError(f"hotspot must have shape ({batch}, 2), got {tuple(hotspot.shape)}")
+        inside = hotspot_disk(centres, height, width, self.radius_fraction * min(height, width))
+        pixels_in = inside.sum()
+        self.pixels_in += pixels_in
+        self.pixels_out += batch * height * width - pixels_in
+        pred_images = compared_maps(pred, self.albedo_space)
+        true_images = compared_maps(true, self.albedo_space)
+        for name in RMSE_MAPS:
+            # Squared error per pixel, summed over the map's channels: (B, H, W).
+            squared = (pred_images[name] - true_images[name]).square().sum(dim=-3, dtype=torch.float64)
+            sse_in, sse_out = getattr(self, f"sse_in_{name}"), getattr(self, f"sse_out_{name}")
+            sse_in += torch.where(inside, squared, 0.0).sum()
+            sse_out += torch.where(inside, 0.0, squared).sum()
+
+    def compute(self) -> dict[str, Tensor]:
+        result: dict[str, Tensor] = {}
+        for name, channels in RMSE_MAPS.items():
+            rmse_in = (getattr(self, f"sse_in_{name}") / (self.pixels_in * channels)).sqrt()
+            rmse_out = (getattr(self, f"sse_out_{name}") / (self.pixels_out * channels)).sqrt()
+            nan = torch.full_like(rmse_in, math.nan)
+            # NaN > 0 is false: an empty part gives NaN too.
+            result[f"{self.prefix}{name}"] = torch.where(rmse_out > 0, rmse_in / rmse_out, nan)
+            if self.rmse:
+                result[f"{self.prefix}{name}/inside"] = rmse_in
+                result[f"{self.prefix}{name}/outside"] = rmse_out
+        return result
+
+
 class SVBRDFMetrics(MetricCollection):
-    """All evaluation metrics behind one ``update(pred_maps, true_maps)``, computed as a flat dict.
+    """All evaluation metrics behind one ``update(pred_maps, true_maps, hotspot=None)``, computed
+    as a flat dict. ``hotspot`` (the flash positions, :func:`hotspot_centres`) reaches only
+    :class:`HotspotError`: torchmetrics' ``MetricCollection.update`` passes each child only the
+    keyword arguments its ``update`` signature names (``Metric._filter_kwargs``).
 
     Keys of ``compute()`` (float64 scalars, with the collection's optional ``prefix``):
     ``rmse/{diffuse,specular,normal,roughness,basecolor,metallic}``, the same under
     ``rmse{downscale_to}/`` (e.g. ``rmse256/…``; absent when ``downscale_to`` is ``None`` or every
-    input was already that small), ``normal_angle_deg`` and ``rerender_rmse``. Log them with
+    input was already that small), ``normal_angle_deg``, ``rerender_rmse`` and, with ``hotspot``,
+    ``hotspot/<map>`` (:class:`HotspotError`; with ``hotspot_rmse`` also ``hotspot/<map>/inside``
+    and ``/outside``). Log them with
     ``log_dict(metrics.compute())`` — Lightning's ``log_dict(metrics)`` expects scalar metrics.
 
     Compute groups are off on purpose: torchmetrics would merge children whose states happen to be
@@ -357,6 +565,9 @@ class SVBRDFMetrics(MetricCollection):
         rerender_configs: configurations of :class:`RerenderError`.
         seed: seed of those configurations.
         albedo_space: colour space of the derived-albedo RMSE.
+        hotspot: add :class:`HotspotError` (the error near the flash highlight vs elsewhere).
+        hotspot_radius_fraction: its disk radius as a fraction of the shorter image side.
+        hotspot_rmse: also report its inside and outside RMSE.
         prefix: prepended to every key (e.g. ``"val/"``).
         metric_kwargs: passed to every child :class:`torchmetrics.Metric`. A process that computes
             alone while a process group is initialised (e.g. rank 0 evaluating after DDP
@@ -373,6 +584,9 @@ class SVBRDFMetrics(MetricCollection):
         rerender_configs: int = 16,
         seed: int = 0,
         albedo_space: AlbedoSpace = ALBEDO_SPACE,
+        hotspot: bool = False,
+        hotspot_radius_fraction: float = HOTSPOT_RADIUS_FRACTION,
+        hotspot_rmse: bool = False,
         prefix: str | None = None,
         **metric_kwargs: Any,
     ) -> None:
@@ -386,4 +600,8 @@ class SVBRDFMetrics(MetricCollection):
             )
         metrics["normal_angle_deg"] = NormalAngularError(**kw)
         metrics["rerender_rmse"] = RerenderError(configs=rerender_configs, seed=seed, **kw)
+        if hotspot:
+            metrics["hotspot"] = HotspotError(
+                hotspot_radius_fraction, albedo_space=albedo_space, rmse=hotspot_rmse, prefix="hotspot/", **kw
+            )
         super().__init__(metrics, prefix=prefix, compute_groups=False)

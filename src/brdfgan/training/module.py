@@ -35,6 +35,7 @@ from brdfgan.errors import UserError
 from brdfgan.losses.parameter import parameter_loss
 from brdfgan.losses.rendering import rendering_loss
 from brdfgan.losses.total import GANLoss
+from brdfgan.metrics import hotspot_centres
 from brdfgan.training.schedule import LinearDecaySchedule
 
 log = logging.getLogger(__name__)
@@ -251,7 +252,9 @@ class SVBRDFGAN(L.LightningModule):
         terms["loss"] = terms["param"] + terms["render"]
         metrics = self.val_metrics if stage == "val" else self.test_metrics
         if metrics is not None:
-            metrics.update(fake, maps)
+            meta = batch.get("meta")
+            hotspot = None if meta is None else hotspot_centres(meta, *maps.shape[-2:]).to(maps.device)
+            metrics.update(fake, maps, hotspot=hotspot)
         self.log_dict(
             {f"{stage}/{name}": value for name, value in terms.items()},
             on_epoch=True,
