@@ -5,9 +5,9 @@ from __future__ import annotations
 import torch
 
 from brdfgan.core.svbrdf import srgb_to_linear, validate_maps
-from brdfgan.data.materials.albedo import METAL_F0_LINEAR, metal_basecolor
-from brdfgan.data.materials.base import MaterialFamily
-from brdfgan.data.materials.families import polished_metal
+from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR, METAL_F0_LINEAR, metal_basecolor
+from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
+from brdfgan.data.materials.families import polished_metal, tread_plate
 
 SIZE = 128
 
@@ -63,3 +63,71 @@ def test_polished_metal_smudges_and_swirls_only_roughen() -> None:
     assert smudged.mean() > 0.11
     # Swirls are thin lines: they touch little of the surface.
     assert (swirled > 0.11).float().mean() < 0.15
+
+
+def _layers(
+    family: MaterialFamily, params: dict[str, float], size: int = SIZE, seed: int = 0
+) -> MaterialLayers:
+    return family.generate({**family.defaults(), **params}, size, torch.Generator().manual_seed(seed))
+
+
+def test_tread_plate_lozenges_are_raised_and_alternate() -> None:
+    # 8 lozenges over 128 texels: a 16-texel pitch, so cells line up with texels.
+    clean = {"lozenge_count": 8.0, "dirt": 0.0, "rust": 0.0, "relief": 0.06}
+    height = _layers(tread_plate.FAMILY, clean).height[0]
+    profile, _, _ = tread_plate.lozenge_profile(SIZE, 8, tread_plate.FAMILY.defaults()["width"])
+    on, off = profile > 0.5, profile == 0.0
+    assert 0.05 < on.float().mean() < 0.3 and off.float().mean() > 0.6
+    # Lozenges stand 6 % of the 16-texel pitch above the plate.
+    assert height[on].mean() > height[off].mean() + 0.5
+    assert abs(height.max().item() - 0.06 * 16) < 0.05
+    cell = height[:16, :16]
+    assert torch.allclose(height[:16, 16:32], cell.flip(1), atol=1e-5)  # neighbour: other diagonal
+    assert torch.allclose(height[16:32, 16:32], cell, atol=1e-5)  # diagonal neighbour: same
+    assert not torch.allclose(cell, cell.flip(1), atol=0.1)
+    # An odd count is made even, so the alternation also holds across the wrap.
+    odd = _layers(tread_plate.FAMILY, {**clean, "lozenge_count": 7.0}).height[0]
+    assert torch.equal(odd, height)
+
+
+def test_tread_plate_clean_is_bare_metal_with_polished_tops() -> None:
+    for index, name in enumerate(tread_plate.METALS):
+        maps = _maps(tread_plate.FAMILY, {"metal": index + 0.5, "dirt": 0.0, "rust": 0.0})
+        assert torch.equal(maps[7], torch.ones(SIZE, SIZE)), name
+        assert torch.allclose(maps[0:3], _f0(name).expand(3, SIZE, SIZE), atol=1e-6), name
+    profile, _, _ = tread_plate.lozenge_profile(SIZE, 8, tread_plate.FAMILY.defaults()["width"])
+    tops, plate = profile > 0.9, profile == 0.0
+    clean = {"dirt": 0.0, "rust": 0.0, "lozenge_count": 8.0, "roughness": 0.4}
+    unworn = _maps(tread_plate.FAMILY, {**clean, "wear": 0.0})[6]
+    worn = _maps(tread_plate.FAMILY, {**clean, "wear": 1.0})[6]
+    assert abs(unworn[tops].mean() - unworn[plate].mean()) < 0.02
+    assert worn[tops].mean() < worn[plate].mean() - 0.1
+    assert torch.equal(worn[plate], unworn[plate])  # traffic polishes only what it touches
+
+
+def test_tread_plate_dirt_and_rust_only_in_the_valleys() -> None:
+    profile, _, _ = tread_plate.lozenge_profile(SIZE, 8, tread_plate.FAMILY.defaults()["width"])
+    for metal in (0.5, 1.5):
+        params = {"metal": metal, "dirt": 0.5, "rust": 0.4, "lozenge_count": 8.0}
+        maps = _maps(tread_plate.FAMILY, params)
+        metallic, rough = maps[7], maps[6]
+        covered = metallic < 0.01
+        assert 0.2 < covered.float().mean() < 0.8
+        assert torch.all(metallic[profile > 0.2] == 1.0)  # lozenges stay bare metal
+        # Metallic is 0 or 1 except along the boundaries of the dirt and rust patches.
+        assert ((metallic > 0.02) & (metallic < 0.98)).float().mean() < 0.06
+        assert rough[covered].mean() > rough[metallic == 1.0].mean() + 0.3
+        # Where the metal shows, it is the metal's F0; where covered, a dielectric albedo.
+        f0 = _f0(tread_plate.METALS[int(metal)])
+        bare = metallic == 1.0
+        assert torch.allclose(maps[0:3][:, bare], f0.flatten()[:, None].expand(3, int(bare.sum())), atol=1e-6)
+        linear = srgb_to_linear(maps[0:3][:, covered])
+        assert (
+            linear.min() >= DIELECTRIC_ALBEDO_LINEAR[0] - 1e-4 and linear.max() <= DIELECTRIC_ALBEDO_LINEAR[1]
+        )
+    # Rust on steel is orange (red well above blue); the oxide on aluminium is not.
+    steel = _maps(tread_plate.FAMILY, {"metal": 0.5, "dirt": 0.0, "rust": 0.5})
+    aluminium = _maps(tread_plate.FAMILY, {"metal": 1.5, "dirt": 0.0, "rust": 0.5})
+    for maps, orange in ((steel, True), (aluminium, False)):
+        rust = maps[7] < 0.01
+        assert ((maps[0] - maps[2])[rust].mean() > 0.15) == orange
