@@ -11,10 +11,10 @@ import torch
 from brdfgan.core.svbrdf import split_maps, srgb_to_linear
 from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
-from brdfgan.data.materials.families import paper
+from brdfgan.data.materials.families import paper, plaster
 
 SIZE = 64
-MODULES = ("paper",)
+MODULES = ("paper", "plaster")
 
 
 def _family(module: str) -> MaterialFamily:
@@ -116,3 +116,65 @@ def test_folds_are_narrow_ridges_or_grooves() -> None:
         assert 0.8 < fold.abs().max() <= 1.0  # peak ±1 on the fold line
         assert fold.abs().median() < 0.3  # most of the sheet is away from the fold
         assert (fold >= 0).all() or (fold <= 0).all()  # one fold: a ridge or a groove
+
+
+# --- plaster ----------------------------------------------------------------------------------
+
+ORANGE_PEEL, TROWEL, KNOCK_DOWN = 0.5, 1.5, 2.5
+CLEAN = {"cracks": 0.0, "dirt": 0.0}
+
+
+@pytest.mark.parametrize("hue", [0.05, 0.3, 0.58, 0.8])
+def test_plaster_paint_follows_hue_and_value(hue: float) -> None:
+    maps = _maps(plaster.FAMILY, {**CLEAN, "hue": hue, "saturation": 0.7, "value": 0.6})
+    basecolor = split_maps(maps).basecolor
+    assert _hue_distance(_mean_hue(basecolor), hue) < 0.02
+    assert basecolor.amax(dim=0).mean().item() == pytest.approx(0.6, abs=0.03)  # HSV value
+
+
+@pytest.mark.parametrize("stucco", [ORANGE_PEEL, TROWEL, KNOCK_DOWN])
+def test_plaster_roughness_follows_the_paint(stucco: float) -> None:
+    means = []
+    for roughness in (0.3, 0.6, 0.9):
+        maps = _maps(plaster.FAMILY, {**CLEAN, "stucco": stucco, "roughness": roughness})
+        means.append(split_maps(maps).roughness.mean().item())
+        assert means[-1] == pytest.approx(roughness, abs=0.12)  # trowelling only polishes a little
+    assert means[0] < means[1] < means[2]
+
+
+def test_knock_down_plateaus_are_raised_and_burnished() -> None:
+    for seed in range(3):
+        params = {**CLEAN, "stucco": KNOCK_DOWN}
+        height = _layers(plaster.FAMILY, params, seed).height.flatten()
+        roughness = split_maps(_maps(plaster.FAMILY, params, seed)).roughness.flatten()
+        plateau, base = height >= height.quantile(0.7), height <= height.quantile(0.3)
+        assert roughness[plateau].mean() < roughness[base].mean() - 0.05
+
+
+def test_cracks_are_dark_rough_grooves() -> None:
+    # Cracks are drawn after the stucco, so the same seed gives the same wall with and without
+    # them (no dirt, whose blotches are drawn after the cracks): the texels that change are cracks.
+    params = {"dirt": 0.0, "stucco": ORANGE_PEEL, "roughness": 0.5}
+    whole = _layers(plaster.FAMILY, {**params, "cracks": 0.0}, seed=2)
+    cracked = _layers(plaster.FAMILY, {**params, "cracks": 1.0}, seed=2)
+    crack = (cracked.height - whole.height)[0] < -0.1
+    assert 0.005 < crack.float().mean() < 0.2
+    assert (cracked.roughness[0][crack] > whole.roughness[0][crack]).all()
+    assert cracked.basecolor[:, crack].mean() < whole.basecolor[:, crack].mean() - 0.1
+
+
+def test_dirt_darkens_and_roughens_the_paint() -> None:
+    for seed in range(3):
+        clean = split_maps(_maps(plaster.FAMILY, {**CLEAN, "roughness": 0.5}, seed))
+        dirty = split_maps(_maps(plaster.FAMILY, {"cracks": 0.0, "dirt": 1.0, "roughness": 0.5}, seed))
+        assert dirty.basecolor.mean() < clean.basecolor.mean() - 0.05
+        assert dirty.roughness.mean() > clean.roughness.mean() + 0.02
+
+
+def test_plaster_relief_parameter_deepens_the_texture() -> None:
+    for stucco in (ORANGE_PEEL, TROWEL, KNOCK_DOWN):
+        tilts = [
+            _tilt(_maps(plaster.FAMILY, {**CLEAN, "stucco": stucco, "relief": r}, size=128))
+            for r in (0.002, 0.008)
+        ]
+        assert tilts[1] > 2.0 * tilts[0], stucco
