@@ -17,6 +17,7 @@ from brdfgan.core.lighting import (
 )
 from brdfgan.core.render import FlashCapture
 from brdfgan.core.svbrdf import CHANNELS, flat_maps, normalize_normal
+from brdfgan.data.capture import CaptureDraw, max_distance_factor
 from brdfgan.data.lighting import load_environment, room_spec, sunsky_spec
 from brdfgan.mitsuba_render.environment import ENVMAP_TO_WORLD
 from tests.conftest import random_maps
@@ -188,15 +189,35 @@ def test_traverse_update_equals_a_fresh_load() -> None:
     fresh = CaptureRenderer(RES, SPP, CAPTURE, 16, reuse_scene=False)
     sky = load_environment(sunsky_spec(0, 0), 16)
     room = load_environment(room_spec(0, 0), 16)
+    # Each sample with its own camera pose, field of view and flash position (data.capture).
+    tilted = CaptureDraw(
+        fov_deg=70.0,
+        tilt_deg=6.0,
+        tilt_axis_deg=40.0,
+        distance_factor=max_distance_factor(70.0, 6.0, 40.0),
+        flash_offset=0.05,
+        flash_offset_angle_deg=120.0,
+    )
     inputs = [
-        (random_maps(RES, RES, seed=1), sky, (8.0, 8.0, 8.0)),
-        (random_maps(RES, RES, seed=2), room.rotated(1.0).scaled(3.0), (4.0, 5.0, 6.0)),
-        (random_maps(RES, RES, seed=3), sky.rotated(2.5).scaled(0.5), (1.0, 2.0, 3.0)),
-        (random_maps(RES, RES, seed=4), room, (2.0, 2.0, 2.0)),
+        (random_maps(RES, RES, seed=1), sky, (8.0, 8.0, 8.0), CaptureDraw()),
+        (random_maps(RES, RES, seed=2), room.rotated(1.0).scaled(3.0), (4.0, 5.0, 6.0), CaptureDraw()),
+        (random_maps(RES, RES, seed=3), sky.rotated(2.5).scaled(0.5), (1.0, 2.0, 3.0), tilted),
+        (random_maps(RES, RES, seed=4), room, (2.0, 2.0, 2.0), CaptureDraw(fov_deg=50.0, flash_offset=0.08)),
+        (random_maps(RES, RES, seed=5), sky, (3.0, 3.0, 3.0), CaptureDraw()),
     ]
-    for seed, (maps, environment, flash) in enumerate(inputs):
-        a = reused.render(maps, environment.radiance, flash, seed=seed, sun=environment.sun)
-        b = fresh.render(maps, environment.radiance, flash, seed=seed, sun=environment.sun)
+    for seed, (maps, environment, flash, draw) in enumerate(inputs):
+        a, b = (
+            renderer.render(
+                maps,
+                environment.radiance,
+                flash,
+                seed=seed,
+                sun=environment.sun,
+                camera=draw.camera,
+                flash_position=draw.flash_position,
+            )
+            for renderer in (reused, fresh)
+        )
         assert reused.last_timing is not None and fresh.last_timing is not None
         assert reused.last_timing.loaded_scene == (seed < 2) and fresh.last_timing.loaded_scene
         torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-6)

@@ -21,6 +21,7 @@ import torch
 from brdfgan.core.exposure import auto_expose
 from brdfgan.core.render import FlashCapture, render_flash
 from brdfgan.data.augment import CropSampling
+from brdfgan.data.capture import CaptureDraw
 from brdfgan.data.flash import blackbody_rgb
 from brdfgan.data.generation import (
     SPLITS,
@@ -69,22 +70,28 @@ def tiny_spec(**change: object) -> DatasetSpec:
 
 
 class TorchPhotographer:
-    """A fast stand-in for Mitsuba with the same contract: flash-only torch render + exposure.
+    """A fast stand-in for Mitsuba with the same contract: flash-only torch render + exposure
+    (of the drawn field of view and exposure error; it ignores tilt, distance and flash offset).
     Counts calls, and can fail after ``fail_after`` photos to simulate a crash."""
 
     def __init__(self, spec: DatasetSpec, fail_after: int | None = None) -> None:
-        self.capture = FlashCapture(fov_deg=spec.fov_deg)
         self.calls = 0
         self.fail_after = fail_after
 
     def __call__(
-        self, maps: torch.Tensor, lighting: LightingDraw, intensity: float, temperature: float, seed: int
+        self,
+        maps: torch.Tensor,
+        lighting: LightingDraw,
+        intensity: float,
+        temperature: float,
+        draw: CaptureDraw,
+        seed: int,
     ) -> tuple[torch.Tensor, float]:
         if self.fail_after is not None and self.calls >= self.fail_after:
             raise RuntimeError("simulated crash")
         self.calls += 1
-        capture = FlashCapture(self.capture.fov_deg, intensity, blackbody_rgb(temperature))
-        ldr, scale = auto_expose(render_flash(maps[None], capture)[0])
+        capture = FlashCapture(draw.fov_deg, intensity, blackbody_rgb(temperature))
+        ldr, scale = auto_expose(render_flash(maps[None], capture)[0], draw.exposure_ev)
         return ldr, float(scale)
 
 
@@ -299,7 +306,6 @@ def test_a_directory_of_another_spec_is_refused(tmp_path: Path) -> None:
             {"test_fraction": 0.5, "val_fraction": 0.5},
             r"dataset_spec.test_fraction=0.5 \+ dataset_spec.val_fraction",
         ),
-        ({"fov_deg": 0.5}, r"dataset_spec.fov_deg=0.5: must be in \[1, 170\)"),
         ({"spp": "abc"}, "dataset_spec.spp='abc': must be an integer"),
         ({"families": ("wood_planks", "woood")}, "unknown material family 'woood'"),
         ({"materials": 2, "test_fraction": 0.5, "val_fraction": 0.4}, "leaves no training material"),

@@ -82,17 +82,21 @@ def auto_exposure_scale(hdr: Tensor) -> Tensor:
     return torch.where(positive, scale, torch.zeros_like(scale))
 
 
-def auto_expose(hdr: Tensor) -> tuple[Tensor, Tensor]:
-    """Linear HDR → linear LDR in [0, 1] with the paper's auto exposure.
+def auto_expose(hdr: Tensor, exposure_ev: float = 0.0) -> tuple[Tensor, Tensor]:
+    """Linear HDR → linear LDR in [0, 1] with the paper's auto exposure, off by ``exposure_ev``
+    stops (a camera's metering error: + brighter, − darker; 0 is the exact auto exposure).
 
     Returns:
-        ``(ldr, scale)`` where ``ldr = clip(hdr · scale, 0, 1)``.
+        ``(ldr, scale)`` where ``ldr = clip(hdr · scale, 0, 1)`` and
+        ``scale = auto_exposure_scale(hdr) · 2^exposure_ev``.
 
     Shape:
         - hdr: ``(*, 3, H, W)``
         - output: ldr ``(*, 3, H, W)``, scale ``(*)``
     """
-    scale = auto_exposure_scale(hdr)
+    if not math.isfinite(exposure_ev):
+        raise ValueError(f"exposure_ev must be finite, got {exposure_ev}")
+    scale = auto_exposure_scale(hdr) * math.pow(2.0, exposure_ev)  # · 1.0 at 0: bit for bit
     return (hdr * scale[..., None, None, None]).clamp(0.0, 1.0), scale
 
 

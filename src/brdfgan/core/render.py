@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
@@ -50,6 +51,88 @@ def capture_camera_height(fov_deg: float, plane_half_size: float = 1.0) -> float
     if not 0.0 < fov_deg < 180.0:
         raise ValueError(f"fov_deg must lie in (0, 180), got {fov_deg}")
     return plane_half_size / math.tan(math.radians(fov_deg) / 2.0)
+
+
+Vector3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class CameraPose:
+    """A pinhole camera in world units: its position ``origin``, the point it aims at, the
+    world direction that is up in the image (orthogonal to the view direction) and the
+    horizontal field of view. :func:`nominal_camera` builds the capture camera of today's
+    photos; :mod:`brdfgan.data.capture` draws randomised ones."""
+
+    origin: Vector3
+    target: Vector3 = (0.0, 0.0, 0.0)
+    up: Vector3 = (0.0, 1.0, 0.0)
+    fov_deg: float = 45.0
+
+
+def nominal_camera(fov_deg: float, plane_half_size: float = 1.0) -> CameraPose:
+    """The capture camera of docs/conventions.md#scene-and-orientation: above the sample centre at
+    :func:`capture_camera_height`, looking down −Z with +Y up, framing ``[-s, s]²`` exactly."""
+    height = capture_camera_height(fov_deg, plane_half_size)
+    return CameraPose((0.0, 0.0, height), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), fov_deg)
+
+
+def camera_frame(pose: CameraPose) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit ``(right, up, forward)`` of the image: columns grow along ``right``, rows along
+    ``−up``, ``forward`` points from the camera to its target (Mitsuba's ``look_at`` frame).
+
+    Shape:
+        - output: three ``(3,)`` float64 arrays
+    """
+    origin = np.asarray(pose.origin, dtype=np.float64)
+    forward = np.asarray(pose.target, dtype=np.float64) - origin
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.asarray(pose.up, dtype=np.float64))
+    norm = np.linalg.norm(right)
+    if not norm > 1e-9:
+        raise ValueError(f"camera up {pose.up} is parallel to the view direction")
+    right /= norm
+    return right, np.cross(right, forward), forward
+
+
+def project_to_image(points: np.ndarray, pose: CameraPose, width: int, height: int) -> np.ndarray:
+    """Continuous pixel coordinates of world points in the photo of ``pose`` (horizontal field of
+    view, square pixels): x along the columns from the left edge, y along the rows from the top,
+    so pixel (row i, column j) spans ``[j, j+1] × [i, i+1]`` and the image centre is (W/2, H/2).
+
+    Shape:
+        - points: ``(N, 3)`` world units, in front of the camera
+        - output: ``(N, 2)`` pixels, ``(x, y)``
+    """
+    right, up, forward = camera_frame(pose)
+    local = np.asarray(points, dtype=np.float64) - np.asarray(pose.origin, dtype=np.float64)
+    depth = local @ forward
+    if not (depth > 0).all():
+        raise ValueError("points must lie in front of the camera")
+    tan_half = math.tan(math.radians(pose.fov_deg) / 2.0)
+    x = (local @ right) / (depth * tan_half)  # −1 … 1 across the width
+    y = (local @ up) / (depth * tan_half * height / width)  # −1 … 1 across the height
+    return np.stack([(x + 1.0) / 2.0 * width, (1.0 - y) / 2.0 * height], axis=-1)
+
+
+def view_footprint(pose: CameraPose, width: int, height: int) -> np.ndarray:
+    """Where the rays through the four image corners meet the plane z = 0, in the order
+    top-left, top-right, bottom-right, bottom-left. The photo shows exactly the quadrilateral
+    they span (a pinhole view of a plane is a projective map).
+
+    Shape:
+        - output: ``(4, 3)`` world units
+    """
+    right, up, forward = camera_frame(pose)
+    tan_x = math.tan(math.radians(pose.fov_deg) / 2.0)
+    tan_y = tan_x * height / width
+    origin = np.asarray(pose.origin, dtype=np.float64)
+    corners = []
+    for sx, sy in ((-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)):
+        ray = forward + sx * tan_x * right + sy * tan_y * up
+        if not ray[2] < 0.0:
+            raise ValueError(f"the image corner ray {ray.tolist()} does not reach the plane z = 0")
+        corners.append(origin - origin[2] / ray[2] * ray)
+    return np.stack(corners)
 
 
 def plane_positions(
@@ -179,6 +262,10 @@ class FlashCapture:
     @property
     def camera_height(self) -> float:
         return capture_camera_height(self.fov_deg, self.plane_half_size)
+
+    @property
+    def camera_pose(self) -> CameraPose:
+        return nominal_camera(self.fov_deg, self.plane_half_size)
 
     @property
     def radiant_intensity(self) -> tuple[float, float, float]:

@@ -14,9 +14,10 @@ The protocol, and where each step lives:
 4. Every crop is photographed ``train_renders`` times in ``train`` (paper: 3) and
    ``eval_renders`` times in ``val``/``test`` (paper: 1): a random environment of the split's
    pool (``test`` uses the disjoint test pool; ``val`` holds out materials, not lighting, so it
-   uses the training pool), randomly rotated, balanced against a random flash — rendered with
-   Mitsuba and auto-exposed to linear LDR — :mod:`brdfgan.data.lighting`,
-   :mod:`brdfgan.mitsuba_render.capture`, :mod:`brdfgan.core.exposure`.
+   uses the training pool), randomly rotated, balanced against a random flash, through a capture
+   geometry and exposure error drawn per photo (off by default: today's fixed camera) — rendered
+   with Mitsuba and auto-exposed to linear LDR — :mod:`brdfgan.data.lighting`,
+   :mod:`brdfgan.data.capture`, :mod:`brdfgan.mitsuba_render.capture`, :mod:`brdfgan.core.exposure`.
 5. Materials are grouped ``materials_per_shard`` at a time into WebDataset shards
    ``<split>/<split>-NNNNNN.tar`` — :mod:`brdfgan.data.shards`. A shard is the unit of work
    and a pure function of (spec, split, shard index): re-running skips complete shards, so a
@@ -51,6 +52,7 @@ from brdfgan.core.lighting import flash_irradiance
 from brdfgan.core.render import FlashCapture
 from brdfgan.core.svbrdf import InvalidMapsError, validate_maps
 from brdfgan.data.augment import CropSampling, random_crops
+from brdfgan.data.capture import CaptureDraw, CaptureSampling
 from brdfgan.data.flash import FlashSampling, blackbody_rgb
 from brdfgan.data.lighting import (
     EnvironmentPools,
@@ -103,10 +105,10 @@ class DatasetSpec:
     val_fraction: float = 0.05
     materials_per_shard: int = 4
     spp: int = 64
-    fov_deg: float = 45.0
     crop: CropSampling = field(default_factory=CropSampling)
     flash: FlashSampling = field(default_factory=FlashSampling)
     lighting: LightingConfig = field(default_factory=LightingConfig)
+    capture: CaptureSampling = field(default_factory=CaptureSampling)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "families", tuple(self.families))
@@ -143,7 +145,6 @@ class DatasetSpec:
                 f"dataset_spec.materials={self.materials} leaves no training material after the "
                 f"{counts['test']} test and {counts['val']} validation ones"
             )
-        in_range("dataset_spec.fov_deg", self.fov_deg, 1.0, 170.0, high_open=True)
         resolve_families(self.families)  # unknown names fail here, before any work
 
     def to_json(self) -> dict[str, Any]:
@@ -227,14 +228,16 @@ def material_seed(dataset_seed: int, material_index: int) -> int:
     return derive_seed(dataset_seed, "material", material_index)
 
 
-# (maps (8, R, R), lighting, flash radiant intensity W/sr, flash temperature K, render seed)
-#   -> (linear LDR photo (3, R, R), exposure scale)
-PhotographFn = Callable[[Tensor, LightingDraw, float, float, int], tuple[Tensor, float]]
+# (maps (8, R, R), lighting, flash radiant intensity W/sr, flash temperature K, capture geometry
+#  and exposure error, render seed) -> (linear LDR photo (3, R, R), exposure scale applied)
+PhotographFn = Callable[[Tensor, LightingDraw, float, float, CaptureDraw, int], tuple[Tensor, float]]
 
 
 class MitsubaPhotographer:
     """The capture simulation: flash colour from its temperature, the drawn environment rotated
-    and balanced against the flash, a Mitsuba render, auto exposure to linear LDR.
+    and balanced against the flash (its irradiance at the sample centre from where the drawn
+    capture puts it), a Mitsuba render through the drawn camera, auto exposure to linear LDR
+    off by the drawn exposure error.
 
     Keeps one :class:`~brdfgan.mitsuba_render.capture.CaptureRenderer` (scene reuse) and adds up
     the time spent inside ``mi.render`` (``mitsuba_seconds``) for the benchmark.
@@ -243,22 +246,39 @@ class MitsubaPhotographer:
     def __init__(self, spec: DatasetSpec) -> None:
         from brdfgan.mitsuba_render.capture import CaptureRenderer
 
-        self.capture = FlashCapture(fov_deg=spec.fov_deg)
+        self.capture = FlashCapture()  # the sample size; each photo brings its own camera
         self.environment_resolution = spec.lighting.resolution
         self.renderer = CaptureRenderer(spec.resolution, spec.spp, self.capture, spec.lighting.resolution)
         self.mitsuba_seconds = 0.0
 
     def __call__(
-        self, maps: Tensor, lighting: LightingDraw, flash_intensity: float, temperature_k: float, seed: int
+        self,
+        maps: Tensor,
+        lighting: LightingDraw,
+        flash_intensity: float,
+        temperature_k: float,
+        capture: CaptureDraw,
+        seed: int,
     ) -> tuple[Tensor, float]:
         from brdfgan.mitsuba_render.capture import render_capture
 
         r, g, b = blackbody_rgb(temperature_k)
         flash = (flash_intensity * r, flash_intensity * g, flash_intensity * b)
-        environment = realize_lighting(
-            lighting, flash_irradiance(flash, self.capture.camera_height), self.environment_resolution
+        position = capture.flash_position
+        distance = math.hypot(*position)  # the lens height exactly when the flash is at the lens
+        # I·cos/d² at the sample centre; cos = 1 for the flash straight above it.
+        centre_irradiance = flash_irradiance(flash, distance) * (position[2] / distance)
+        environment = realize_lighting(lighting, centre_irradiance, self.environment_resolution)
+        result = render_capture(
+            self.renderer,
+            maps,
+            environment,
+            flash,
+            seed=seed,
+            camera=capture.camera,
+            flash_position=position,
+            exposure_ev=capture.exposure_ev,
         )
-        result = render_capture(self.renderer, maps, environment, flash, seed=seed)
         if self.renderer.last_timing is not None:
             self.mitsuba_seconds += self.renderer.last_timing.mi_render_s
         return result.ldr, result.exposure_scale
@@ -275,7 +295,8 @@ def material_samples(
 
     Keys are ``<split>-m<material>-c<crop>-r<render>``; metadata records everything needed to
     reproduce or filter a sample (family, parameters, seeds, crop transform, environment id,
-    rotation and balance ratio, flash intensity and temperature, exposure scale).
+    rotation and balance ratio, flash intensity and temperature, capture geometry with the
+    flash hotspot's pixel, exposure scale).
     """
     seed = material_seed(spec.seed, material_index)
     generator = torch.Generator().manual_seed(seed)
@@ -295,7 +316,11 @@ def material_samples(
             lighting = draw_lighting(pool, spec.lighting, generator)
             flash_intensity, temperature = spec.flash.sample(generator)
             render_seed = derive_seed(seed, "render", c, r) & 0xFFFFFFFF
-            photo, exposure = photograph(crop, lighting, flash_intensity, temperature, render_seed)
+            # Its own stream per photo: drawing it from ``generator`` would shift every later
+            # lighting and flash draw, so turning the randomisation on would change those too.
+            capture_generator = torch.Generator().manual_seed(derive_seed(seed, "capture", c, r))
+            capture = spec.capture.sample(capture_generator)
+            photo, exposure = photograph(crop, lighting, flash_intensity, temperature, capture, render_seed)
             yield Sample(
                 key=f"{split}-m{material_index:06d}-c{c}-r{r}",
                 photo=photo,
@@ -310,6 +335,7 @@ def material_samples(
                     "render": {"index": r, "seed": render_seed, "spp": spec.spp},
                     "lighting": lighting.to_json(),
                     "flash": {"intensity_w_sr": flash_intensity, "temperature_k": temperature},
+                    "capture": capture.to_json(spec.resolution),
                     "exposure_scale": exposure,
                 },
             )

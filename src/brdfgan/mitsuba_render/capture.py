@@ -1,8 +1,9 @@
 """The capture renderer of dataset generation: a map set under an HDR environment plus the flash.
 
 Scene: the textured plane of :func:`brdfgan.mitsuba_render.scene.plane_scene_dict` (principled +
-normalmap, nearest-filtered raw bitmaps, rows flipped), the capture camera of
-:class:`~brdfgan.core.render.FlashCapture`, a point-light flash at the camera, an ``envmap``
+normalmap, nearest-filtered raw bitmaps, rows flipped), a camera (the nominal one of
+:class:`~brdfgan.core.render.FlashCapture` or any :class:`~brdfgan.core.render.CameraPose`, as
+:mod:`brdfgan.data.capture` draws them), a point-light flash (at the lens or next to it), an ``envmap``
 emitter holding an equirect array of :mod:`brdfgan.core.lighting` (its +Y-up frame turned to our
 +Z-up by :data:`~brdfgan.mitsuba_render.environment.ENVMAP_TO_WORLD`) and, for sun/sky
 environments, the sun as a ``directional`` emitter.
@@ -21,13 +22,15 @@ noise-free). Stratifying the choice over a pixel's samples removed most of it: r
 
 Scene reuse: the scene is loaded once per emitter set (environment yes/no, sun yes/no) and then
 updated per sample through ``mi.traverse`` + ``params.update()`` (textures, envmap data, flash
-intensity, sun); a change of map or environment shape reloads it. Measured on this 2-core
-machine while otherwise idle (``llvm_ad_rgb``, ``python -m benchmarks.bench_capture``, median
-of 6): a ``render()`` call takes 0.349 s with traverse-update vs 0.361 s with a reload at
-256²/64 spp, 4.01 s vs 4.06 s at 512²/196 spp. The work outside ``mi.render`` shrinks from
-33 to 18 ms (256²) and from 51 to 33 ms (512²), but ``mi.render`` itself is 92–99 % of the
-call, so reuse gains only 1–4 %. It is the default (``reuse_scene=True``); results are
-identical either way (tested).
+intensity and position, sun, the sensor's ``x_fov`` and ``to_world``); a change of map or
+environment shape reloads it. A new camera pose per sample costs no kernel recompile (measured:
+128², random poses of :mod:`brdfgan.data.capture` per sample render as fast as a fixed one).
+Measured on this 2-core machine while otherwise idle (``llvm_ad_rgb``,
+``python -m benchmarks.bench_capture``, median of 6): a ``render()`` call takes 0.349 s with
+traverse-update vs 0.361 s with a reload at 256²/64 spp, 4.01 s vs 4.06 s at 512²/196 spp. The
+work outside ``mi.render`` shrinks from 33 to 18 ms (256²) and from 51 to 33 ms (512²), but
+``mi.render`` itself is 92–99 % of the call, so reuse gains only 1–4 %. It is the default
+(``reuse_scene=True``); results are identical either way (tested).
 """
 
 from __future__ import annotations
@@ -44,10 +47,10 @@ from torch import Tensor
 
 from brdfgan.core.exposure import auto_expose
 from brdfgan.core.lighting import Environment, SunLight, check_equirect, orthonormal_frame
-from brdfgan.core.render import FlashCapture
+from brdfgan.core.render import CameraPose, FlashCapture, Vector3
 from brdfgan.core.svbrdf import encode_normal, split_maps, srgb_to_linear, validate_maps
 from brdfgan.mitsuba_render.environment import ENVMAP_TO_WORLD
-from brdfgan.mitsuba_render.scene import MitsubaPointLight, plane_scene_dict
+from brdfgan.mitsuba_render.scene import MitsubaPointLight, camera_to_world, plane_scene_dict
 from brdfgan.mitsuba_render.variant import mitsuba
 
 log = logging.getLogger(__name__)
@@ -61,6 +64,9 @@ _TEXTURE_KEYS = {
     "normal": "sample.bsdf.normalmap.data",
 }
 _FLASH_KEY = "point_light_0.intensity.value"
+_FLASH_POSITION_KEY = "point_light_0.position"
+_FOV_KEY = "sensor.x_fov"
+_CAMERA_TO_WORLD_KEY = "sensor.to_world"
 _ENV_KEY = "environment.data"
 _SUN_IRRADIANCE_KEY = "sun.irradiance.value"
 _SUN_TO_WORLD_KEY = "sun.to_world"
@@ -125,8 +131,11 @@ def capture_scene_dict(
     resolution: int | None = None,
     spp: int = 64,
     seed: int = 0,
+    camera: CameraPose | None = None,
+    flash_position: Vector3 | None = None,
 ) -> dict[str, Any]:
     """Scene dict of one capture: plane, camera, flash, environment (optional) and sun (optional).
+    ``camera`` defaults to the nominal camera of ``capture``, ``flash_position`` to the lens.
 
     Shape:
         - maps: ``(8, H, W)``
@@ -148,7 +157,10 @@ def capture_scene_dict(
             "to_world": _sun_to_world(mi, sun.direction),
             "irradiance": {"type": "rgb", "value": [float(e) for e in sun.irradiance]},
         }
-    flash = MitsubaPointLight((0.0, 0.0, capture.camera_height), flash_rgb_intensity)
+    pose = camera if camera is not None else capture.camera_pose
+    flash = MitsubaPointLight(
+        flash_position if flash_position is not None else pose.origin, flash_rgb_intensity
+    )
     scene = plane_scene_dict(
         maps,
         lights=[flash],
@@ -159,6 +171,7 @@ def capture_scene_dict(
         resolution=resolution,
         integrator={"type": "direct", "hide_emitters": True},
         extra_emitters=extra,
+        camera=pose,
     )
     scene["sensor"]["sampler"] = {"type": "stratified", "sample_count": int(spp), "seed": int(seed)}
     return scene
@@ -178,8 +191,9 @@ class CaptureRenderer:
     Args:
         resolution: film size (square); the maps are usually this size too (one texel a pixel).
         spp: samples per pixel, a perfect square (stratified sampler), e.g. 64 or 196.
-        capture: camera geometry (field of view, sample size); its flash settings are not used,
-            :meth:`render` takes the flash intensity per sample.
+        capture: the nominal camera geometry (field of view, sample size), used when
+            :meth:`render` gets no camera pose; its flash settings are not used, :meth:`render`
+            takes the flash intensity (and position) per sample.
         environment_resolution: expected equirect height (a different one reloads the scene).
         reuse_scene: update the loaded scene through ``mi.traverse`` instead of reloading it
             for every sample (faster, see the module docstring; results are identical).
@@ -232,10 +246,15 @@ class CaptureRenderer:
         flash_rgb_intensity: tuple[float, float, float],
         seed: int = 0,
         sun: SunLight | None = None,
+        *,
+        camera: CameraPose | None = None,
+        flash_position: Vector3 | None = None,
     ) -> Tensor:
         """Linear HDR capture of ``maps`` under ``environment`` (already rotated and scaled),
-        ``sun`` and the flash (RGB radiant intensity, W/sr). ``None`` or an all-zero
-        environment leaves the envmap out of the scene (no emitter samples wasted on it)."""
+        ``sun`` and the flash (RGB radiant intensity, W/sr) at ``flash_position`` (default: the
+        lens), seen by ``camera`` (default: the nominal camera of ``self.capture``). ``None``
+        or an all-zero environment leaves the envmap out of the scene (no emitter samples
+        wasted on it)."""
         start = time.perf_counter()
         mi = mitsuba()
         validate_maps(maps)
@@ -248,6 +267,8 @@ class CaptureRenderer:
             _check_environment(environment)
             if not environment.any():
                 environment = None
+        pose = camera if camera is not None else self.capture.camera_pose
+        light_position = flash_position if flash_position is not None else pose.origin
         key = (environment is not None, sun is not None)
         map_shape = tuple(maps.shape)
         env_shape = None if environment is None else environment.shape
@@ -262,6 +283,8 @@ class CaptureRenderer:
                     flash,
                     sun=sun,
                     capture=self.capture,
+                    camera=pose,
+                    flash_position=light_position,
                     resolution=self.resolution,
                     spp=self.spp,
                     # The sampler's load-time seed also enters the samples (stratified sampler,
@@ -275,7 +298,7 @@ class CaptureRenderer:
         else:
             assert entry is not None
             scene = entry.scene
-            self._update(entry.params, maps, environment, flash, sun)
+            self._update(entry.params, maps, environment, flash, sun, pose, light_position)
 
         render_start = time.perf_counter()
         image = mi.render(scene, spp=self.spp, seed=seed)
@@ -292,11 +315,16 @@ class CaptureRenderer:
         environment: np.ndarray | None,
         flash: tuple[float, float, float],
         sun: SunLight | None,
+        camera: CameraPose,
+        flash_position: Vector3,
     ) -> None:
         mi = mitsuba()
         for name, array in _texture_arrays(maps).items():
             params[_TEXTURE_KEYS[name]] = mi.TensorXf(array)
         params[_FLASH_KEY] = mi.Color3f(*flash)
+        params[_FLASH_POSITION_KEY] = mi.Point3f(*(float(c) for c in flash_position))
+        params[_FOV_KEY] = float(camera.fov_deg)
+        params[_CAMERA_TO_WORLD_KEY] = mi.Transform4f(camera_to_world(camera).matrix)
         if environment is not None:
             params[_ENV_KEY] = mi.TensorXf(_padded_envmap(environment))
         if sun is not None:
@@ -308,7 +336,7 @@ class CaptureRenderer:
 @dataclass(frozen=True, eq=False)
 class CaptureResult:
     """One simulated photo: linear HDR, its auto-exposed linear LDR in [0, 1] and the exposure
-    multiplier (``ldr = clip(hdr · exposure_scale, 0, 1)``)."""
+    multiplier applied, exposure error included (``ldr = clip(hdr · exposure_scale, 0, 1)``)."""
 
     hdr: Tensor
     ldr: Tensor
@@ -321,8 +349,14 @@ def render_capture(
     environment: Environment | None,
     flash_rgb_intensity: tuple[float, float, float],
     seed: int = 0,
+    *,
+    camera: CameraPose | None = None,
+    flash_position: Vector3 | None = None,
+    exposure_ev: float = 0.0,
 ) -> CaptureResult:
-    """Render a capture and auto-expose it to linear LDR (paper appendix, docs/conventions.md#auto-exposure).
+    """Render a capture and auto-expose it to linear LDR (paper appendix, docs/conventions.md#auto-exposure),
+    off by ``exposure_ev`` stops: ``ldr = clip(hdr · auto_scale · 2^exposure_ev, 0, 1)``.
+    ``camera`` and ``flash_position`` as :meth:`CaptureRenderer.render`.
 
     Shape:
         - maps: ``(8, H, W)``
@@ -334,6 +368,8 @@ def render_capture(
         flash_rgb_intensity,
         seed=seed,
         sun=None if environment is None else environment.sun,
+        camera=camera,
+        flash_position=flash_position,
     )
-    ldr, scale = auto_expose(hdr)
+    ldr, scale = auto_expose(hdr, exposure_ev)
     return CaptureResult(hdr, ldr, float(scale))

@@ -1,7 +1,9 @@
 """A Mitsuba 3 scene of a planar map set: ``principled`` + ``normalmap`` on a rectangle.
 
 Geometry matches :mod:`brdfgan.core.render`: the sample covers ``[-s, s]²`` of z = 0, the camera
-looks down −Z from above the centre and frames the square. Mitsuba's ``rectangle`` maps bitmap
+looks down −Z from above the centre and frames the square, or takes any
+:class:`~brdfgan.core.render.CameraPose` (``look_at`` with ``fov_axis = "x"``: its image frame is
+:func:`~brdfgan.core.render.camera_frame`'s). Mitsuba's ``rectangle`` maps bitmap
 row 0 to y = −s (the bottom of the image) while our row 0 is +Y, so rows are flipped on the way
 in — rows only; the Y component of the normals stays as it is (docs/conventions.md#mitsuba-row-flip).
 """
@@ -16,7 +18,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from brdfgan.core.render import FlashCapture, capture_camera_height
+from brdfgan.core.render import CameraPose, FlashCapture, nominal_camera
 from brdfgan.core.svbrdf import encode_normal, split_maps, srgb_to_linear, validate_maps
 from brdfgan.mitsuba_render.variant import mitsuba
 
@@ -38,6 +40,17 @@ def _bitmap_texture(mi: Any, image: Tensor) -> dict[str, Any]:
         "raw": True,
         "filter_type": "nearest",
     }
+
+
+def camera_to_world(pose: CameraPose) -> Any:
+    """The sensor's ``to_world`` of ``pose`` (a ``look_at``; Mitsuba's frame: local +X is the
+    image's left, +Y its up, +Z the view direction)."""
+    mi = mitsuba()
+    return mi.ScalarTransform4f().look_at(
+        origin=[float(c) for c in pose.origin],
+        target=[float(c) for c in pose.target],
+        up=[float(c) for c in pose.up],
+    )
 
 
 def material_dict(maps: Tensor) -> dict[str, Any]:
@@ -74,37 +87,38 @@ def plane_scene_dict(
     resolution: int | None = None,
     integrator: dict[str, Any] | None = None,
     extra_emitters: dict[str, dict[str, Any]] | None = None,
+    camera: CameraPose | None = None,
 ) -> dict[str, Any]:
     """Scene dict for ``mi.load_dict``: the textured plane, the capture camera and the lights.
 
     Args:
         maps: the map set to render.
         lights: point lights (e.g. the flash at the camera position).
-        fov_deg: horizontal field of view; the camera height follows from it.
+        fov_deg: horizontal field of view of the nominal camera; its height follows from it.
         plane_half_size: half the side of the sample square.
         spp: samples per pixel.
         seed: sampler seed.
         resolution: film size (default: the map size).
         integrator: integrator dict (default: ``direct``, enough for a single plane).
         extra_emitters: further emitters by name (environment maps, sun/sky).
+        camera: the camera pose, field of view included (default: the nominal camera of
+            ``fov_deg``, :func:`~brdfgan.core.render.nominal_camera`).
 
     Shape:
         - maps: ``(8, H, W)``
     """
     mi = mitsuba()
     _, height, width = maps.shape
-    camera_z = capture_camera_height(fov_deg, plane_half_size)
+    pose = camera if camera is not None else nominal_camera(fov_deg, plane_half_size)
     film_w, film_h = (resolution, resolution) if resolution else (width, height)
     scene: dict[str, Any] = {
         "type": "scene",
         "integrator": integrator or {"type": "direct"},
         "sensor": {
             "type": "perspective",
-            "fov": float(fov_deg),
+            "fov": float(pose.fov_deg),
             "fov_axis": "x",
-            "to_world": mi.ScalarTransform4f().look_at(
-                origin=[0.0, 0.0, camera_z], target=[0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0]
-            ),
+            "to_world": camera_to_world(pose),
             "film": {
                 "type": "hdrfilm",
                 "width": film_w,
