@@ -98,10 +98,16 @@ def test_the_config_walk_covers_every_numeric_field_of_the_spec_classes() -> Non
     assert set(NUMERIC_KEYS) == _spec_numeric_fields(DatasetSpec, "dataset_spec") - {"dataset_spec.seed"}
 
 
+# Signed values, where -1 is a valid setting: their out-of-range example instead.
+OUT_OF_RANGE = {"dataset_spec.capture.exposure_ev_min": -5}
+
+
 @pytest.mark.parametrize("key", NUMERIC_KEYS)
 @pytest.mark.parametrize("bad", [-1, "abc"])
 def test_every_numeric_value_is_checked_at_composition_naming_its_key(key: str, bad: object) -> None:
-    # -1 is out of range for every one of them; 'abc' is a typo that must not reach a comparison.
+    # -1 is out of range for every one of them but the signed ones; 'abc' is a typo that must not
+    # reach a comparison.
+    bad = OUT_OF_RANGE.get(key, bad) if bad == -1 else bad
     with pytest.raises(DatasetConfigError, match=re.escape(f"{key}={bad!r}")):
         _spec_with(**{key: bad})
 
@@ -110,7 +116,7 @@ def test_every_numeric_value_is_checked_at_composition_naming_its_key(key: str, 
 def test_an_inverted_min_max_pair_is_refused(low_key: str) -> None:
     high_key = low_key.replace("_min", "_max")
     high = OmegaConf.select(BASE, high_key)
-    low = high * 1.5  # in range on its own, above its maximum
+    low = high * 1.5 if high > 0 else high + 0.25  # above its maximum (a maximum of 0: switched off)
     message = f"{low_key}={low:g} > {high_key}={high:g}"
     with pytest.raises(DatasetConfigError, match=re.escape(message)):
         _spec_with(**{low_key: low})
