@@ -7,7 +7,7 @@ import torch
 from brdfgan.core.svbrdf import srgb_to_linear, validate_maps
 from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR, METAL_F0_LINEAR, metal_basecolor
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
-from brdfgan.data.materials.families import polished_metal, tread_plate
+from brdfgan.data.materials.families import anodized_metal, polished_metal, tread_plate
 
 SIZE = 128
 
@@ -131,3 +131,53 @@ def test_tread_plate_dirt_and_rust_only_in_the_valleys() -> None:
     for maps, orange in ((steel, True), (aluminium, False)):
         rust = maps[7] < 0.01
         assert ((maps[0] - maps[2])[rust].mean() > 0.15) == orange
+
+
+def test_anodized_metal_is_dyed_aluminium_of_the_chosen_hue() -> None:
+    aluminium = torch.tensor(METAL_F0_LINEAR["aluminium"]).view(3, 1, 1)
+    # Red, green and blue dyes: the dominant channel of the base colour follows the hue.
+    for hue, channel in ((0.0, 0), (1 / 3, 1), (2 / 3, 2)):
+        params = {"hue": hue, "saturation": 0.9, "value": 0.8}
+        maps = _maps(anodized_metal.FAMILY, params, size=64)
+        assert torch.equal(maps[7], torch.ones(64, 64))
+        mean = maps[0:3].mean(dim=(1, 2))
+        assert mean.argmax() == channel and mean.max() - mean.min() > 0.4, hue
+        assert torch.allclose(mean, torch.tensor(anodized_metal.anodised_color(hue, 0.9, 0.8)), atol=0.02)
+        # A dye only absorbs: 4 % oxide reflection ≤ F0 ≤ the bare aluminium F0.
+        linear = srgb_to_linear(maps[0:3])
+        assert linear.min() >= 0.04 - 1e-4 and torch.all(linear <= aluminium + 1e-3)
+    clear = _maps(anodized_metal.FAMILY, {"saturation": 0.0, "value": 1.0}, size=64)[0:3]
+    assert torch.allclose(clear.mean(dim=(1, 2)), _f0("aluminium").flatten(), atol=0.02)
+    black = _maps(anodized_metal.FAMILY, {"saturation": 0.0, "value": 0.15}, size=64)[0:3]
+    assert 0.04 <= srgb_to_linear(black).mean() < 0.07
+
+
+def test_anodized_metal_brushed_is_streaky_and_blasted_is_isotropic() -> None:
+    def anisotropy(params: dict[str, float]) -> float:
+        rough = _maps(anodized_metal.FAMILY, params)[6]
+        along_rows = (rough[:, 1:] - rough[:, :-1]).abs().mean()
+        along_columns = (rough[1:] - rough[:-1]).abs().mean()
+        ratio = float(along_rows / along_columns)
+        return max(ratio, 1.0 / ratio)
+
+    assert anisotropy({"finish": 0.0, "texture": 1.0}) < 1.3
+    for texture in (0.4, 1.0):
+        assert anisotropy({"finish": 1.0, "texture": texture}) > 3.0
+
+
+def test_anodized_metal_holes_are_dark_voids_with_bright_chamfers() -> None:
+    params = {"holes": 4.0, "hole_size": 0.25, "saturation": 0.9, "value": 0.6}
+    maps = _maps(anodized_metal.FAMILY, params)
+    height = _layers(anodized_metal.FAMILY, params).height[0]
+    metallic, basecolor = maps[7], maps[0:3]
+    void = metallic < 0.01
+    # π·0.25² of every cell is hole; its edge is one texel soft.
+    assert abs(void.float().mean() - torch.pi * 0.25**2) < 0.03
+    assert ((metallic > 0.01) & (metallic < 0.99)).float().mean() < 0.05
+    assert srgb_to_linear(basecolor[:, void]).max() < 0.03 and torch.all(maps[6][void] > 0.95)
+    # Chamfers: bare aluminium (its measured F0), smoother than the anodising, sloping into the hole.
+    bare = (basecolor - _f0("aluminium")).abs().amax(dim=0) < 1e-4
+    assert 0.03 < bare.float().mean() < 0.25
+    assert maps[6][bare].mean() < maps[6][~bare & ~void].mean() - 0.1
+    assert height[void].mean() < height[bare].mean() < height[~bare & ~void].mean()
+    assert _tilt_degrees(maps)[bare].mean() > 30.0
