@@ -11,10 +11,12 @@ import torch
 from brdfgan.core.svbrdf import split_maps, srgb_to_linear
 from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
-from brdfgan.data.materials.families import paper, plaster
+from brdfgan.data.materials.families import paper, plaster, terrazzo
 
 SIZE = 64
-MODULES = ("paper", "plaster")
+MODULES = ("paper", "plaster", "terrazzo")
+# Polished terrazzo is flat but for its pits (which may be absent); its own test checks that.
+FLAT = ("terrazzo",)
 
 
 def _family(module: str) -> MaterialFamily:
@@ -41,6 +43,11 @@ def _mean_hue(basecolor: torch.Tensor) -> float:
     return colorsys.rgb_to_hsv(r, g, b)[0]
 
 
+def _texel_hues(basecolor: torch.Tensor) -> torch.Tensor:
+    """HSV hue in turns of every texel. Shape: ``(3, H, W)`` → ``(H·W,)``."""
+    return torch.tensor([colorsys.rgb_to_hsv(*rgb)[0] for rgb in basecolor.flatten(1).T.tolist()])
+
+
 def _hue_distance(a: float, b: float) -> float:
     d = abs(a - b) % 1.0
     return min(d, 1.0 - d)
@@ -57,7 +64,8 @@ def test_dielectric_with_plausible_albedo_and_relief(module: str) -> None:
         assert torch.equal(parts.metallic, torch.zeros_like(parts.metallic)), params
         linear = srgb_to_linear(parts.basecolor)
         assert linear.min() >= low - 1e-4 and linear.max() <= high + 1e-4, params
-        assert (parts.normal[2] < 0.9999).float().mean() > 0.05, params  # some relief everywhere
+        if module not in FLAT:
+            assert (parts.normal[2] < 0.9999).float().mean() > 0.05, params  # some relief
         assert parts.roughness.std() > 1e-3, params
 
 
@@ -178,3 +186,59 @@ def test_plaster_relief_parameter_deepens_the_texture() -> None:
             for r in (0.002, 0.008)
         ]
         assert tilts[1] > 2.0 * tilts[0], stucco
+
+
+# --- terrazzo ---------------------------------------------------------------------------------
+
+
+def _chip_coverage(params: dict[str, float], seed: int = 0) -> torch.Tensor:
+    """Chip coverage in [0, 1] read off the height: without pits it is ``_CHIP_PROUD·size·chips``."""
+    height = _layers(terrazzo.FAMILY, {**params, "pits": 0.0}, seed).height[0]
+    return height / (terrazzo._CHIP_PROUD * SIZE)
+
+
+def test_terrazzo_is_polished_flat_and_pits_are_dark_rough_hollows() -> None:
+    for seed in range(3):
+        flat = split_maps(_maps(terrazzo.FAMILY, {"pits": 0.0}, seed))
+        assert flat.roughness.mean() < 0.3
+        assert (1.0 - flat.normal[2]).max() < 1e-3  # chips stand only a hair proud
+        layers = _layers(terrazzo.FAMILY, {"pits": 1.0}, seed, size=128)
+        pit = layers.height[0] < 0.0
+        assert 0.005 < pit.float().mean() < 0.1
+        assert (layers.roughness[0][pit] > 0.6).all()
+        assert layers.basecolor[:, pit].mean() < 0.5 * layers.basecolor[:, ~pit].mean()
+
+
+def test_terrazzo_matrix_is_rougher_than_its_chips() -> None:
+    for seed in range(3):
+        params = {"roughness": 0.1}
+        chips = _chip_coverage(params, seed)
+        roughness = _layers(terrazzo.FAMILY, {**params, "pits": 0.0}, seed).roughness[0]
+        assert roughness[chips < 0.01].mean() > roughness[chips > 0.99].mean() + 0.05
+
+
+@pytest.mark.parametrize("density", [0.2, 0.4, 0.65])
+def test_terrazzo_chip_density_is_the_covered_fraction(density: float) -> None:
+    for seed in range(2):
+        assert _chip_coverage({"chip_density": density}, seed).mean().item() == pytest.approx(
+            density, abs=0.06
+        )
+
+
+@pytest.mark.parametrize("hue", [0.0, 0.35, 0.7])
+def test_terrazzo_colours_follow_chip_and_matrix_hues(hue: float) -> None:
+    params = {
+        "chip_hue": hue,
+        "chip_saturation": 0.9,
+        "matrix_hue": (hue + 0.25) % 1.0,
+        "matrix_saturation": 0.3,
+    }
+    chips = _chip_coverage(params).flatten()
+    hues = _texel_hues(_layers(terrazzo.FAMILY, {**params, "pits": 0.0}).basecolor)
+    chip_hues = hues[chips > 0.99]
+    near_chip_hue = torch.tensor([_hue_distance(h, hue) < 0.1 for h in chip_hues.tolist()])
+    # The palette's own shades and the analogous hue make up 50 % of its weight, whites, blacks,
+    # greys (hue of no consequence) and the complement the rest.
+    assert near_chip_hue.float().mean() > 0.35
+    matrix_hues = hues[chips < 0.01].tolist()
+    assert sorted(_hue_distance(h, params["matrix_hue"]) for h in matrix_hues)[len(matrix_hues) // 2] < 0.02
