@@ -11,7 +11,7 @@ ifneq ($(LIBLLVM),)
 export DRJIT_LIBLLVM_PATH ?= $(LIBLLVM)
 endif
 
-.PHONY: setup test test-slow faults demo demo-renderer lint format bench data clean
+.PHONY: setup test test-slow faults demo demo-renderer lint format bench data ood clean
 
 setup: $(STAMP)
 
@@ -71,6 +71,18 @@ bench: setup
 
 data: setup
 	$(PY) generate.py
+
+# The out-of-distribution benchmark: real scanned materials (../shared/ood/ambientcg, or
+# BRDFGAN_OOD_DIR) photographed like the test split into data/ood (generated when absent), then
+# the shipped weights and the two trivial references evaluated on it: OOD_OUT/metrics.{md,json}.
+OOD_OUT ?= outputs/ood
+REFERENCES := src/brdfgan/weights/references
+ood: setup
+	$(PY) generate.py dataset_spec=ood progress=false contact_sheet=8
+	$(PY) evaluate.py data=ood hydra.run.dir=$(OOD_OUT) \
+		'ckpt={shipped: src/brdfgan/weights/default.safetensors, mean_maps: $(REFERENCES)/mean_maps.safetensors, photo_basecolor: $(REFERENCES)/photo_basecolor.safetensors}'
+	@echo "shipped = $$($(PY) -c 'import json; print(json.load(open("src/brdfgan/weights/default.json"))["model_id"])'); table: $(OOD_OUT)/metrics.md"
+	@cat $(OOD_OUT)/metrics.md
 
 clean:
 	rm -rf $(VENV) .node outputs multirun .pytest_cache .ruff_cache src/*.egg-info

@@ -62,7 +62,11 @@ from brdfgan.data.lighting import (
     draw_lighting,
     realize_lighting,
 )
+from brdfgan.data.material_source import PaintedMaterial, paint_procedural, paint_scanned
 from brdfgan.data.materials.families import resolve_families
+from brdfgan.data.materials.mixing import MixingConfig
+from brdfgan.data.materials.recolor import RecolorConfig
+from brdfgan.data.scanned import scanned_material_folders
 from brdfgan.data.shards import (
     Sample,
     ShardError,
@@ -109,6 +113,11 @@ class DatasetSpec:
     flash: FlashSampling = field(default_factory=FlashSampling)
     lighting: LightingConfig = field(default_factory=LightingConfig)
     capture: CaptureSampling = field(default_factory=CaptureSampling)
+    mixing: MixingConfig = field(default_factory=MixingConfig)
+    recolor: RecolorConfig = field(default_factory=RecolorConfig)
+    # A folder of scanned material sets (brdfgan.data.scanned) instead of the procedural
+    # families: such a dataset is test only, so real scans never become training data.
+    scanned: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "families", tuple(self.families))
@@ -133,6 +142,9 @@ class DatasetSpec:
                 f"dataset_spec.resolution={self.resolution} > dataset_spec.material_resolution="
                 f"{self.material_resolution}: crops are cut from the material maps"
             )
+        if self.scanned is not None:
+            self._check_scanned()
+            return
         test = in_range("dataset_spec.test_fraction", self.test_fraction, 0.0, 1.0, high_open=True)
         val = in_range("dataset_spec.val_fraction", self.val_fraction, 0.0, 1.0, high_open=True)
         if test + val >= 1.0:
@@ -147,9 +159,27 @@ class DatasetSpec:
             )
         resolve_families(self.families)  # unknown names fail here, before any work
 
+    def _check_scanned(self) -> None:
+        found = len(scanned_material_folders(str(self.scanned)))
+        if self.materials != found:
+            raise DatasetConfigError(
+                f"dataset_spec.materials={self.materials}: dataset_spec.scanned={self.scanned!r} "
+                f"holds {found} sets"
+            )
+        if self.mixing.fraction > 0 or self.recolor.probability > 0:
+            raise DatasetConfigError(
+                "dataset_spec.scanned: scanned materials are a benchmark and stay as scanned; "
+                "set dataset_spec.mixing.fraction=0 and dataset_spec.recolor.probability=0"
+            )
+
     def to_json(self) -> dict[str, Any]:
-        """A JSON-ready description (recorded in ``dataset.json`` and the manifests)."""
-        return json.loads(json.dumps(dataclasses.asdict(self)))
+        """A JSON-ready description (recorded in ``dataset.json`` and the manifests). An empty
+        family list is recorded resolved, as the registry's names: a dataset made before a family
+        joined the registry then differs from today's, and is not taken for it."""
+        description = json.loads(json.dumps(dataclasses.asdict(self)))
+        if self.scanned is None:
+            description["families"] = [family.name for family in resolve_families(self.families)]
+        return description
 
     def renders_per_crop(self, split: str) -> int:
         return self.train_renders if split == "train" else self.eval_renders
@@ -201,7 +231,10 @@ def held_out_counts(materials: int, test_fraction: float, val_fraction: float) -
 
 
 def split_materials(spec: DatasetSpec) -> dict[str, tuple[int, ...]]:
-    """Material indices per split, each sorted. Disjoint and covering ``range(materials)``."""
+    """Material indices per split, each sorted. Disjoint and covering ``range(materials)``.
+    Scanned materials are all ``test``."""
+    if spec.scanned is not None:
+        return {"train": (), "val": (), "test": tuple(range(spec.materials))}
     order = torch.randperm(
         spec.materials, generator=torch.Generator().manual_seed(derive_seed(spec.seed, "split"))
     )
@@ -300,14 +333,12 @@ def material_samples(
     """
     seed = material_seed(spec.seed, material_index)
     generator = torch.Generator().manual_seed(seed)
-    families = resolve_families(spec.families)
-    family = families[material_index % len(families)]
-    params = family.sample_parameters(generator)
-    maps = family.make_maps(params, spec.material_resolution, generator)
+    material = paint_material(spec, split, material_index, generator)
+    maps = material.maps
     try:
         validate_maps(maps)
     except InvalidMapsError as error:  # a family bug, not a user error: keep the traceback
-        where = f"material {material_index} ({family.name}, parameters {params})"
+        where = f"material {material_index} ({material.family}, {material.parameters}, {material.extra})"
         raise RuntimeError(f"{where}: {error}") from error
     crops, transforms = random_crops(maps, spec.crops_per_material, spec.resolution, generator, spec.crop)
     pool = pools.test if split == "test" else pools.train
@@ -329,8 +360,9 @@ def material_samples(
                     "split": split,
                     "material_index": material_index,
                     "material_seed": seed,
-                    "family": family.name,
-                    "parameters": params,
+                    "family": material.family,
+                    "parameters": material.parameters,
+                    **material.extra,
                     "crop": {"index": c, **dataclasses.asdict(transform)},
                     "render": {"index": r, "seed": render_seed, "spp": spec.spp},
                     "lighting": lighting.to_json(),
@@ -339,6 +371,27 @@ def material_samples(
                     "exposure_scale": exposure,
                 },
             )
+
+
+def paint_material(
+    spec: DatasetSpec, split: str, material_index: int, generator: torch.Generator
+) -> PaintedMaterial:
+    """The maps of material ``material_index`` of ``split`` (:mod:`brdfgan.data.material_source`):
+    a scanned set, or a family draw from ``generator`` (mixed with a partner of the same split
+    and recoloured as the spec says)."""
+    if spec.scanned is not None:
+        return paint_scanned(scanned_material_folders(spec.scanned)[material_index], spec.material_resolution)
+    return paint_procedural(
+        resolve_families(spec.families),
+        material_index,
+        spec.material_resolution,
+        generator,
+        choice_seed=derive_seed(spec.seed, "mix", material_index),
+        partner_seed=lambda index: material_seed(spec.seed, index),
+        split_indices=split_materials(spec)[split],
+        mixing=spec.mixing,
+        recolor=spec.recolor,
+    )
 
 
 @dataclass
