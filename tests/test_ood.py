@@ -98,15 +98,16 @@ def test_resolved_families_are_recorded() -> None:
 
 def test_ood_config_composes_with_its_folder_from_the_environment(scanned_root: Path, tmp_path: Path) -> None:
     out = tmp_path / "plan"
+    env = {"BRDFGAN_OOD_DIR": str(scanned_root), "PATH": "/usr/bin"}
     result = subprocess.run(
         [sys.executable, "generate.py", "dataset_spec=ood", "materials=2", "plan=true", f"out_dir={out}"],
-        cwd=ROOT, capture_output=True, text=True, env={"BRDFGAN_OOD_DIR": str(scanned_root), "PATH": "/usr/bin"},
+        cwd=ROOT, capture_output=True, text=True, env=env,
     )  # fmt: skip
     assert result.returncode == 2 and "materials" in result.stderr  # a top-level key, not the spec's
     result = subprocess.run(
         [sys.executable, "generate.py", "dataset_spec=ood", "dataset_spec.materials=2", "plan=true",
          f"out_dir={out}"],
-        cwd=ROOT, capture_output=True, text=True, env={"BRDFGAN_OOD_DIR": str(scanned_root), "PATH": "/usr/bin"},
+        cwd=ROOT, capture_output=True, text=True, env=env,
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert "test" in result.stdout and "train" not in result.stdout.replace("train_", "")
