@@ -12,7 +12,9 @@ import subprocess
 import sys
 import tarfile
 from collections import Counter
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -107,7 +109,7 @@ def shard_hashes(root: Path) -> dict[str, str]:
     }
 
 
-def all_metas(root: Path) -> dict[str, list[dict]]:
+def all_metas(root: Path) -> dict[str, list[Mapping[str, Any]]]:
     return {split: [s.meta for p in list_shards(root, split) for s in iter_shard(p)] for split in SPLITS}
 
 
@@ -332,9 +334,10 @@ def test_end_to_end_mitsuba_generation_feeds_the_datamodule(tmp_path: Path) -> N
 
     spec = tiny_spec(materials=3, crops_per_material=1, val_fraction=0.0, materials_per_shard=1)
     data_dir = tmp_path / "data"
-    module = ShardDataModule(
-        str(data_dir), batch_size=2, prepare=lambda: ensure_dataset(spec, data_dir, progress=False)
-    )
+    def prepare() -> None:
+        ensure_dataset(spec, data_dir, progress=False)
+
+    module = ShardDataModule(str(data_dir), batch_size=2, prepare=prepare)
     module.prepare_data()
     module.setup("fit")
     batch = next(iter(module.train_dataloader()))
