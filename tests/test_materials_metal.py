@@ -5,9 +5,15 @@ from __future__ import annotations
 import torch
 
 from brdfgan.core.svbrdf import srgb_to_linear, validate_maps
-from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR, METAL_F0_LINEAR, metal_basecolor
+from brdfgan.data.materials.albedo import (
+    DIELECTRIC_ALBEDO_LINEAR,
+    METAL_F0_LINEAR,
+    clamp_dielectric_albedo,
+    metal_basecolor,
+)
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
-from brdfgan.data.materials.families import anodized_metal, polished_metal, tread_plate
+from brdfgan.data.materials.families import anodized_metal, metallic_paint, polished_metal, tread_plate
+from brdfgan.data.materials.noise import hsv_to_rgb
 
 SIZE = 128
 
@@ -181,3 +187,49 @@ def test_anodized_metal_holes_are_dark_voids_with_bright_chamfers() -> None:
     assert maps[6][bare].mean() < maps[6][~bare & ~void].mean() - 0.1
     assert height[void].mean() < height[bare].mean() < height[~bare & ~void].mean()
     assert _tilt_degrees(maps)[bare].mean() > 30.0
+
+
+def test_metallic_paint_is_paint_with_metal_flakes() -> None:
+    params = {"mode": 0.0, "hue": 0.0, "saturation": 0.9, "value": 0.7, "flake_count": 40.0, "tint": 0.0}
+    maps = _maps(metallic_paint.FAMILY, params, size=256)
+    metallic, basecolor = maps[7], maps[0:3]
+    flake, paint = metallic == 1.0, metallic == 0.0
+    # Flakes cover about the flake density; metallic is 0 or 1 but along their one-texel edges.
+    assert abs((metallic > 0.5).float().mean() - 0.12) < 0.02
+    assert flake.any() and (flake | paint).float().mean() > 0.85
+    # The paint is the chosen colour, a plausible dielectric albedo; untinted flakes are aluminium.
+    red = clamp_dielectric_albedo(
+        hsv_to_rgb(torch.zeros(1, 1), torch.full((1, 1), 0.9), torch.full((1, 1), 0.7))
+    )
+    assert torch.allclose(basecolor[:, paint], red.view(3, 1).expand(3, int(paint.sum())), atol=1e-6)
+    assert torch.allclose(
+        basecolor[:, flake], _f0("aluminium").view(3, 1).expand(3, int(flake.sum())), atol=1e-6
+    )
+    # Every flake lies at its own tilt, so flakes scatter the normals; the paint is nearly flat.
+    tilt = _tilt_degrees(maps)
+    assert tilt[flake].mean() > 3.0 * tilt[paint].mean() and tilt[paint].mean() < 2.0
+    assert maps[3][flake].std() > 0.05
+    # A fully tinted coat colours the flakes with the paint's hue.
+    tinted = _maps(metallic_paint.FAMILY, {**params, "tint": 1.0}, size=256)
+    flake_color = tinted[0:3][:, tinted[7] == 1.0].mean(dim=1)
+    assert flake_color[0] > flake_color[2] + 0.3
+
+
+def test_metallic_paint_hue_moves_the_paint_hue() -> None:
+    for hue, channel in ((0.0, 0), (1 / 3, 1), (2 / 3, 2)):
+        maps = _maps(metallic_paint.FAMILY, {"mode": 0.0, "hue": hue, "saturation": 0.8}, size=64)
+        paint = maps[7] == 0.0
+        assert maps[0:3][:, paint].mean(dim=1).argmax() == channel, hue
+
+
+def test_foil_is_exactly_the_named_metal_with_strong_crinkles() -> None:
+    for index, name in enumerate(metallic_paint.FOIL_METALS):
+        maps = _maps(metallic_paint.FAMILY, {"mode": 1.0, "foil_metal": index + 0.5}, size=64)
+        assert torch.equal(maps[7], torch.ones(64, 64)), name
+        assert torch.allclose(maps[0:3], _f0(name).expand(3, 64, 64), atol=1e-6), name
+    tilts = [
+        _tilt_degrees(_maps(metallic_paint.FAMILY, {"mode": 1.0, "crinkle": c})).mean() for c in (0.0, 1.0)
+    ]
+    assert tilts[1] > 18.0 and tilts[1] > 3.0 * tilts[0]
+    # The mode switches at 0.5: just below it is paint with dielectric texels.
+    assert (_maps(metallic_paint.FAMILY, {"mode": 0.49}, size=64)[7] == 0.0).any()
