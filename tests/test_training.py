@@ -42,9 +42,13 @@ def test_every_loss_and_experiment_composes_and_builds(tmp_path: Path, loss: str
         assert cfg.model.optimizer.lr == 2e-4 and list(cfg.model.optimizer.betas) == [0.5, 0.999]
         return  # building needs 4 GPUs
     if experiment == "default_model":
-        # 128² crops of the 256² default_model dataset, validated on whole photos.
+        # 128² crops of the 256² default_model dataset (the v3 recipe: many materials, phone-like
+        # captures, sensor effects on), validated on whole photos.
         assert cfg.data.train_crop == 128 and cfg.data.data_dir.endswith("default_model")
-        assert cfg.data.prepare.spec.materials == 96 and cfg.data.prepare.spec.resolution == 256
+        spec = cfg.data.prepare.spec
+        assert spec.materials >= 1000 and spec.resolution == 256 and not spec.families
+        assert spec.mixing.fraction > 0 and spec.recolor.probability > 0 and spec.capture.tilt_max_deg > 0
+        assert cfg.data.sensor.enabled
     _, module, trainer = build(cfg)
     switches = module.loss.switches
     assert switches.adversarial == (loss != "no_adv") and switches.feature == (loss != "no_feat")
