@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import colorsys
 import importlib
+from collections.abc import Callable
 
 import pytest
 import torch
@@ -11,10 +12,10 @@ import torch
 from brdfgan.core.svbrdf import split_maps, srgb_to_linear
 from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
-from brdfgan.data.materials.families import paper, plaster, terrazzo
+from brdfgan.data.materials.families import paper, pavers, plaster, terrazzo
 
 SIZE = 64
-MODULES = ("paper", "plaster", "terrazzo")
+MODULES = ("paper", "plaster", "terrazzo", "pavers")
 # Polished terrazzo is flat but for its pits (which may be absent); its own test checks that.
 FLAT = ("terrazzo",)
 
@@ -242,3 +243,69 @@ def test_terrazzo_colours_follow_chip_and_matrix_hues(hue: float) -> None:
     assert near_chip_hue.float().mean() > 0.35
     matrix_hues = hues[chips < 0.01].tolist()
     assert sorted(_hue_distance(h, params["matrix_hue"]) for h in matrix_hues)[len(matrix_hues) // 2] < 0.02
+
+
+# --- pavers -----------------------------------------------------------------------------------
+
+COBBLES, RUNNING_BOND, HERRINGBONE = 0.5, 1.5, 2.5
+
+
+@pytest.mark.parametrize("layout", [COBBLES, RUNNING_BOND, HERRINGBONE])
+def test_paver_joints_are_lower_and_rougher(layout: float) -> None:
+    generator = torch.Generator().manual_seed(5)
+    for seed in range(3):
+        params = {**pavers.FAMILY.sample_parameters(generator), "layout": layout, "joint_width": 0.1}
+        layers = _layers(pavers.FAMILY, params, seed, size=128)
+        height, roughness = layers.height.flatten(), layers.roughness.flatten()
+        low, high = height <= height.quantile(0.1), height >= height.quantile(0.5)
+        assert roughness[low].mean() > roughness[high].mean() + 0.05, params
+
+
+@pytest.mark.parametrize("pattern", [pavers.running_bond, pavers.herringbone])
+def test_pavers_are_two_by_one_and_each_stone_is_one_paver(
+    pattern: Callable[[int, int, float], pavers.Paving],
+) -> None:
+    # 8 paver widths on 96 texels: a unit square is 12 × 12 texels, a paver two of them.
+    paving = pattern(96, 8, 0.1)
+    ids, counts = torch.unique(paving.stone, return_counts=True)
+    assert len(ids) == 8 * 8 // 2 and ids.max() < paving.count
+    assert (counts == 2 * 12 * 12).all()
+    for stone in ids[:8].tolist():
+        rows, cols = torch.nonzero(paving.stone == stone, as_tuple=True)
+        extent = sorted((rows.max() - rows.min() + 1, cols.max() - cols.min() + 1))
+        if rows.max() - rows.min() < 90 and cols.max() - cols.min() < 90:  # not wrapped round
+            assert extent == [12, 24]
+
+
+def test_herringbone_lays_half_the_pavers_each_way() -> None:
+    paving = pavers.herringbone(64, 8, 0.1)
+    vertical = (paving.stone % 2 == 1).float().mean()
+    assert vertical == pytest.approx(0.5, abs=1e-6)
+
+
+def test_cobbles_are_domed_with_polished_tops() -> None:
+    for seed in range(3):
+        cobbles = {"layout": COBBLES, "count": 6, "moss": 0.0, "relief": 0.02}
+        flat = {**cobbles, "layout": RUNNING_BOND}
+        assert _tilt(_maps(pavers.FAMILY, cobbles, seed)) > 1.5 * _tilt(_maps(pavers.FAMILY, flat, seed))
+        layers = _layers(pavers.FAMILY, cobbles, seed, size=128)
+        height, roughness = layers.height.flatten(), layers.roughness.flatten()
+        top = height >= height.quantile(0.9)
+        side = (height > height.quantile(0.4)) & (height < height.quantile(0.6))
+        assert roughness[top].mean() < roughness[side].mean() - 0.03
+
+
+def test_moss_greens_the_joints() -> None:
+    for seed in range(3):
+        joints = {"layout": RUNNING_BOND, "joint_width": 0.15, "saturation": 0.0}
+        bare = _layers(pavers.FAMILY, {**joints, "moss": 0.0}, seed).basecolor
+        mossy = _layers(pavers.FAMILY, {**joints, "moss": 1.0}, seed).basecolor
+        greenness = [(c[1] - c[0]).mean().item() for c in (bare, mossy)]
+        assert greenness[1] > greenness[0] + 0.01
+
+
+@pytest.mark.parametrize("hue", [0.0, 0.07, 0.14])
+def test_paver_colour_follows_hue(hue: float) -> None:
+    params = {"hue": hue, "saturation": 0.45, "color_variation": 0.0, "moss": 0.0, "joint_width": 0.03}
+    basecolor = _layers(pavers.FAMILY, {**params, "layout": RUNNING_BOND}).basecolor
+    assert _hue_distance(_mean_hue(basecolor), hue) < 0.025
