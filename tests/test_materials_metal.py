@@ -13,7 +13,7 @@ from brdfgan.data.materials.albedo import (
 )
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
 from brdfgan.data.materials.families import anodized_metal, metallic_paint, polished_metal, tread_plate
-from brdfgan.data.materials.noise import hsv_to_rgb
+from brdfgan.data.materials.noise import hsv_to_rgb, worley
 
 SIZE = 128
 
@@ -56,6 +56,15 @@ def test_hammered_dents_tilt_the_normals_strongly() -> None:
     # Relief is in image-width units: the tilt is alike at twice the resolution.
     full_256 = _tilt_degrees(_maps(polished_metal.FAMILY, {**flat, "hammered": 1.0}, size=256))
     assert abs(full_256.mean() - full.mean()) < 0.2 * full.mean()
+
+
+def test_polished_metal_half_resolution_dents_match_full_resolution() -> None:
+    # From 512² the dents are computed at half resolution: same dent centres, same field
+    # (wrapping included: the borders agree as well as the interior).
+    full = worley(512, 10, torch.Generator().manual_seed(3), jitter=0.8)[0]
+    half = polished_metal._dent_distance(512, 10, torch.Generator().manual_seed(3))
+    assert (full - half).abs().max() < 0.03 and (full - half).abs().mean() < 1e-3
+    assert (full - half)[[0, -1]].abs().mean() < 2e-3
 
 
 def test_polished_metal_smudges_and_swirls_only_roughen() -> None:
