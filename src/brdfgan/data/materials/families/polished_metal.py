@@ -179,7 +179,11 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
 
     smudge = params["smudge"]
     oil = _fingerprints(size, round(smudge * MAX_FINGERPRINTS), generator)
-    haze = smudge * smoothstep(0.1, 0.6, fbm(size, 3, generator, octaves=3)) if smudge > 0.0 else 0.0 * oil
+    haze = (
+        smudge * smoothstep(0.1, 0.6, fbm(size, 3, generator, octaves=3))
+        if smudge > 0.0
+        else torch.zeros_like(oil)
+    )
 
     # Oil ridges and oxide haze scatter light widely: both raise roughness, never lower it.
     roughness = params["roughness"] + 0.3 * oil + 0.25 * haze + 0.12 * swirl

@@ -114,7 +114,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     metal_rough = params["roughness"] * (1.0 + 0.1 * mill) * (1.0 - 0.65 * polish)
 
     # Valleys: the plate between lozenges. Traffic pushes dirt against the flanks, so its field
-    # is raised within a lozenge half-width of one.
+    # is raised within two lozenge half-widths of one.
     valley = 1.0 - smoothstep(0.0, 0.2, profile)
     in_valley = valley > 0.5
     grime = fbm(size, 6, generator, octaves=4)
