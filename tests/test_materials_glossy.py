@@ -19,10 +19,12 @@ from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
 
 SIZE = 128
-MODULES = ("mosaic", "relief_tiles", "painted_wood")
+MODULES = ("mosaic", "relief_tiles", "painted_wood", "plastic")
 # Least mean 1 − n_z at 128² for defaults and samples: deep grout and embossed motifs tilt the
-# normals a lot; boards are flat apart from grooves, chips and grain (like wood_planks).
-MIN_TILT = {"mosaic": 0.005, "relief_tiles": 0.003, "painted_wood": 0.0005}
+# normals a lot; boards are flat apart from grooves, chips and grain (like wood_planks); smooth
+# plastic is flat and fine plastic textures are below 128²'s Nyquist limit (its relief is
+# checked per mode below).
+MIN_TILT = {"mosaic": 0.005, "relief_tiles": 0.003, "painted_wood": 0.0005, "plastic": 0.0}
 
 
 def _family(module: str) -> MaterialFamily:
@@ -221,3 +223,57 @@ def test_painted_wood_grain_shows_through_the_paint_as_relief() -> None:
         _tilt(_maps("painted_wood", {**plain, "grain_relief": r}))[faces].mean() for r in (0.0002, 0.002)
     ]
     assert tilts[1] > 1e-3 and tilts[1] > 20.0 * tilts[0]
+
+
+PLASTIC_MODES = {
+    "smooth": 0.0,
+    "leather_grain": 1.0,
+    "stipple": 2.0,
+    "ribbed": 3.0,
+    "rubber_studs": 4.0,
+    "rubber_ribs": 5.0,
+}
+
+
+def test_plastic_textures_have_strong_relief_and_smooth_plastic_is_flat() -> None:
+    # At the coarsest scale every texture spans ≥ 8 texels at 256².
+    tilts = {
+        name: _tilt(_maps("plastic", {"mode": mode, "texture_scale": 0.0}, size=256)).mean().item()
+        for name, mode in PLASTIC_MODES.items()
+    }
+    assert tilts["smooth"] < 1e-3
+    assert all(tilt > 0.008 for name, tilt in tilts.items() if name != "smooth"), tilts
+    assert min(tilts["rubber_studs"], tilts["rubber_ribs"]) > 0.04  # mats: strong relief
+
+
+def test_plastic_rubber_is_dark_and_rough_plastic_keeps_its_colour_and_gloss() -> None:
+    colour = {"hue": 0.3, "saturation": 0.75, "value": 0.9, "roughness": 0.1, "wear": 0.0}
+    for name, mode in PLASTIC_MODES.items():
+        parts = split_maps(_maps("plastic", {**colour, "mode": mode}))
+        if name.startswith("rubber"):
+            assert parts.basecolor.max() < 0.3 and parts.roughness.min() > 0.6, name
+        else:
+            mean, concentration = _mean_hue(_hue_turns(parts.basecolor))
+            assert abs(mean - 0.3) < 0.005 and concentration > 0.999, name
+            assert parts.basecolor.max() > 0.85 and parts.roughness.max() < 0.16, name
+
+
+def test_plastic_ribs_and_studs_are_regular() -> None:
+    # texture_scale picks 16 ribs (12·5^s) and 8 studs (6·4^s) per width: pitches 8 and 16 texels.
+    ribs = _layers("plastic", {"mode": 3.0, "texture_scale": math.log(16 / 12) / math.log(5)}).height[0]
+    assert (ribs - ribs.roll(1, dims=0)).abs().max() < 1e-5  # straight along the rows
+    assert (ribs - ribs.roll(8, dims=1)).abs().max() < 1e-4 < (ribs - ribs.roll(4, dims=1)).abs().mean()
+    studs = _layers("plastic", {"mode": 4.0, "texture_scale": math.log(8 / 6) / math.log(4), "wear": 0.0})
+    height = studs.height[0]
+    centres, corners = height[8::16, 8::16], height[::16, ::16]
+    assert centres.min() > corners.max() + 0.9 * 0.1 * 16  # relief 0.1 of the pitch
+
+
+def test_plastic_wear_scuffs_plastic_and_polishes_rubber() -> None:
+    for mode, rougher in ((1.0, True), (4.0, False)):
+        pristine = _layers("plastic", {"mode": mode, "wear": 0.0})
+        worn = _layers("plastic", {"mode": mode, "wear": 1.0})
+        change = (worn.roughness - pristine.roughness)[0]
+        scuffed = change.abs() > 0.05
+        assert 0.05 < scuffed.float().mean() < 0.9, mode
+        assert (change[scuffed].mean() > 0.1) if rougher else (change[scuffed].mean() < -0.05), mode
