@@ -13,7 +13,7 @@ from brdfgan.data.materials.albedo import (
 )
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
 from brdfgan.data.materials.families import anodized_metal, metallic_paint, polished_metal, tread_plate
-from brdfgan.data.materials.noise import hsv_to_rgb, worley
+from brdfgan.data.materials.noise import fbm, hsv_to_rgb, worley
 
 SIZE = 128
 
@@ -65,6 +65,15 @@ def test_polished_metal_half_resolution_dents_match_full_resolution() -> None:
     half = polished_metal._dent_distance(512, 10, torch.Generator().manual_seed(3))
     assert (full - half).abs().max() < 0.03 and (full - half).abs().mean() < 1e-3
     assert (full - half)[[0, -1]].abs().mean() < 2e-3
+
+
+def test_smooth_fbm_is_fbm_evaluated_coarsely() -> None:
+    # 12 cells in the finest octave, 8 texels each: computed at 128² and upsampled to 512².
+    exact = fbm(512, 3, torch.Generator().manual_seed(5), octaves=3)
+    smooth = polished_metal.smooth_fbm(512, 3, torch.Generator().manual_seed(5), octaves=3, texels_per_cell=8)
+    assert (exact - smooth).abs().max() < 0.01 < exact.abs().max()
+    small = polished_metal.smooth_fbm(64, 3, torch.Generator().manual_seed(5), octaves=3, texels_per_cell=8)
+    assert torch.equal(small, fbm(64, 3, torch.Generator().manual_seed(5), octaves=3))
 
 
 def test_polished_metal_smudges_and_swirls_only_roughen() -> None:

@@ -78,21 +78,54 @@ def _periodic_offset(coordinate: Tensor, centre: float) -> Tensor:
     return torch.sin(math.pi * (coordinate - centre)) / math.pi
 
 
+def wrapped_upsample(field: Tensor, factor: int) -> Tensor:
+    """Bilinear upsampling of a periodic field by an integer factor, wrapping at the borders
+    (texel centres stay texel centres: output texel k samples input coordinate (k + ½)/factor − ½).
+
+    Shape: ``(n, n)`` → ``(n·factor, n·factor)``.
+    """
+    if factor == 1:
+        return field
+    padded = F.pad(field[None, None], (1, 1, 1, 1), mode="circular")
+    upsampled = F.interpolate(padded, scale_factor=factor, mode="bilinear", align_corners=False)[0, 0]
+    n = field.shape[-1] * factor
+    return upsampled[factor : factor + n, factor : factor + n]
+
+
+def _coarse_size(size: int, finest_cells: int, texels_per_cell: int) -> int:
+    """The smallest halving of ``size`` that keeps ``texels_per_cell`` texels per finest cell."""
+    coarse = size
+    while coarse % 2 == 0 and coarse // 2 >= texels_per_cell * finest_cells:
+        coarse //= 2
+    return coarse
+
+
+def smooth_fbm(
+    size: int, cells: int, generator: torch.Generator, octaves: int, texels_per_cell: int
+) -> Tensor:
+    """:func:`~brdfgan.data.materials.noise.fbm` of a smooth, low-frequency field, evaluated at a
+    lower resolution that keeps ``texels_per_cell`` texels per finest cell and upsampled.
+
+    fbm's lattices do not depend on the resolution, so this is the same field up to the
+    bilinear interpolation, at a fraction of the cost (full-resolution noise of a few cells per
+    image dominated this family's painting time).
+    Shape: ``(size, size)``.
+    """
+    coarse = _coarse_size(size, cells * 2 ** (octaves - 1), texels_per_cell)
+    return wrapped_upsample(fbm(coarse, cells, generator, octaves=octaves), size // coarse)
+
+
 def _dent_distance(size: int, dents: int, generator: torch.Generator) -> Tensor:
     """Worley f1 (distance to the nearest dent centre, in dent pitches) of ``dents`` cells per side.
 
-    From 512² up it is computed at half resolution and upsampled bilinearly with wrap-around:
-    Worley noise dominates this family's cost, and a dent is at least 34 texels wide at 1024²,
-    so halving the resolution only blunts its ridges by a texel.
+    From 512² up it is computed at half resolution and upsampled: Worley noise dominates this
+    family's cost, and a dent is at least 34 texels wide at 1024², so halving the resolution
+    only blunts its ridges by a texel.
     Shape: ``(size, size)``.
     """
     if size < 512 or size % 2:
         return worley(size, dents, generator, jitter=0.8)[0]
-    half = worley(size // 2, dents, generator, jitter=0.8)[0]
-    # Output texel k + 2 of the padded, doubled field sits at input coordinate (k + 0.5)/2 − 0.5.
-    padded = F.pad(half[None, None], (1, 1, 1, 1), mode="circular")
-    doubled = F.interpolate(padded, scale_factor=2, mode="bilinear", align_corners=False)[0, 0]
-    return doubled[2 : size + 2, 2 : size + 2]
+    return wrapped_upsample(worley(size // 2, dents, generator, jitter=0.8)[0], 2)
 
 
 def _swirls(size: int, generator: torch.Generator) -> Tensor:
@@ -167,7 +200,9 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
 
     height = torch.zeros(size, size)
     if params["waviness"] > 0.0:
-        height = _WAVE_DEPTH * size * params["waviness"] * fbm(size, 2, generator, octaves=2)
+        # A height field: 32 texels per cell keep the bilinear slope steps far below a degree.
+        waves = smooth_fbm(size, 2, generator, octaves=2, texels_per_cell=32)
+        height = _WAVE_DEPTH * size * params["waviness"] * waves
     if params["hammered"] > 0.0:
         # Bowls around the feature points; where two bowls meet f1 is continuous but its slope
         # flips, giving the sharp ridges between hammer blows. Jitter < 1 keeps dents alike in size.
@@ -179,11 +214,9 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
 
     smudge = params["smudge"]
     oil = _fingerprints(size, round(smudge * MAX_FINGERPRINTS), generator)
-    haze = (
-        smudge * smoothstep(0.1, 0.6, fbm(size, 3, generator, octaves=3))
-        if smudge > 0.0
-        else torch.zeros_like(oil)
-    )
+    haze = torch.zeros_like(oil)
+    if smudge > 0.0:
+        haze = smudge * smoothstep(0.1, 0.6, smooth_fbm(size, 3, generator, octaves=3, texels_per_cell=8))
 
     # Oil ridges and oxide haze scatter light widely: both raise roughness, never lower it.
     roughness = params["roughness"] + 0.3 * oil + 0.25 * haze + 0.12 * swirl
@@ -220,4 +253,4 @@ FAMILY = MaterialFamily(
     tags=("metal", "polished", "hammered", "metallic", "tileable"),
 )
 
-__all__ = ["FAMILY", "MAX_FINGERPRINTS", "METALS"]
+__all__ = ["FAMILY", "MAX_FINGERPRINTS", "METALS", "smooth_fbm", "wrapped_upsample"]

@@ -35,8 +35,8 @@ from torch import Tensor
 
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo, metal_basecolor
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
+from brdfgan.data.materials.families.polished_metal import smooth_fbm
 from brdfgan.data.materials.noise import (
-    fbm,
     gradient_noise,
     lerp_color,
     random_per_cell,
@@ -117,7 +117,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     # is raised within two lozenge half-widths of one.
     valley = 1.0 - smoothstep(0.0, 0.2, profile)
     in_valley = valley > 0.5
-    grime = fbm(size, 6, generator, octaves=4)
+    grime = smooth_fbm(size, 6, generator, octaves=4, texels_per_cell=8)
     near_flank = smoothstep(3.0, 1.0, across)
     dirt = valley * _coverage(grime + 0.5 * near_flank, params["dirt"], 0.01, in_valley)
     # Corrosion starts where dirt holds moisture, then spreads in spots.
