@@ -12,10 +12,10 @@ import torch
 from brdfgan.core.svbrdf import split_maps, srgb_to_linear
 from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
-from brdfgan.data.materials.families import paper, pavers, plaster, terrazzo
+from brdfgan.data.materials.families import asphalt, paper, pavers, plaster, terrazzo
 
 SIZE = 64
-MODULES = ("paper", "plaster", "terrazzo", "pavers")
+MODULES = ("paper", "plaster", "terrazzo", "pavers", "asphalt")
 # Polished terrazzo is flat but for its pits (which may be absent); its own test checks that.
 FLAT = ("terrazzo",)
 
@@ -44,9 +44,14 @@ def _mean_hue(basecolor: torch.Tensor) -> float:
     return colorsys.rgb_to_hsv(r, g, b)[0]
 
 
+def _texel_hsv(basecolor: torch.Tensor) -> torch.Tensor:
+    """HSV (hue in turns) of every texel. Shape: ``(3, H, W)`` → ``(H·W, 3)``."""
+    return torch.tensor([colorsys.rgb_to_hsv(*rgb) for rgb in basecolor.flatten(1).T.tolist()])
+
+
 def _texel_hues(basecolor: torch.Tensor) -> torch.Tensor:
     """HSV hue in turns of every texel. Shape: ``(3, H, W)`` → ``(H·W,)``."""
-    return torch.tensor([colorsys.rgb_to_hsv(*rgb)[0] for rgb in basecolor.flatten(1).T.tolist()])
+    return _texel_hsv(basecolor)[:, 0]
 
 
 def _hue_distance(a: float, b: float) -> float:
@@ -309,3 +314,67 @@ def test_paver_colour_follows_hue(hue: float) -> None:
     params = {"hue": hue, "saturation": 0.45, "color_variation": 0.0, "moss": 0.0, "joint_width": 0.03}
     basecolor = _layers(pavers.FAMILY, {**params, "layout": RUNNING_BOND}).basecolor
     assert _hue_distance(_mean_hue(basecolor), hue) < 0.025
+
+
+# --- asphalt ----------------------------------------------------------------------------------
+
+NO_MARKING, WHITE, YELLOW = 0.5, 1.5, 2.5
+
+
+@pytest.mark.parametrize("marking", [WHITE, YELLOW])
+@pytest.mark.parametrize("width", [0.1, 0.3])
+def test_road_marking_is_a_bright_smooth_stripe_of_its_width(marking: float, width: float) -> None:
+    params = {"marking": marking, "marking_width": width, "wear": 0.0, "cracks": 0.0, "aggregate_value": 0.4}
+    for seed in range(2):
+        maps = split_maps(_maps(asphalt.FAMILY, params, seed, size=128))
+        hsv = _texel_hsv(maps.basecolor)
+        # Only paint is saturated (yellow) or brighter than 0.75 (white): stones stay below.
+        paint = hsv[:, 1] > 0.5 if marking == YELLOW else hsv[:, 2] > 0.75
+        assert paint.float().mean().item() == pytest.approx(width, abs=0.03)
+        if marking == YELLOW:
+            assert all(_hue_distance(h, 0.13) < 0.03 for h in hsv[paint, 0].tolist())
+        roughness, tilt = maps.roughness.flatten(), (1.0 - maps.normal[2]).flatten()
+        assert roughness[paint].mean() < roughness[~paint].mean() - 0.25
+        assert tilt[paint].mean() < tilt[~paint].mean()  # paint fills the gaps
+
+
+def test_asphalt_without_marking_has_no_paint() -> None:
+    for seed in range(3):
+        hsv = _texel_hsv(
+            _layers(asphalt.FAMILY, {"marking": NO_MARKING, "aggregate_value": 0.4}, seed).basecolor
+        )
+        assert hsv[:, 1].max() < 0.5 and hsv[:, 2].max() < 0.75
+
+
+def test_bare_aggregate_lightens_and_wear_smooths() -> None:
+    base = {"marking": NO_MARKING, "cracks": 0.0, "bitumen_value": 0.2, "aggregate_value": 0.7}
+    for seed in range(3):
+        coated = _layers(asphalt.FAMILY, {**base, "aggregate": 0.0, "wear": 0.0}, seed)
+        bare = _layers(asphalt.FAMILY, {**base, "aggregate": 1.0, "wear": 0.0}, seed)
+        assert bare.basecolor.mean() > coated.basecolor.mean() + 0.05
+        worn = _maps(asphalt.FAMILY, {**base, "aggregate": 1.0, "wear": 1.0}, seed)
+        fresh = _maps(asphalt.FAMILY, {**base, "aggregate": 1.0, "wear": 0.0}, seed)
+        assert _tilt(worn) < 0.8 * _tilt(fresh)
+        assert split_maps(worn).roughness.mean() < split_maps(fresh).roughness.mean() - 0.03
+
+
+def test_asphalt_cracks_are_dark_rough_grooves() -> None:
+    # Coated stones (no bare aggregate) make the colour independent of the stone tones drawn after
+    # the cracks; the same seed then gives the same surface with and without cracks.
+    params = {"marking": NO_MARKING, "aggregate": 0.0, "wear": 0.0}
+    whole = _layers(asphalt.FAMILY, {**params, "cracks": 0.0}, seed=1, size=128)
+    cracked = _layers(asphalt.FAMILY, {**params, "cracks": 1.0}, seed=1, size=128)
+    crack = (cracked.height - whole.height)[0] < -0.3
+    assert 0.01 < crack.float().mean() < 0.3
+    assert (cracked.roughness[0][crack] > whole.roughness[0][crack]).all()
+    assert cracked.basecolor[:, crack].mean() < whole.basecolor[:, crack].mean() - 0.02
+
+
+def test_asphalt_relief_is_resolution_independent() -> None:
+    # Grain is counted per image width and stone heights scale with the texel size of a cell, so
+    # the relief measured in image widths is the same at every resolution.
+    def relief(size: int) -> float:
+        height = _layers(asphalt.FAMILY, {"marking": NO_MARKING}, size=size).height
+        return height.std().item() / size
+
+    assert relief(64) == pytest.approx(relief(128), rel=0.1)
