@@ -33,7 +33,13 @@ def main(cfg: DictConfig) -> None:
 
 def generate(cfg: DictConfig) -> None:
     from brdfgan.data.contact_sheet import write_contact_sheet
-    from brdfgan.data.generation import dataset_ready, plan_shards, run_generation, spec_from_config
+    from brdfgan.data.generation import (
+        dataset_ready,
+        plan_shards,
+        run_generation,
+        spec_from_config,
+        split_materials,
+    )
 
     check_config(cfg, ["dataset_spec"])  # types, naming the key; the spec checks ranges
     spec = spec_from_config(cfg.dataset_spec)
@@ -50,7 +56,9 @@ def generate(cfg: DictConfig) -> None:
     summary = run_generation(spec, cfg.out_dir, shards=shard, progress=cfg.progress)
     log.info("%s", summary.describe())
     if cfg.contact_sheet and shard is None and dataset_ready(spec, cfg.out_dir):
-        path = write_contact_sheet(cfg.out_dir, "train", rows=cfg.contact_sheet, seed=spec.seed)
+        # Training data is what a person judges; a test-only dataset (scanned sets) shows its test split.
+        split = "train" if split_materials(spec)["train"] else "test"
+        path = write_contact_sheet(cfg.out_dir, split, rows=cfg.contact_sheet, seed=spec.seed)
         log.info("contact sheet: %s", path)
 
 
