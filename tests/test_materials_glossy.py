@@ -19,12 +19,12 @@ from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
 
 SIZE = 128
-MODULES = ("mosaic", "relief_tiles", "painted_wood", "plastic")
+MODULES = ("mosaic", "relief_tiles", "painted_wood", "plastic", "fabric")
 # Least mean 1 − n_z at 128² for defaults and samples: deep grout and embossed motifs tilt the
 # normals a lot; boards are flat apart from grooves, chips and grain (like wood_planks); smooth
-# plastic is flat and fine plastic textures are below 128²'s Nyquist limit (its relief is
-# checked per mode below).
-MIN_TILT = {"mosaic": 0.005, "relief_tiles": 0.003, "painted_wood": 0.0005, "plastic": 0.0}
+# plastic is flat, and fine plastic textures and threads are below 128²'s Nyquist limit (their
+# relief is checked below at resolved scales).
+MIN_TILT = {"mosaic": 0.005, "relief_tiles": 0.003, "painted_wood": 0.0005, "plastic": 0.0, "fabric": 0.0}
 
 
 def _family(module: str) -> MaterialFamily:
@@ -277,3 +277,79 @@ def test_plastic_wear_scuffs_plastic_and_polishes_rubber() -> None:
         scuffed = change.abs() > 0.05
         assert 0.05 < scuffed.float().mean() < 0.9, mode
         assert (change[scuffed].mean() > 0.1) if rougher else (change[scuffed].mean() < -0.05), mode
+
+
+# 32 threads over 128 texels: a thread pitch of 4 texels.
+FABRIC = {"threads": 32.0, "repeats": 2.0}
+PITCH = 4
+
+
+def test_fabric_is_rough_with_sheen_on_the_thread_crowns() -> None:
+    generator = torch.Generator().manual_seed(5)
+    family = _family("fabric")
+    for params in [family.defaults()] + [family.sample_parameters(generator) for _ in range(3)]:
+        layers = family.generate({**params, **FABRIC}, SIZE, generator)  # threads resolved at 128²
+        assert layers.roughness.min() >= 0.6 and layers.roughness.mean() >= 0.7, params
+        height, roughness = layers.height.flatten(), layers.roughness.flatten()
+        crowns, gaps = height >= height.quantile(0.8), height <= height.quantile(0.2)
+        assert roughness[crowns].mean() < roughness[gaps].mean() - 0.03, params
+
+
+def test_fabric_threads_have_strong_relief() -> None:
+    for weave in (0.0, 1.0):
+        assert _tilt(_maps("fabric", {**FABRIC, "weave": weave})).mean() > 0.02
+
+
+def test_fabric_weave_structure_plain_and_twill() -> None:
+    def shifted(weave: float, rows: int, cols: int) -> float:
+        height = _layers("fabric", {**FABRIC, "weave": weave}).height[0]
+        return (height - height.roll((rows, cols), dims=(0, 1))).abs().mean().item()
+
+    # Both repeat one thread right and one up, where the float pattern (i + j) is unchanged ...
+    scale = shifted(0.0, 0, PITCH)
+    for weave in (0.0, 1.0):
+        assert shifted(weave, -PITCH, PITCH) < 1e-4 * scale
+        assert shifted(weave, 0, PITCH) > 0.3 * scale  # ... but not along one axis
+    # ... a plain weave (1/1) repeats every two threads, a 2/2 twill every four.
+    assert shifted(0.0, PITCH, PITCH) < 1e-4 * scale and shifted(0.0, 2 * PITCH, 0) < 1e-4 * scale
+    assert shifted(1.0, PITCH, PITCH) > 0.3 * scale and shifted(1.0, 2 * PITCH, 0) > 0.3 * scale
+    assert shifted(1.0, 4 * PITCH, 0) < 1e-4 * scale
+
+
+def _band_means(basecolor: Tensor, along_columns: bool) -> Tensor:
+    """Mean colour of bands four threads wide (one weave repeat, so the weave averages out),
+    across the columns (``along_columns``) or across the rows. Shape: ``(3, H, W)`` → ``(3, bands)``."""
+    band = 4 * PITCH
+    _, height, width = basecolor.shape
+    if along_columns:
+        return basecolor.reshape(3, height, width // band, band).mean(dim=(1, 3))
+    return basecolor.reshape(3, height // band, band, width).mean(dim=(2, 3))
+
+
+def test_fabric_colour_patterns_follow_the_yarns() -> None:
+    def spreads(pattern: float) -> tuple[float, float]:
+        basecolor = _layers("fabric", {**FABRIC, "pattern": pattern}).basecolor
+        return (
+            _band_means(basecolor, along_columns=True).std(dim=1).max().item(),
+            _band_means(basecolor, along_columns=False).std(dim=1).max().item(),
+        )
+
+    solid, stripes, checks = spreads(0.0), spreads(2.0), spreads(3.0)
+    assert max(solid) < 0.02
+    # Each band mixes the striped yarns with the crossing ones: half the colour contrast.
+    assert stripes[0] > 0.05 and stripes[1] < 0.02  # warp stripes: colour changes across columns only
+    assert min(checks) > 0.05  # warp and weft both striped
+
+
+def test_fabric_two_tone_and_print_colours() -> None:
+    params = {**FABRIC, "hue": 0.62, "saturation": 0.6, "value": 0.7, "weave": 0.0}
+    two_tone = _layers("fabric", {**params, "pattern": 1.0})
+    hsv = kornia.color.rgb_to_hsv(two_tone.basecolor[None])[0]
+    cell = torch.arange(SIZE) // PITCH
+    warp_over = (cell.view(1, -1) + cell.view(-1, 1)) % 2 == 0  # plain weave: checkerboard of floats
+    assert abs(_mean_hue(hsv[0][warp_over] / (2.0 * math.pi))[0] - 0.62) < 0.01
+    assert hsv[1][warp_over].mean() > 0.5 > 0.15 > hsv[1][~warp_over].mean()  # dyed warp, undyed weft
+    printed = _layers("fabric", {**params, "pattern": 4.0, "accent_hue": 0.5})
+    hue = _hue_turns(printed.basecolor)
+    ink = ((hue - 0.12).abs() < 0.03).float().mean()  # the accent: 0.62 + 0.5 turns
+    assert 0.05 < ink < 0.5
