@@ -12,10 +12,10 @@ import torch
 from brdfgan.core.svbrdf import split_maps, srgb_to_linear
 from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
-from brdfgan.data.materials.families import asphalt, paper, pavers, plaster, terrazzo
+from brdfgan.data.materials.families import asphalt, leaves, paper, pavers, plaster, terrazzo
 
 SIZE = 64
-MODULES = ("paper", "plaster", "terrazzo", "pavers", "asphalt")
+MODULES = ("paper", "plaster", "terrazzo", "pavers", "asphalt", "leaves")
 # Polished terrazzo is flat but for its pits (which may be absent); its own test checks that.
 FLAT = ("terrazzo",)
 
@@ -378,3 +378,72 @@ def test_asphalt_relief_is_resolution_independent() -> None:
         return height.std().item() / size
 
     assert relief(64) == pytest.approx(relief(128), rel=0.1)
+
+
+# --- leaves -----------------------------------------------------------------------------------
+
+SOIL, MOSS, BARK = 0.5, 1.5, 2.5
+
+
+def _leaf_texels(
+    params: dict[str, float], seed: int = 0
+) -> tuple[MaterialLayers, MaterialLayers, torch.Tensor]:
+    """Bare ground and the same ground under leaves, and where the leaves are.
+
+    Every random draw happens whatever ``cover`` is, so the same seed gives the same ground and
+    the texels whose colour changes are the leaves.
+    """
+    bare = _layers(leaves.FAMILY, {**params, "cover": 0.0}, seed)
+    covered = _layers(leaves.FAMILY, {**params, "cover": params.get("cover", 0.9)}, seed)
+    leaf = (covered.basecolor - bare.basecolor).abs().sum(dim=0) > 1e-3
+    return bare, covered, leaf
+
+
+@pytest.mark.parametrize("ground", [SOIL, MOSS, BARK])
+def test_leaves_lie_on_top_of_the_ground(ground: float) -> None:
+    for seed in range(2):
+        bare, covered, leaf = _leaf_texels({"ground": ground, "cover": 0.9}, seed)
+        assert leaf.float().mean() > 0.4  # three layers of leaves hide most of the ground
+        lift = (covered.height - bare.height)[0][leaf]
+        assert (lift > 0).float().mean() > 0.95
+        # Overlaps stack: the pile is several leaf steps high, far more relief than the ground's.
+        step = leaves.FAMILY.defaults()["relief"] * SIZE
+        assert covered.height[0][leaf].std() > 0.4 * step
+
+
+@pytest.mark.parametrize(
+    ("season", "hue_range"), [(0.0, (0.2, 0.3)), (1 / 3, (0.1, 0.16)), (2 / 3, (0.0, 0.05))]
+)
+def test_leaf_colour_follows_the_season(season: float, hue_range: tuple[float, float]) -> None:
+    _, covered, leaf = _leaf_texels({"season": season, "color_variation": 0.0, "veins": 0.0})
+    hue = _mean_hue(covered.basecolor[:, leaf][:, :, None])
+    assert hue_range[0] <= hue <= hue_range[1]
+
+
+def test_fresh_leaves_are_glossier_than_dry_ones_and_the_ground() -> None:
+    means = {}
+    for season in (0.0, 1.0):
+        bare, covered, leaf = _leaf_texels({"season": season, "color_variation": 0.0, "leaf_roughness": 0.3})
+        means[season] = covered.roughness[0][leaf].mean().item()
+        assert bare.roughness.mean() > 0.85
+    assert means[0.0] == pytest.approx(0.3, abs=0.05)  # waxy fresh leaves (veins a little rougher)
+    assert means[1.0] == pytest.approx(leaves._DRY_ROUGHNESS, abs=0.05)
+
+
+def test_leaves_are_not_cut_at_the_cell_midlines() -> None:
+    # Only the 2 × 2 nearest lattice cells are searched, which holds while no leaf reaches past
+    # the midline of the next cell. A longer leaf would be cut off along the lines halfway between
+    # cell centres, piling up outline crossings on them compared with the lines beside them.
+    assert leaves._MAX_HALF_LENGTH < 0.5 + leaves._CENTRE_MARGIN
+    cells, size = 4, 160
+    crossings = torch.zeros(size)
+    for seed in range(4):
+        params = {**leaves.FAMILY.defaults(), "cover": 0.5}
+        cover = leaves.leaf_layer(size, cells, params, torch.Generator().manual_seed(seed)).cover > 0.5
+        for dim in (0, 1):
+            # Outline crossings between texel k − 1 and k, summed along the other axis.
+            crossings += (cover ^ torch.roll(cover, 1, dims=dim)).float().sum(dim=1 - dim)
+    pitch = size // cells
+    midlines = torch.arange(pitch // 2, size, pitch)
+    beside = torch.cat([midlines - 3, midlines - 2, midlines + 2, midlines + 3])
+    assert crossings[midlines].mean() < 1.5 * crossings[beside].mean()
