@@ -65,7 +65,8 @@ def aggregate_stones(size: int, cells: int, generator: torch.Generator) -> tuple
     f1, _, cell_id = worley(size, cells, generator, jitter=0.9)
     attrs = random_per_cell(cell_id, cells * cells, generator, channels=1)[0]
     radius = 0.3 + 0.25 * attrs
-    dome = torch.sqrt((1.0 - (f1 / radius) ** 2).clamp(min=0.0))
+    r = f1 / radius
+    dome = torch.sqrt((1.0 - r * r).clamp(min=0.0))
     return dome * radius / 0.55, cell_id, (f1 < radius).float()
 
 
@@ -131,7 +132,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     tone = random_per_cell(stone_id, cells * cells, generator, channels=3)
     stone_rgb = hsv_to_rgb(
         0.03 + 0.09 * tone[0],
-        0.04 + 0.22 * tone[1] ** 2,
+        0.04 + 0.22 * tone[1] * tone[1],
         (params["aggregate_value"] * (0.7 + 0.6 * tone[2]) * (1.0 + 0.2 * sand)).clamp(0.0, 1.0),
     )
     basecolor = torch.lerp(bitumen, stone_rgb, bare[None])

@@ -87,7 +87,7 @@ def cobblestones(size: int, cells: int, joint_width: float, generator: torch.Gen
     # Radial position from the feature point (0) to the border (1): a dome over the whole sett
     # whose sides round steeply down into the joint.
     radial = (2.0 * f1 / (f1 + f2).clamp(min=1e-6)).clamp(0.0, 1.0)
-    dome = torch.sqrt((1.0 - radial**2).clamp(min=0.0))
+    dome = torch.sqrt((1.0 - radial * radial).clamp(min=0.0))
     profile = torch.sqrt(smoothstep(joint_width, joint_width + _COBBLE_BEVEL, edge)) * (0.55 + 0.45 * dome)
     zeros = torch.zeros(size, size)
     return Paving(mask, profile, cell_id, cells * cells, zeros, zeros)

@@ -119,9 +119,9 @@ def pit_field(size: int, density: float, generator: torch.Generator) -> Tensor:
     radius = 0.12 + 0.2 * attrs[0][cell]
     cx = radius + (1.0 - 2.0 * radius) * attrs[1][cell]
     cy = radius + (1.0 - 2.0 * radius) * attrs[2][cell]
-    distance = torch.sqrt((x - x.floor() - cx) ** 2 + (y - y.floor() - cy) ** 2) / radius
+    dx, dy = x - x.floor() - cx, y - y.floor() - cy
     present = attrs[3][cell] < 0.3 * density
-    return (1.0 - distance**2).clamp(min=0.0) * present
+    return (1.0 - (dx * dx + dy * dy) / (radius * radius)).clamp(min=0.0) * present
 
 
 def _generate(params: Mapping[str, float], size: int, generator: torch.Generator) -> MaterialLayers:
