@@ -101,16 +101,17 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     stones, stone_id, inside = aggregate_stones(size, cells, generator)
     wear = params["wear"]
     # Traffic grinds the tops flat: heights above the cap are mostly removed.
-    cap = 1.0 - 0.6 * wear
+    cap = 1.0 - 0.5 * wear
     ground = (stones - cap).clamp(min=0.0)
     stones = stones - 0.85 * ground
     flat_top = smoothstep(0.0, 0.05, ground)
 
     sand = value_noise(size, min(size, 4 * cells), generator) - 0.5  # sand and filler in the bitumen
     surface = torch.maximum(stones, torch.full_like(stones, _BITUMEN_FILL) + 0.15 * sand)
-    # Bitumen wears off the stone tops first: the bare part grows with ``aggregate`` and wear.
+    # Bitumen wears off the stone tops first: the bare part grows with ``aggregate`` and wear,
+    # and tops ground flat are bare stone whatever the coating was.
     bare_from = 1.0 - 0.9 * min(params["aggregate"] + 0.3 * wear, 1.0)
-    bare = inside * smoothstep(bare_from, bare_from + 0.1, stones)
+    bare = inside * torch.maximum(smoothstep(bare_from, bare_from + 0.1, stones), flat_top)
 
     crack = crack_network(size, params["cracks"], generator)
     marking = MARKINGS[min(max(int(params["marking"]), 0), len(MARKINGS) - 1)]

@@ -178,7 +178,7 @@ def ground_surface(ground: str, size: int, generator: torch.Generator) -> tuple[
         return clods, 1.0 + 0.2 * clods
     if ground == "moss":
         clumps = value_noise(size, 12, generator)
-        fuzz = value_noise(size, min(size, 128), generator)
+        fuzz = value_noise(size, min(size, 256), generator)  # fronds of a millimetre or two
         height = 1.2 * clumps + 0.6 * fuzz - 0.9
         return height, 0.8 + 0.25 * clumps + 0.2 * fuzz
     u, _ = texel_coordinates(size)
