@@ -28,7 +28,8 @@ Parameters:
         and 1 (it is always very rough).
     relief: relief strength, a multiplier of each mode's typical depth (fibres and folds, flutes,
         granules).
-    scale: features per image width: fibre flocs (paper), flutes (cardboard) or granules (cork).
+    scale: features per image width: fibre flocs (paper), flutes (cardboard) or, doubled, granules
+        (cork).
     creases: number of straight folds, as a fraction of the maximum (paper and cardboard).
     ink: fraction of the print-layout blocks that carry print (paper and cardboard).
 """
@@ -263,7 +264,7 @@ FAMILY = MaterialFamily(
             0.8, 0.35, 0.95, "perceptual roughness of paper or liner (cork: halfway to 1)"
         ),
         "relief": Parameter(1.0, 0.3, 2.0, "relief strength, multiplier of the mode's typical depth"),
-        "scale": Parameter(20.0, 8.0, 48.0, "fibre flocs, flutes or cork granules per image width"),
+        "scale": Parameter(20.0, 8.0, 48.0, "fibre flocs, flutes or half the cork granules per image width"),
         "creases": Parameter(0.3, 0.0, 1.0, f"folds as a fraction of {MAX_CREASES} (paper, cardboard)"),
         "ink": Parameter(0.3, 0.0, 1.0, "fraction of print blocks carrying print (paper, cardboard)"),
     },
