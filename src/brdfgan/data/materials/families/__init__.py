@@ -1,7 +1,8 @@
 """The registry of material families: name → :class:`~brdfgan.data.materials.base.MaterialFamily`.
 
 Each module in this package exports one ``FAMILY``; the registry is the single list the data
-generator, configs and tests draw from.
+generator, configs and tests draw from. Its order is the round-robin order of a dataset's
+materials (material ``i`` is family ``i mod len``), so new families go at the end.
 """
 
 from __future__ import annotations
@@ -11,15 +12,30 @@ from types import MappingProxyType
 
 from brdfgan.data.materials.base import MaterialFamily
 from brdfgan.data.materials.families import (
+    anodized_metal,
+    asphalt,
     bricks,
     brushed_metal,
     concrete,
+    fabric,
     ground,
     leather,
+    leaves,
     marble,
+    metallic_paint,
+    mosaic,
+    painted_wood,
+    paper,
+    pavers,
+    plaster,
+    plastic,
+    polished_metal,
+    relief_tiles,
     rusted_metal,
     stone,
+    terrazzo,
     tiles,
+    tread_plate,
     wood,
 )
 from brdfgan.errors import UserError
@@ -38,6 +54,22 @@ FAMILIES: Mapping[str, MaterialFamily] = MappingProxyType(
             leather,
             concrete,
             ground,
+            # Added for coverage of real surfaces (issue 15); each module says which gap it fills.
+            polished_metal,
+            metallic_paint,
+            anodized_metal,
+            tread_plate,
+            mosaic,
+            relief_tiles,
+            painted_wood,
+            plastic,
+            fabric,
+            paper,
+            plaster,
+            terrazzo,
+            pavers,
+            asphalt,
+            leaves,
         )
     }
 )
