@@ -17,6 +17,8 @@ from torch import Tensor
 from brdfgan.core.svbrdf import split_maps, srgb_to_linear
 from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
+from brdfgan.data.materials.families import mosaic
+from brdfgan.data.materials.noise import worley
 
 SIZE = 128
 MODULES = ("mosaic", "relief_tiles", "painted_wood", "plastic", "fabric")
@@ -72,6 +74,44 @@ def test_dielectric_with_plausible_albedo_and_relief(module: str) -> None:
         assert linear.min() >= low - 1e-4 and linear.max() <= high + 1e-4, params
         # Every one of these surfaces has visible relief: normals are not near-flat.
         assert _tilt(maps).mean() > MIN_TILT[module], params
+
+
+@pytest.mark.parametrize(
+    ("module", "params", "sizes"),
+    [
+        ("mosaic", {"irregular": 0.0}, (256, 512)),
+        ("mosaic", {"irregular": 1.0}, (256, 512)),
+        ("relief_tiles", {}, (256, 512)),
+        # Board grooves and latewood edges are a few texels wide only from 512² up.
+        ("painted_wood", {"chipping": 0.6}, (512, 1024)),
+        ("plastic", {"mode": 4.0}, (256, 512)),
+        ("fabric", {"threads": 32.0}, (256, 512)),
+    ],
+)
+def test_relief_is_resolution_independent(
+    module: str, params: dict[str, float], sizes: tuple[int, int]
+) -> None:
+    # Heights are in texels ∝ size and features per image width, so once features span a few
+    # texels the mean normal tilt barely changes with the resolution.
+    tilts = [_tilt(_maps(module, params, size=size)).mean().item() for size in sizes]
+    assert tilts[0] == pytest.approx(tilts[1], rel=0.3)
+
+
+def test_mosaic_half_resolution_cells_match_full_resolution_worley() -> None:
+    f1, f2, cell = mosaic._cells(512, 20, torch.Generator().manual_seed(0))
+    g1, g2, gcell = worley(512, 20, torch.Generator().manual_seed(0), jitter=0.85)
+    # The distances (in pitches; a texel is 0.04 pitch) match up to the bilinear interpolation,
+    # worst at their creases and at the feature points. What the mosaic uses is the distance to
+    # the cell border, which shapes grout and bevel (edge < 0.2 pitch): off by well under a
+    # texel on average (a one-texel misalignment would be ~0.04 everywhere).
+    edge, half_res_edge = 0.5 * (g2 - g1), 0.5 * (f2 - f1)
+    assert (f1 - g1).abs().max() < 0.05 and (f2 - g2).abs().max() < 0.05
+    error = (half_res_edge - edge)[edge < 0.2].abs()
+    assert error.max() < 0.035 and error.mean() < 0.005
+    # Ids differ only right at the cell borders (edge < 0.03 pitch), where even the narrowest
+    # grout (half width 0.02, bevel 0.12) leaves the tessera colour a weight below 2 %.
+    differ = cell != gcell
+    assert differ.float().mean() < 0.05 and edge[differ].max() < 0.03
 
 
 def test_mosaic_grout_is_lower_and_rougher_than_the_tesserae() -> None:
@@ -345,10 +385,15 @@ def test_fabric_two_tone_and_print_colours() -> None:
     params = {**FABRIC, "hue": 0.62, "saturation": 0.6, "value": 0.7, "weave": 0.0}
     two_tone = _layers("fabric", {**params, "pattern": 1.0})
     hsv = kornia.color.rgb_to_hsv(two_tone.basecolor[None])[0]
-    cell = torch.arange(SIZE) // PITCH
-    warp_over = (cell.view(1, -1) + cell.view(-1, 1)) % 2 == 0  # plain weave: checkerboard of floats
+    cell, offset = torch.arange(SIZE) // PITCH, torch.arange(SIZE) % PITCH
+    # Plain weave: warp floats on a checkerboard of thread crossings; their middle texels, clear
+    # of the gaps where the crossing thread shows, are warp.
+    floats = (cell.view(1, -1) + cell.view(-1, 1)) % 2 == 0
+    middle = (offset > 0) & (offset < PITCH - 1)
+    warp_over = floats & middle.view(1, -1) & middle.view(-1, 1)
+    weft_over = ~floats & middle.view(1, -1) & middle.view(-1, 1)
     assert abs(_mean_hue(hsv[0][warp_over] / (2.0 * math.pi))[0] - 0.62) < 0.01
-    assert hsv[1][warp_over].mean() > 0.5 > 0.15 > hsv[1][~warp_over].mean()  # dyed warp, undyed weft
+    assert hsv[1][warp_over].mean() > 0.5 > 0.15 > hsv[1][weft_over].mean()  # dyed warp, undyed weft
     printed = _layers("fabric", {**params, "pattern": 4.0, "accent_hue": 0.5})
     hue = _hue_turns(printed.basecolor)
     ink = ((hue - 0.12).abs() < 0.03).float().mean()  # the accent: 0.62 + 0.5 turns

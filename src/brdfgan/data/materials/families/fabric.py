@@ -2,14 +2,15 @@
 
 Depicts a woven cloth seen close up: vertical warp threads and horizontal weft threads crossing
 over and under each other (plain weave 1/1, or a 2/2 twill with its diagonal ribs), each thread
-with a rounded cross-section, rising where it floats over the crossing threads and dipping where
-it passes under them, with the slanted ridges of the yarn's twist. Colour comes from the yarns:
-one colour throughout, a two-tone cloth (dyed warp over an undyed weft, like denim or chambray),
-stripes (warp yarns in a repeating colour sequence), checks or plaid (warp and weft both in a
-sequence, so the crossings mix them), or a print (dots or five-petal flowers on a half-drop grid,
-inked onto the thread crowns more than into the gaps). Threads differ slightly in shade and
-sheen; fibres aligned along the crowns give a slight sheen (lower roughness) there, while the
-gaps between threads are darker and rougher. Fabric scatters light widely: roughness 0.6–1.
+a continuous tube with a rounded cross-section, rising where it floats over the crossing threads
+and sinking where it passes under them, with the slanted ridges of the yarn's twist. Colour
+comes from the yarns: one colour throughout, a two-tone cloth (dyed warp over an undyed weft,
+like denim or chambray), stripes (warp yarns in a repeating colour sequence), checks or plaid
+(warp and weft both in a sequence, so the crossings mix them), or a print (dots or five-petal
+flowers on a half-drop grid, inked onto the thread crowns more than into the gaps). Threads
+differ slightly in shade and sheen; fibres aligned along the crowns give a slight sheen (lower
+roughness) there, while the gaps between threads are darker and rougher. Fabric scatters light
+widely: roughness 0.6–1.
 
 Why it is in the dataset: the original families contain only a plain-weave mode of the leather
 family in one colour; clothes, upholstery, bags and tablecloths are among the most photographed
@@ -97,21 +98,27 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     i, fu = _thread_axis(size, threads)
     j, fv = _thread_axis(size, threads)
     i, fu, j, fv = i.view(1, size), fu.view(1, size), j.view(size, 1), fv.view(size, 1)
-    # Position in the weave repeat: the warp floats over the weft for the first float_length
-    # steps, then passes under it; (i + j) shifts the float by one each thread (the twill diagonal).
-    phase = torch.remainder(i + j, 2 * float_length)
-    warp_over = phase < float_length
-    warp_along = (phase + fv) / float_length  # position along the warp's current float
-    weft_along = (phase - float_length + fu) / float_length
-    warp_across, weft_across = torch.sin(math.pi * fu).sqrt(), torch.sin(math.pi * fv).sqrt()
-    # A thread is highest mid-float and dips where it goes under; yarn twist adds slanted ridges.
-    warp_height = warp_across * (0.55 + 0.45 * torch.sin(math.pi * warp_along.clamp(0.0, 1.0)))
-    weft_height = weft_across * (0.55 + 0.45 * torch.sin(math.pi * weft_along.clamp(0.0, 1.0)))
-    warp_twist = torch.sin(2.0 * math.pi * (3.0 * fv + fu))
-    weft_twist = torch.sin(2.0 * math.pi * (3.0 * fu + fv))
-    relief = torch.where(warp_over, warp_height, weft_height)
+    # Every thread is a continuous tube: a rounded cross-section with finite slopes (so the
+    # normals do not sharpen with the resolution), at a level that rises over its floats and
+    # sinks under the crossing threads, periodic over the weave repeat of 2L threads. Warp i
+    # floats over the rows y in [-i, L - i) (mod 2L), weft j over the columns x in [L - j, 2L - j):
+    # (i + j) shifts the floats by one each thread, the twill's diagonal. The visible surface is
+    # the higher of the two threads at each texel.
+    length = float(float_length)
+    warp_level = smoothstep(-0.7, 0.7, torch.cos(math.pi * (j + fv + i - 0.5 * length) / length))
+    weft_level = smoothstep(-0.7, 0.7, torch.cos(math.pi * (i + fu + j - 1.5 * length) / length))
+    # sin^1.5: full round tops, and valleys between threads that flatten at the bottom instead
+    # of a V as sharp as the texel grid.
+    warp_across, weft_across = torch.sin(math.pi * fu) ** 1.5, torch.sin(math.pi * fv) ** 1.5
+    warp_height = warp_across * (0.45 + 0.55 * warp_level)
+    weft_height = weft_across * (0.45 + 0.55 * weft_level)
+    warp_over = warp_height >= weft_height
+    relief = torch.maximum(warp_height, weft_height)
+    # The yarn's twist: slanted ridges along each thread, two per thread pitch.
+    warp_twist = torch.sin(2.0 * math.pi * (2.0 * fv + fu))
+    weft_twist = torch.sin(2.0 * math.pi * (2.0 * fu + fv))
     twist = torch.where(warp_over, warp_twist, weft_twist)
-    height = params["relief"] * (size / threads) * (relief + 0.08 * twist * relief)
+    height = params["relief"] * (size / threads) * (relief + 0.05 * twist * relief)
 
     # Palette: main yarn, an accent that contrasts in hue and brightness, and a darker third.
     hue, saturation, value = params["hue"], params["saturation"], params["value"]

@@ -38,12 +38,13 @@ from torch import Tensor
 
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
+from brdfgan.data.materials.families.polished_metal import wrapped_upsample
 from brdfgan.data.materials.noise import (
-    gradient_noise,
     hsv_to_rgb,
     random_per_cell,
     smoothstep,
     texel_coordinates,
+    value_noise,
     worley,
 )
 
@@ -74,6 +75,24 @@ def _offsets_from_centre(x: Tensor, cell: Tensor, count: int, period: int) -> Te
     return torch.remainder(x - centre[cell] + 0.5 * period, period) - 0.5 * period
 
 
+def _cells(size: int, n: int, generator: torch.Generator) -> tuple[Tensor, Tensor, Tensor]:
+    """Worley ``(f1, f2, cell_id)`` of ``n`` cells per side, from 512² up computed at half
+    resolution: Worley noise is most of the family's cost, a tessera is at least 21 texels wide at
+    1024², and the ids, read nearest-neighbour, can only be off by a texel at a cell border, which
+    lies in the grout.
+
+    Shape: each ``(size, size)``.
+    """
+    if size < 512 or size % 2:
+        return worley(size, n, generator, jitter=0.85)
+    f1, f2, cell = worley(size // 2, n, generator, jitter=0.85)
+    return (
+        wrapped_upsample(f1, 2),
+        wrapped_upsample(f2, 2),
+        cell.repeat_interleave(2, 0).repeat_interleave(2, 1),
+    )
+
+
 def _palette(params: Mapping[str, float], generator: torch.Generator) -> Tensor:
     """The sRGB colours of the mosaic's glass batches. Shape: ``(PALETTE_SIZE, 3)``."""
     draws = torch.rand((3, 1, PALETTE_SIZE), generator=generator)
@@ -89,7 +108,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     x, y = u * n, v * n
     count = n * n
     if params["irregular"] >= 0.5:
-        f1, f2, cell = worley(size, n, generator, jitter=0.85)
+        f1, f2, cell = _cells(size, n, generator)
         # Half the gap between the two nearest feature points: the distance to the cell border
         # (the bisector) along the line joining them, in pitch units.
         edge = 0.5 * (f2 - f1)
@@ -113,7 +132,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
 
     # One noise field at a few cells per tessera: sand grains in the grout, a faint waviness
     # and internal streaks in the glass.
-    grain = gradient_noise(size, min(size, 4 * n), generator)
+    grain = 2.0 * value_noise(size, min(size, 4 * n), generator) - 1.0  # in [-1, 1]
     height = profile * (depth + tilt + 0.03 * depth * grain) + (1.0 - face) * 0.1 * depth * grain
 
     palette = _palette(params, generator)

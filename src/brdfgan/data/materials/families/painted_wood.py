@@ -37,8 +37,8 @@ from torch import Tensor
 
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
+from brdfgan.data.materials.families.polished_metal import smooth_fbm
 from brdfgan.data.materials.noise import (
-    gradient_noise,
     hsv_to_rgb,
     random_per_cell,
     smoothstep,
@@ -49,7 +49,7 @@ from brdfgan.data.materials.noise import (
 # Relief as fractions of the image width, so normals look alike at every resolution.
 _GROOVE_DEPTH = 0.004
 _GROOVE_WIDTH = 0.003
-_BEVEL_WIDTH = 0.005
+_BEVEL_WIDTH = 0.006
 _PAINT_THICKNESS = 0.0012
 # Roughness of a matte and of a high-gloss coat, and of raw weathered wood.
 _MATTE, _GLOSSY, _RAW_WOOD = 0.7, 0.06, 0.8
@@ -78,7 +78,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     # features run long along the board, like fibres.
     attrs = random_per_cell(board, n, generator, channels=3)
     rows = torch.arange(size).view(size, 1) + (attrs[0] * size).long()
-    warp_field = gradient_noise(size, 4, generator)
+    warp_field = smooth_fbm(size, 4, generator, octaves=2, texels_per_cell=16)  # smooth: coarse, upsampled
     fibre_field = value_noise(size, min(size, 32), generator)
     warp = warp_field[(rows[:, 0] * n) % size]
     fibre = fibre_field[(rows[:, 0] * 8) % size]
@@ -87,7 +87,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     # earlywood, abrupt latewood).
     ring_coord = params["grain_scale"] * (lv + 0.25 * warp) + 4.0 * attrs[1]
     ring = ring_coord - ring_coord.floor()
-    latewood = smoothstep(0.55, 0.95, ring) * (1.0 - smoothstep(0.95, 1.0, ring))
+    latewood = smoothstep(0.5, 0.9, ring) * (1.0 - smoothstep(0.9, 1.0, ring))
     grain = latewood + 0.5 * fibre
 
     wood_draws = torch.rand(2, generator=generator)

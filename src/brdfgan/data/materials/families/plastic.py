@@ -38,6 +38,7 @@ from torch import Tensor
 
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
+from brdfgan.data.materials.families.polished_metal import smooth_fbm
 from brdfgan.data.materials.noise import (
     gradient_noise,
     hsv_to_rgb,
@@ -97,21 +98,22 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     amplitude = _ORANGE_PEEL if mode == "smooth" else params["relief"]
     height = amplitude * pitch * relief
 
-    # Scuffs: patches with ragged outlines (a coarse and a finer octave); wear = 0 puts the
-    # threshold above the field's maximum.
-    scuff_field = value_noise(size, 6, generator) + 0.15 * gradient_noise(size, 24, generator)
-    threshold = 1.17 - 0.7 * params["wear"]
-    scuff = smoothstep(threshold, threshold + 0.06, scuff_field)
+    # Scuffs: patches with ragged outlines (three octaves from 6 cells per width, a smooth
+    # field evaluated coarse and upsampled); fbm stays within [-1, 1], so wear = 0 puts the
+    # threshold at its maximum and leaves no scuff, wear = 1 scuffs more than half the surface.
+    scuff_field = smooth_fbm(size, 6, generator, octaves=3, texels_per_cell=8)
+    threshold = (1.0 - params["wear"]) ** 2 - 0.1 * params["wear"]
+    scuff = smoothstep(threshold, threshold + 0.08, scuff_field)
     wear = params["wear"]
 
     hue, saturation, value = params["hue"], params["saturation"], params["value"]
     if rubber:
         saturation, value = 0.5 * saturation, 0.03 + 0.25 * value
         # Fine matte micro-texture of moulded rubber: a fixed fraction of the image width.
-        micro = gradient_noise(size, min(size, 128), generator)
+        micro = 2.0 * value_noise(size, min(size, 128), generator) - 1.0
         height = height + 0.05 * (size / 128) * micro
     colour = hsv_to_rgb(torch.tensor([[hue]]), torch.tensor([[saturation]]), torch.tensor([[value]]))
-    flow = 1.0 + 0.02 * (scuff_field - 0.5)  # faint flow marks of the moulding
+    flow = 1.0 + 0.01 * scuff_field  # faint flow marks of the moulding
     if rubber:
         # Dust settles on the worn raised parts and greys them.
         dust = (0.15 * wear * relief * scuff)[None]

@@ -40,11 +40,11 @@ from torch import Tensor
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
 from brdfgan.data.materials.noise import (
-    gradient_noise,
     hsv_to_rgb,
     random_per_cell,
     smoothstep,
     texel_coordinates,
+    value_noise,
 )
 
 # Grout depth as a fraction of the image width, so normals look alike at every resolution.
@@ -110,7 +110,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     mu, mv = lu * repeat, lv * repeat
     motif = _motif(pattern, mu - mu.floor(), mv - mv.floor(), generator) * face
 
-    grain = gradient_noise(size, min(size, 48), generator)  # grout sand, glaze mottling
+    grain = 2.0 * value_noise(size, min(size, 48), generator) - 1.0  # grout sand, glaze mottling
     depth = _GROUT_DEPTH * size
     motif_width = size / (n * repeat)
     height = depth * profile + params["relief"] * motif_width * motif
