@@ -117,11 +117,13 @@ def validate_maps(maps: Tensor, *, normal_tolerance: float = NORMAL_UNIT_TOLERAN
         raise InvalidMapsError(f"maps contain NaN or infinite values in: {', '.join(bad)}")
     parts = split_maps(maps)
     for name in ("basecolor", "roughness", "metallic"):
-        values = getattr(parts, name)
-        low, high = values.min().item(), values.max().item()
+        low_t, high_t = torch.aminmax(getattr(parts, name))
+        low, high = low_t.item(), high_t.item()
         if low < 0.0 or high > 1.0:
             raise InvalidMapsError(f"{name} must lie in [0, 1], found values in [{low:.4g}, {high:.4g}]")
-    lengths = torch.linalg.vector_norm(parts.normal, dim=-3)
+    # Summing the three products, not linalg.vector_norm over the strided channel dimension:
+    # the same lengths several times faster (docs/conventions.md#speed).
+    lengths = (parts.normal * parts.normal).sum(dim=-3).sqrt()
     worst = (lengths - 1.0).abs().max().item()
     if worst > normal_tolerance:
         raise InvalidMapsError(

@@ -101,14 +101,24 @@ def crop_maps(maps: Tensor, transform: CropTransform, out_size: int) -> Tensor:
     check_map_shape(maps)
     if maps.ndim != 3 or maps.shape[-1] != maps.shape[-2]:
         raise ValueError(f"expected square maps of shape (8, S, S), got {tuple(maps.shape)}")
+    return _crop_linear(_linear_basecolor(maps), transform, out_size)
+
+
+def _linear_basecolor(maps: Tensor) -> Tensor:
+    """A copy of the maps with the base colour decoded to linear, for resampling."""
     work = maps.clone()
     work[BASECOLOR] = srgb_to_linear(maps[BASECOLOR])
+    return work
+
+
+def _crop_linear(work: Tensor, transform: CropTransform, out_size: int) -> Tensor:
+    """:func:`crop_maps` of maps whose base colour is already linear (:func:`_linear_basecolor`)."""
     # Source texels per output texel; pre-filter so the rotation samples ~1:1.
-    texels_per_output = transform.scale * maps.shape[-1] / out_size
-    source = _prefilter(work, max(out_size, round(maps.shape[-1] / max(texels_per_output, 1.0))))
+    texels_per_output = transform.scale * work.shape[-1] / out_size
+    source = _prefilter(work, max(out_size, round(work.shape[-1] / max(texels_per_output, 1.0))))
     pad = 2
     padded = F.pad(source[None], (pad, pad, pad, pad), mode="circular")
-    grid = _sampling_grid(transform, out_size, source.shape[-1], pad).to(maps.dtype)
+    grid = _sampling_grid(transform, out_size, source.shape[-1], pad).to(work.dtype)
     out = F.grid_sample(padded, grid, mode="bilinear", padding_mode="border", align_corners=False)[0]
 
     cos, sin = math.cos(transform.angle), math.sin(transform.angle)
@@ -134,5 +144,9 @@ def random_crops(
         - maps: ``(8, S, S)``
         - output: ``(count, 8, out_size, out_size)``
     """
+    check_map_shape(maps)
+    if maps.ndim != 3 or maps.shape[-1] != maps.shape[-2]:
+        raise ValueError(f"expected square maps of shape (8, S, S), got {tuple(maps.shape)}")
     transforms = [sampling.sample(generator) for _ in range(count)]
-    return torch.stack([crop_maps(maps, t, out_size) for t in transforms]), transforms
+    work = _linear_basecolor(maps)  # once per material, not per crop
+    return torch.stack([_crop_linear(work, t, out_size) for t in transforms]), transforms
