@@ -115,6 +115,8 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
         du = _offsets_from_centre(x, cell, count, n)
         dv = _offsets_from_centre(y, cell, count, n)
     else:
+        # Per axis, a row (1, size) and a column (size, 1), broadcast where they combine.
+        x, y = x[:1], y[:, :1]
         col, row = x.floor().long().clamp(max=n - 1), y.floor().long().clamp(max=n - 1)
         du, dv = x - x.floor() - 0.5, y - y.floor() - 0.5
         edge = 0.5 - torch.maximum(du.abs(), dv.abs())

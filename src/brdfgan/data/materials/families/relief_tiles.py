@@ -60,7 +60,9 @@ def _motif(pattern: str, mu: Tensor, mv: Tensor, generator: torch.Generator) -> 
     """Height of one motif in [0, 1] over a motif cell (``mu``, ``mv`` in [0, 1)).
 
     Every motif falls to the same value along all four borders of the cell or repeats with it,
-    so whole numbers of motifs join seamlessly. Shape: ``(H, W)`` → ``(H, W)``.
+    so whole numbers of motifs join seamlessly.
+
+    Shape: ``mu`` and ``mv`` broadcastable (e.g. ``(1, W)`` and ``(H, 1)``) → ``(H, W)``.
     """
     cx, cy = mu - 0.5, mv - 0.5
     r = torch.sqrt(cx * cx + cy * cy)
@@ -97,8 +99,10 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     n = max(1, round(params["tile_count"]))
     repeat = max(1, round(params["motif_repeat"]))
     pattern = PATTERNS[min(max(int(params["pattern"]), 0), len(PATTERNS) - 1)]
+    # Tile coordinates along each axis, a row (1, size) and a column (size, 1), broadcast to the
+    # texel grid only where both axes combine.
     u, v = texel_coordinates(size)
-    x, y = u * n, v * n
+    x, y = u[:1] * n, v[:, :1] * n
     col, row = x.floor().long().clamp(max=n - 1), y.floor().long().clamp(max=n - 1)
     lu, lv = x - x.floor(), y - y.floor()
 
