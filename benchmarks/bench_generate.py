@@ -1,11 +1,14 @@
 """Dataset generation benchmark: samples per hour and where the time goes.
 
-For each case, one material goes through the whole production path of
+For each case, materials go through the whole production path of
 :func:`brdfgan.data.generation.material_samples` — family maps at the material resolution,
-7 crops, 3 captures per crop (environment + flash, Mitsuba, auto exposure) — and every sample
-is encoded as it would be written to a shard. The time inside ``mi.render`` is Mitsuba's; the
-rest (material painting, crops, environment building, scene updates, exposure, PNG encoding) is
-our overhead.
+crops, captures per crop (environment + flash, Mitsuba, auto exposure) — and every sample is
+encoded as it would be written to a shard. The first two cases are the paper-like protocol
+(7 crops × 3 captures per material); the last is the default model's v3 recipe
+(``conf/dataset_spec/default_model.yaml``: 512² materials, 2 crops × 1 capture, mixing,
+recolouring, randomised capture), composed from its config file. The time inside
+``mi.render`` is Mitsuba's; the rest (material painting, crops, environment building, scene
+updates, exposure, PNG encoding) is our overhead.
 
     python -m benchmarks.bench_generate [--materials N]
 """
@@ -17,19 +20,46 @@ import json
 import subprocess
 import sys
 import time
+from pathlib import Path
+from typing import Any
 
-# (resolution, spp, material resolution)
-CASES: list[tuple[int, int, int]] = [(256, 64, 1024), (512, 196, 2048)]
+# (resolution, spp, material resolution) of the paper-like cases; "recipe" = the v3 recipe.
+CASES: list[str] = ["256,64,1024", "512,196,2048", "recipe"]
 
 
-def _measure(resolution: int, spp: int, material_resolution: int, materials: int) -> dict[str, float]:
+def _recipe_spec() -> Any:
+    from hydra import compose, initialize_config_dir
+
+    from brdfgan.data.generate_config import register_configs
+    from brdfgan.data.generation import spec_from_config
+
+    register_configs()
+    with initialize_config_dir(str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
+        cfg = compose("generate", overrides=["dataset_spec=default_model"])
+    return spec_from_config(cfg.dataset_spec)
+
+
+def _measure(case: str, materials: int) -> dict[str, float]:
+    from brdfgan.data.generation import single_torch_thread
+
+    with single_torch_thread():  # as run_generation does
+        return _measure_spec(case, materials)
+
+
+def _measure_spec(case: str, materials: int) -> dict[str, float]:
     from brdfgan.data.generation import DatasetSpec, MitsubaPhotographer, derive_seed, material_samples
     from brdfgan.data.lighting import build_environment_pools, load_environment
     from brdfgan.data.shards import encode_sample
 
-    spec = DatasetSpec(
-        materials=10 * materials, material_resolution=material_resolution, resolution=resolution, spp=spp
-    )
+    if case == "recipe":
+        spec = _recipe_spec()
+        # Enough materials per case for the recipe's few photos each to average out.
+        materials *= 8
+    else:
+        resolution, spp, material_resolution = map(int, case.split(","))
+        spec = DatasetSpec(
+            materials=10 * materials, material_resolution=material_resolution, resolution=resolution, spp=spp
+        )
     pools = build_environment_pools(spec.lighting, derive_seed(spec.seed, "lighting"))
     photographer = MitsubaPhotographer(spec)
     # Warm-up: Mitsuba kernel compilation and the environment cache are one-off costs of a run.
@@ -53,6 +83,9 @@ def _measure(resolution: int, spp: int, material_resolution: int, materials: int
         "mitsuba_s": photographer.mitsuba_seconds,
         "encode_s": encode_s,
         "bytes_per_sample": sum(len(b) for b in encoded.values()),
+        "resolution": spec.resolution,
+        "spp": spec.spp,
+        "material_resolution": spec.material_resolution,
     }
 
 
@@ -62,28 +95,32 @@ def main() -> None:
     parser.add_argument("--case", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.case:
-        print(json.dumps(_measure(*map(int, args.case.split(",")), args.materials)))
+        print(json.dumps(_measure(args.case, args.materials)))
         return
 
     rows = []
     for case in CASES:
         command = [sys.executable, "-m", "benchmarks.bench_generate", "--materials", str(args.materials)]
-        command += ["--case", ",".join(map(str, case))]
+        command += ["--case", case]
         out = subprocess.run(command, check=True, capture_output=True, text=True)
         rows.append((case, json.loads(out.stdout.strip().splitlines()[-1])))
 
     print(
-        f"\nDataset generation, {args.materials} material(s) × 7 crops × 3 captures per case "
-        "(after warm-up); overhead = everything outside mi.render; ratios against the first row\n"
+        f"\nDataset generation, {args.materials} material(s) × 7 crops × 3 captures per paper-like case, "
+        f"{8 * args.materials} materials of the v3 recipe (after warm-up); overhead = everything outside "
+        "mi.render; ratios against the first row\n"
     )
-    header = "resolution spp material-res samples s/sample samples/h in-mitsuba overhead MB/sample slower"
+    header = (
+        "case resolution spp material-res samples s/sample samples/h in-mitsuba overhead MB/sample slower"
+    )
     print("| " + " | ".join(header.split()) + " |")
     print("|" + "---|" * len(header.split()))
     base = rows[0][1]["total_s"] / rows[0][1]["samples"]
-    for (resolution, spp, material_resolution), m in rows:
+    for case, m in rows:
         per_sample = m["total_s"] / m["samples"]
         cells = [
-            f"{resolution}²", str(spp), f"{material_resolution}²", str(m["samples"]), f"{per_sample:.2f}",
+            "v3 recipe" if case == "recipe" else "paper-like", f"{m['resolution']}²", str(m["spp"]),
+            f"{m['material_resolution']}²", str(m["samples"]), f"{per_sample:.2f}",
             f"{3600.0 / per_sample:.0f}", f"{m['mitsuba_s'] / m['total_s']:.0%}",
             f"{1.0 - m['mitsuba_s'] / m['total_s']:.0%}", f"{m['bytes_per_sample'] / 1e6:.2f}",
             f"{per_sample / base:.1f}×",
