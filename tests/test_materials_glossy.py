@@ -223,7 +223,9 @@ def test_painted_wood_intact_paint_has_the_paint_colour_and_follows_gloss() -> N
         hsv = kornia.color.rgb_to_hsv(layers.basecolor[None])[0]
         hue = hsv[0][faces] / (2.0 * math.pi)
         assert (hue - 0.6).abs().max() < 0.005 and (hsv[2][faces] - 0.6).abs().max() < 0.03
-        assert layers.roughness[0][faces].mean().item() == pytest.approx(coat_roughness, abs=0.01)
+        coat = layers.roughness[0][faces]
+        assert coat.mean().item() == pytest.approx(coat_roughness, abs=0.01)
+        assert coat.min() > 0.6 * coat_roughness  # only faint brush streaks, never a mirror
 
 
 def test_painted_wood_clear_lacquer_shows_the_wood_grain() -> None:

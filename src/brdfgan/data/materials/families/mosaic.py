@@ -146,7 +146,7 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     basecolor = clamp_dielectric_albedo(grout + (tessera - grout) * face[None])
 
     # Glossy tesserae (each a little different), rough porous grout.
-    tessera_rough = params["tessera_roughness"] * (0.8 + 0.4 * attrs[4]) + 0.01 * grain
+    tessera_rough = params["tessera_roughness"] * (0.8 + 0.4 * attrs[4]) * (1.0 + 0.1 * grain)
     grout_rough = 0.9 + 0.05 * grain
     roughness = grout_rough + (tessera_rough - grout_rough) * face
     return MaterialLayers.dielectric(basecolor, height, roughness)

@@ -120,7 +120,8 @@ def _generate(params: Mapping[str, float], size: int, generator: torch.Generator
     height = grain_height + _PAINT_THICKNESS * size * coat - _GROOVE_DEPTH * size * (1.0 - face)
 
     coat_rough = _MATTE + (_GLOSSY - _MATTE) * params["gloss"] + 0.04 * (fibre - 0.5)
-    surface_rough = _RAW_WOOD + 0.1 * (fibre - 0.5) + (coat_rough - _RAW_WOOD) * coat
+    raw_rough = _RAW_WOOD + 0.1 * (fibre - 0.5)
+    surface_rough = raw_rough + (coat_rough - raw_rough) * coat
     roughness = surface_rough + (1.0 - face) * (0.1 + 0.2 * (1.0 - params["gloss"]))
     return MaterialLayers.dielectric(basecolor, height, roughness)
 
