@@ -272,3 +272,21 @@ def test_random_per_cell_matches_golden_and_lookup() -> None:
     looked_up = noise.random_per_cell(cell_id, 49, generator, channels=3)
     for y, x in ((0, 0), (13, 57), (99, 99)):
         assert torch.equal(looked_up[:, y, x], table[cell_id[y, x]])
+
+
+def test_wrapped_upsample_samples_texel_centres_and_wraps() -> None:
+    # A ramp along the columns: away from the wrap, output texel k of an ×f upsampling holds the
+    # input sampled at coordinate (k + ½)/f − ½, i.e. the ramp value there.
+    n, factor = 8, 4
+    ramp = torch.arange(n, dtype=torch.float32).expand(n, n).contiguous()
+    up = noise.wrapped_upsample(ramp, factor)
+    assert up.shape == (n * factor, n * factor)
+    k = torch.arange(factor, n * factor - factor, dtype=torch.float32)
+    assert torch.allclose(up[3, factor:-factor], (k + 0.5) / factor - 0.5, atol=1e-6)
+    # Periodic: shifting the input by one texel shifts the output by one input texel (f texels).
+    field = noise.value_noise(n, 3, torch.Generator().manual_seed(4))
+    shifted = noise.wrapped_upsample(torch.roll(field, 1, dims=1), factor)
+    assert torch.allclose(
+        shifted, torch.roll(noise.wrapped_upsample(field, factor), factor, dims=1), atol=1e-6
+    )
+    assert noise.wrapped_upsample(field, 1) is field

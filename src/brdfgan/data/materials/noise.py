@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 
 
@@ -42,9 +43,9 @@ def _axis(size: int, cells: int) -> tuple[Tensor, Tensor, Tensor]:
     return index, (index + 1) % cells, x - floor
 
 
-def _gather(table: Tensor, index: Tensor) -> Tensor:
+def lookup(table: Tensor, index: Tensor) -> Tensor:
     """``table.flatten()[index]`` by ``index_select``, several times faster on CPU than advanced
-    indexing for a per-texel lookup in a small table.
+    indexing for a per-texel lookup in a small table (lattice values, per-cell attributes).
 
     Shape: table any (read flattened), index any → index's shape.
     """
@@ -66,10 +67,10 @@ def value_noise(size: int, cells: int, generator: torch.Generator) -> Tensor:
     j0, j1, fv = _axis(size, cells)
     su, sv = _quintic(fu).view(1, size), _quintic(fv).view(size, 1)
     top = torch.lerp(
-        _gather(lattice, _cell_index(j0, i0, cells)), _gather(lattice, _cell_index(j0, i1, cells)), su
+        lookup(lattice, _cell_index(j0, i0, cells)), lookup(lattice, _cell_index(j0, i1, cells)), su
     )
     bottom = torch.lerp(
-        _gather(lattice, _cell_index(j1, i0, cells)), _gather(lattice, _cell_index(j1, i1, cells)), su
+        lookup(lattice, _cell_index(j1, i0, cells)), lookup(lattice, _cell_index(j1, i1, cells)), su
     )
     return torch.lerp(top, bottom, sv)
 
@@ -84,7 +85,7 @@ def gradient_noise(size: int, cells: int, generator: torch.Generator) -> Tensor:
 
     def corner(j: Tensor, i: Tensor, du: Tensor, dv: Tensor) -> Tensor:
         index = _cell_index(j, i, cells)
-        return _gather(gx, index) * du + _gather(gy, index) * dv
+        return lookup(gx, index) * du + lookup(gy, index) * dv
 
     su, sv = _quintic(fu), _quintic(fv)
     top = torch.lerp(corner(j0, i0, fu, fv), corner(j0, i1, fu - 1, fv), su)
@@ -116,6 +117,66 @@ def fbm(
     return total / max(norm, 1e-8)
 
 
+def wrapped_upsample(field: Tensor, factor: int) -> Tensor:
+    """Bilinear upsampling of a periodic field by an integer factor, wrapping at the borders
+    (texel centres stay texel centres: output texel k samples input coordinate (k + ½)/factor − ½).
+
+    Shape: ``(n, n)`` → ``(n·factor, n·factor)``.
+    """
+    if factor == 1:
+        return field
+    padded = F.pad(field[None, None], (1, 1, 1, 1), mode="circular")
+    upsampled = F.interpolate(padded, scale_factor=factor, mode="bilinear", align_corners=False)[0, 0]
+    n = field.shape[-1] * factor
+    return upsampled[factor : factor + n, factor : factor + n]
+
+
+def _coarse_size(size: int, finest_cells: int, texels_per_cell: int) -> int:
+    """The smallest halving of ``size`` that keeps ``texels_per_cell`` texels per finest cell."""
+    coarse = size
+    while coarse % 2 == 0 and coarse // 2 >= texels_per_cell * finest_cells:
+        coarse //= 2
+    return coarse
+
+
+def smooth_fbm(
+    size: int, cells: int, generator: torch.Generator, octaves: int, texels_per_cell: int
+) -> Tensor:
+    """:func:`fbm` of a smooth, low-frequency field, evaluated at a lower resolution that keeps
+    ``texels_per_cell`` texels per finest cell and upsampled.
+
+    fbm's lattices do not depend on the resolution, so this is the same field up to the
+    bilinear interpolation, at a fraction of the cost (full-resolution noise of a few cells per
+    image dominated the painting time of the families that use it).
+    Shape: ``(size, size)``.
+    """
+    coarse = _coarse_size(size, cells * 2 ** (octaves - 1), texels_per_cell)
+    return wrapped_upsample(fbm(coarse, cells, generator, octaves=octaves), size // coarse)
+
+
+def stretched_value_noise(size: int, cells_u: int, cells_v: int, generator: torch.Generator) -> Tensor:
+    """Periodic value noise on a ``cells_v × cells_u`` lattice (anisotropic cells) in [0, 1].
+
+    With ``cells_u ≪ cells_v`` the features are long streaks along the rows, like brushing marks.
+    Shape: ``(size, size)``.
+    """
+    lattice = torch.rand((cells_v, cells_u), generator=generator)
+    c = (torch.arange(size, dtype=torch.float32) + 0.5) / size
+
+    def axis(cells: int) -> tuple[Tensor, Tensor, Tensor]:
+        x = c * cells
+        i0 = x.floor()
+        f = x - i0
+        smooth = f * f * f * (f * (f * 6.0 - 15.0) + 10.0)
+        return i0.long() % cells, (i0.long() + 1) % cells, smooth
+
+    i0, i1, su = axis(cells_u)
+    j0, j1, sv = axis(cells_v)
+    top = torch.lerp(lattice[j0][:, i0], lattice[j0][:, i1], su.view(1, -1))
+    bottom = torch.lerp(lattice[j1][:, i0], lattice[j1][:, i1], su.view(1, -1))
+    return torch.lerp(top, bottom, sv.view(-1, 1))
+
+
 def worley(
     size: int, cells: int, generator: torch.Generator, jitter: float = 1.0
 ) -> tuple[Tensor, Tensor, Tensor]:
@@ -142,8 +203,8 @@ def worley(
     for dj in (-1, 0, 1):
         for di in (-1, 0, 1):
             index = _cell_index((base + dj) % cells, (base + di) % cells, cells)
-            du = di + _gather(point_u, index) - fu
-            dv = dj + _gather(point_v, index) - fv
+            du = di + lookup(point_u, index) - fu
+            dv = dj + lookup(point_v, index) - fv
             d = torch.sqrt(du * du + dv * dv)
             nearer = d < f1
             f2 = torch.where(nearer, f1, torch.minimum(f2, d))

@@ -28,35 +28,12 @@ from torch import Tensor
 
 from brdfgan.data.materials.albedo import metal_basecolor
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import fbm
+from brdfgan.data.materials.noise import fbm, stretched_value_noise
 
 # The metals of the ``metal`` parameter, in index order; base colour = measured F0 (albedo.py).
 METALS: tuple[str, ...] = ("steel", "aluminium", "brass", "copper")
 METAL_COLORS: tuple[tuple[float, float, float], ...] = tuple(metal_basecolor(name) for name in METALS)
 MAX_SCRATCHES = 120
-
-
-def stretched_value_noise(size: int, cells_u: int, cells_v: int, generator: torch.Generator) -> Tensor:
-    """Periodic value noise on a ``cells_v × cells_u`` lattice (anisotropic cells) in [0, 1].
-
-    With ``cells_u ≪ cells_v`` the features are long streaks along the rows, like brushing marks.
-    Shape: ``(size, size)``.
-    """
-    lattice = torch.rand((cells_v, cells_u), generator=generator)
-    c = (torch.arange(size, dtype=torch.float32) + 0.5) / size
-
-    def axis(cells: int) -> tuple[Tensor, Tensor, Tensor]:
-        x = c * cells
-        i0 = x.floor()
-        f = x - i0
-        smooth = f * f * f * (f * (f * 6.0 - 15.0) + 10.0)
-        return i0.long() % cells, (i0.long() + 1) % cells, smooth
-
-    i0, i1, su = axis(cells_u)
-    j0, j1, sv = axis(cells_v)
-    top = torch.lerp(lattice[j0][:, i0], lattice[j0][:, i1], su.view(1, -1))
-    bottom = torch.lerp(lattice[j1][:, i0], lattice[j1][:, i1], su.view(1, -1))
-    return torch.lerp(top, bottom, sv.view(-1, 1))
 
 
 def _scratches(size: int, count: int, depth: float, generator: torch.Generator) -> Tensor:
@@ -164,4 +141,4 @@ FAMILY = MaterialFamily(
     tags=("metal", "brushed", "scratched", "metallic", "tileable"),
 )
 
-__all__ = ["FAMILY", "METALS", "METAL_COLORS", "stretched_value_noise"]
+__all__ = ["FAMILY", "METALS", "METAL_COLORS"]

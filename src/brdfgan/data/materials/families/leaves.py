@@ -40,6 +40,7 @@ from torch import Tensor
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
 from brdfgan.data.materials.noise import fbm, hsv_to_rgb, smoothstep, texel_coordinates, value_noise
+from brdfgan.data.materials.noise import lookup as _lookup
 
 GROUNDS = ("soil", "moss", "bark")
 LAYERS = 3
@@ -150,12 +151,6 @@ def leaf_layer(size: int, cells: int, params: Mapping[str, float], generator: to
         shape=shape * covered,
         vein=torch.maximum(midrib, 0.6 * lateral) * covered,
     )
-
-
-def _lookup(table: Tensor, index: Tensor) -> Tensor:
-    """``table[index]`` by ``index_select``, several times faster on CPU than advanced indexing
-    for a per-texel lookup in a small per-leaf table. Shape: table ``(N,)``, index any → index's."""
-    return table.index_select(0, index.flatten()).view(index.shape)
 
 
 def _half_width(t: Tensor, half_length: Tensor, width: Tensor) -> Tensor:

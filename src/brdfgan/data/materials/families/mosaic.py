@@ -38,7 +38,6 @@ from torch import Tensor
 
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.families.polished_metal import wrapped_upsample
 from brdfgan.data.materials.noise import (
     hsv_to_rgb,
     random_per_cell,
@@ -46,6 +45,7 @@ from brdfgan.data.materials.noise import (
     texel_coordinates,
     value_noise,
     worley,
+    wrapped_upsample,
 )
 
 # Grout depth as a fraction of the image width, so normals look alike at every resolution.

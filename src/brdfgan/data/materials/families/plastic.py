@@ -38,10 +38,10 @@ from torch import Tensor
 
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.families.polished_metal import smooth_fbm
 from brdfgan.data.materials.noise import (
     gradient_noise,
     hsv_to_rgb,
+    smooth_fbm,
     smoothstep,
     texel_coordinates,
     value_noise,

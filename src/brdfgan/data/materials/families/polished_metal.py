@@ -34,12 +34,11 @@ import math
 from collections.abc import Mapping
 
 import torch
-import torch.nn.functional as F
 from torch import Tensor
 
 from brdfgan.data.materials.albedo import metal_basecolor
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import fbm, smoothstep, value_noise, worley
+from brdfgan.data.materials.noise import smooth_fbm, smoothstep, value_noise, worley, wrapped_upsample
 
 # The metals of the ``metal`` parameter, in index order (names of albedo.METAL_F0_LINEAR).
 METALS: tuple[str, ...] = (
@@ -76,43 +75,6 @@ def _periodic_offset(coordinate: Tensor, centre: float) -> Tensor:
     Shape: any → same.
     """
     return torch.sin(math.pi * (coordinate - centre)) / math.pi
-
-
-def wrapped_upsample(field: Tensor, factor: int) -> Tensor:
-    """Bilinear upsampling of a periodic field by an integer factor, wrapping at the borders
-    (texel centres stay texel centres: output texel k samples input coordinate (k + ½)/factor − ½).
-
-    Shape: ``(n, n)`` → ``(n·factor, n·factor)``.
-    """
-    if factor == 1:
-        return field
-    padded = F.pad(field[None, None], (1, 1, 1, 1), mode="circular")
-    upsampled = F.interpolate(padded, scale_factor=factor, mode="bilinear", align_corners=False)[0, 0]
-    n = field.shape[-1] * factor
-    return upsampled[factor : factor + n, factor : factor + n]
-
-
-def _coarse_size(size: int, finest_cells: int, texels_per_cell: int) -> int:
-    """The smallest halving of ``size`` that keeps ``texels_per_cell`` texels per finest cell."""
-    coarse = size
-    while coarse % 2 == 0 and coarse // 2 >= texels_per_cell * finest_cells:
-        coarse //= 2
-    return coarse
-
-
-def smooth_fbm(
-    size: int, cells: int, generator: torch.Generator, octaves: int, texels_per_cell: int
-) -> Tensor:
-    """:func:`~brdfgan.data.materials.noise.fbm` of a smooth, low-frequency field, evaluated at a
-    lower resolution that keeps ``texels_per_cell`` texels per finest cell and upsampled.
-
-    fbm's lattices do not depend on the resolution, so this is the same field up to the
-    bilinear interpolation, at a fraction of the cost (full-resolution noise of a few cells per
-    image dominated this family's painting time).
-    Shape: ``(size, size)``.
-    """
-    coarse = _coarse_size(size, cells * 2 ** (octaves - 1), texels_per_cell)
-    return wrapped_upsample(fbm(coarse, cells, generator, octaves=octaves), size // coarse)
 
 
 def _dent_distance(size: int, dents: int, generator: torch.Generator) -> Tensor:

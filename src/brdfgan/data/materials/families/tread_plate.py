@@ -35,11 +35,11 @@ from torch import Tensor
 
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo, metal_basecolor
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.families.polished_metal import smooth_fbm
 from brdfgan.data.materials.noise import (
     gradient_noise,
     lerp_color,
     random_per_cell,
+    smooth_fbm,
     smoothstep,
     texel_coordinates,
     value_noise,
