@@ -193,7 +193,9 @@ def normalize_normal(normal: Tensor, dim: int = -3, eps: float = 1e-8) -> Tensor
         - normal: ``(*, 3, H, W)`` (vector axis ``dim``)
         - output: same
     """
-    length = torch.linalg.vector_norm(normal, dim=dim, keepdim=True)
+    # Summed products rather than linalg.vector_norm: a norm over the strided channel axis is
+    # several times slower on CPU, and this runs on every normal map the data pipeline touches.
+    length = (normal * normal).sum(dim=dim, keepdim=True).sqrt()
     up = torch.zeros_like(normal).narrow(dim, 2, 1).fill_(1.0)
     flat = torch.cat([torch.zeros_like(up), torch.zeros_like(up), up], dim=dim)
     return torch.where(length > eps, normal / length.clamp(min=eps), flat)

@@ -22,7 +22,7 @@ from types import MappingProxyType
 import torch
 from torch import Tensor
 
-from brdfgan.core.svbrdf import linear_to_srgb, srgb_to_linear
+from brdfgan.core.svbrdf import linear_to_srgb
 
 # Linear-RGB F0 at normal incidence.
 METAL_F0_LINEAR: Mapping[str, tuple[float, float, float]] = MappingProxyType(
@@ -65,8 +65,12 @@ def clamp_dielectric_albedo(basecolor: Tensor) -> Tensor:
 
     Shape: ``(3, H, W)`` (or any shape; applied per element) → same.
     """
-    low, high = DIELECTRIC_ALBEDO_LINEAR
-    return linear_to_srgb(srgb_to_linear(basecolor).clamp(low, high))
+    # The sRGB curve is increasing, so clamping the encoded values against the encoded bounds is
+    # the same clamp, without a decode and re-encode of every texel (and exact inside the range).
+    low, high = (
+        float(linear_to_srgb(torch.tensor(v, dtype=torch.float64))) for v in DIELECTRIC_ALBEDO_LINEAR
+    )
+    return basecolor.clamp(low, high)
 
 
 __all__ = [
