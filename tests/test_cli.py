@@ -23,7 +23,10 @@ from brdfgan.errors import (
 from brdfgan.runs import load_weights
 from tests.conftest import random_maps
 
-COMMANDS = ("predict", "export-weights", "contact-sheet", "convert-deschaintre", "report", "references")
+COMMANDS = (
+    "predict", "export-weights", "contact-sheet", "convert-deschaintre", "report", "references",
+    "dataset-stats",
+)  # fmt: skip
 
 
 def test_every_subcommand_has_a_one_line_help(capsys: pytest.CaptureFixture[str]) -> None:
@@ -53,6 +56,7 @@ def test_every_subcommand_names_its_interrupt_message() -> None:
         "report": ["RUN"],
         "references": ["DATA", "--out", "OUT"],
         "predict": ["P", "--out", "O"],
+        "dataset-stats": ["DATA"],
     }
     messages = {command: parser.parse_args([command, *required[command]]).interrupted for command in COMMANDS}
     assert messages["predict"].startswith("interrupted: finished photos are complete")

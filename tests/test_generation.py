@@ -39,6 +39,7 @@ from brdfgan.data.generation import (
 )
 from brdfgan.data.lighting import LightingConfig, LightingDraw, LightingError
 from brdfgan.data.shards import (
+    Sample,
     digest_path,
     iter_shard,
     list_shards,
@@ -334,6 +335,7 @@ def test_end_to_end_mitsuba_generation_feeds_the_datamodule(tmp_path: Path) -> N
 
     spec = tiny_spec(materials=3, crops_per_material=1, val_fraction=0.0, materials_per_shard=1)
     data_dir = tmp_path / "data"
+
     def prepare() -> None:
         ensure_dataset(spec, data_dir, progress=False)
 
@@ -412,3 +414,22 @@ def test_contact_sheet_shows_every_panel_of_random_samples(tmp_path: Path) -> No
     row = sheet[-spec.resolution :]
     normal_panel = row[:, 2 * spec.resolution : 3 * spec.resolution]
     assert abs(normal_panel[..., 2].mean() - 1.0) < 0.1  # (n+1)/2 of mostly +Z normals is blue
+    # A small sheet: every panel area-resized, each row labelled with its family on the input.
+    assert (
+        main(
+            ["contact-sheet", str(tmp_path), "--rows", "3", "--tile", "16", "--out", str(tmp_path / "s.png")]
+        )
+        == 0
+    )
+    small = read_image(tmp_path / "s.png")
+    assert small.shape[:2] == (22 + 3 * 16, len(COLUMNS) * 16)
+    assert main(["contact-sheet", str(tmp_path), "--tile", "4"]) == 2
+    from brdfgan.data.contact_sheet import row_label
+
+    mixed = Sample(
+        picked[0].key,
+        picked[0].photo,
+        picked[0].maps,
+        {**picked[0].meta, "mix": {"partner_family": "marble"}, "recolor": {}},
+    )
+    assert row_label(mixed) == f"{picked[0].meta['family']} + marble (recol.)"

@@ -18,7 +18,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from brdfgan import __version__
-from brdfgan.errors import DISK_FULL_EXIT_CODE, USER_ERROR_EXIT_CODE, one_line, run_reporting_errors
+from brdfgan.errors import (
+    DISK_FULL_EXIT_CODE,
+    USER_ERROR_EXIT_CODE,
+    UserError,
+    one_line,
+    run_reporting_errors,
+)
 
 if TYPE_CHECKING:  # imported lazily below: --help must not wait for torch
     from brdfgan.inference.intake.preprocess import Crop
@@ -168,6 +174,9 @@ def build_parser() -> argparse.ArgumentParser:
     sheet.add_argument("--rows", type=int, default=16, help="samples shown (default 16)")
     sheet.add_argument("--seed", type=int, default=0, help="which samples (default 0)")
     sheet.add_argument("--out", type=Path, default=None, help="default: DATA_DIR/contact_sheet_<split>.png")
+    sheet.add_argument(
+        "--tile", type=int, default=None, metavar="PX", help="resize every panel to PX² (small sheets)"
+    )
     sheet.set_defaults(run=contact_sheet_command, interrupted="interrupted: no contact sheet was written")
 
     convert = commands.add_parser(
@@ -312,7 +321,13 @@ def export_weights_command(args: argparse.Namespace) -> int:
 def contact_sheet_command(args: argparse.Namespace) -> int:
     from brdfgan.data.contact_sheet import write_contact_sheet
 
-    print(write_contact_sheet(args.data_dir, args.split, rows=args.rows, seed=args.seed, out=args.out))
+    if args.tile is not None and args.tile < 8:
+        raise UserError(f"--tile={args.tile}: must be at least 8 pixels")
+    print(
+        write_contact_sheet(
+            args.data_dir, args.split, rows=args.rows, seed=args.seed, out=args.out, tile=args.tile
+        )
+    )
     return 0
 
 

@@ -1,11 +1,12 @@
 """Contact sheet of a dataset: a PNG grid, one sample per row — input | base color | normal |
 roughness | metallic — so a person can judge the realism of generated data at a glance.
 
-    brdfgan contact-sheet DATA_DIR [--split train] [--rows 16] [--seed 0] [--out PATH]
+    brdfgan contact-sheet DATA_DIR [--split train] [--rows 16] [--seed 0] [--tile PX] [--out PATH]
 
 The input photo is linear LDR and is shown sRGB-encoded, as a phone would display it; base color
 is stored sRGB and shown as is; normals as (n+1)/2 (OpenGL, the usual blue-ish look); roughness
-and metallic as gray. Samples are a seeded uniform draw (reservoir sampling over all shards).
+and metallic as gray. Samples are a seeded uniform draw (reservoir sampling over all shards);
+each row's input panel names its family (``+ partner`` when mixed, ``(recol.)`` when recoloured).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import cv2
 import numpy as np
 import torch
 
-from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
+from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, resize_image, split_maps
 from brdfgan.data.shards import Sample, iter_shard, list_shards
 from brdfgan.errors import UserError
 from brdfgan.io.images import write_image
@@ -44,10 +45,11 @@ def pick_samples(data_dir: str | Path, split: str, rows: int, seed: int = 0) -> 
     return sorted(chosen, key=lambda s: s.key)
 
 
-def sample_row(sample: Sample) -> torch.Tensor:
-    """One row of the sheet: the five panels side by side, display-ready sRGB in [0, 1].
+def sample_row(sample: Sample, tile: int | None = None) -> torch.Tensor:
+    """One row of the sheet: the five panels side by side, display-ready sRGB in [0, 1], each
+    area-resized to ``tile``² when given (a small sheet of many samples).
 
-    Shape: output ``(3, H, 5·W)``.
+    Shape: output ``(3, H, 5·W)`` (``H = W = tile`` when given).
     """
     parts = split_maps(sample.maps)
     panels = [
@@ -57,19 +59,41 @@ def sample_row(sample: Sample) -> torch.Tensor:
         parts.roughness.expand(3, -1, -1),
         parts.metallic.expand(3, -1, -1),
     ]
+    if tile is not None:
+        panels = [resize_image(panel, tile, tile).clamp(0.0, 1.0) for panel in panels]
     return torch.cat(panels, dim=-1)
 
 
-def contact_sheet(samples: list[Sample]) -> np.ndarray:
-    """The grid with a header naming the columns. Shape: ``(rows·H + label, 5·W, 3)`` in [0, 1]."""
+def row_label(sample: Sample) -> str:
+    """What a row shows: the family, ``+partner`` for a mixed material, ``recol.`` if recoloured."""
+    label = str(sample.meta.get("family", sample.key)).removeprefix("scanned/")
+    mix = sample.meta.get("mix")
+    if isinstance(mix, dict):
+        label += f" + {mix.get('partner_family', '?')}"
+    if "recolor" in sample.meta:
+        label += " (recol.)"
+    return label
+
+
+def contact_sheet(samples: list[Sample], tile: int | None = None) -> np.ndarray:
+    """The grid with a header naming the columns and each row's family on its input panel.
+
+    Shape: ``(rows·H + label, 5·W, 3)`` in [0, 1].
+    """
     if not samples:
         raise UserError("no samples to show")
-    rows = torch.cat([sample_row(s) for s in samples], dim=-2).permute(1, 2, 0).numpy()
+    rows = torch.cat([sample_row(s, tile) for s in samples], dim=-2).permute(1, 2, 0).numpy()
+    height = rows.shape[0] // len(samples)
     width = rows.shape[1] // len(COLUMNS)
-    header = np.full((_LABEL_HEIGHT, rows.shape[1], 3), 255, dtype=np.uint8)  # putText draws on 8-bit
+    canvas = np.ascontiguousarray((rows * 255.0 + 0.5).astype(np.uint8))  # putText draws on 8-bit
+    for index, sample in enumerate(samples):
+        origin = (3, index * height + 12)
+        for colour, thickness in (((0, 0, 0), 3), ((255, 255, 255), 1)):  # outlined: legible on any photo
+            cv2.putText(canvas, row_label(sample), origin, cv2.FONT_HERSHEY_SIMPLEX, 0.35, colour, thickness)
+    header = np.full((_LABEL_HEIGHT, rows.shape[1], 3), 255, dtype=np.uint8)
     for index, name in enumerate(COLUMNS):
         cv2.putText(header, name, (index * width + 4, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)
-    return np.concatenate([header.astype(np.float32) / 255.0, rows.astype(np.float32)], axis=0)
+    return np.concatenate([header, canvas], axis=0).astype(np.float32) / 255.0
 
 
 def write_contact_sheet(
@@ -79,7 +103,8 @@ def write_contact_sheet(
     rows: int = 16,
     seed: int = 0,
     out: str | Path | None = None,
+    tile: int | None = None,
 ) -> Path:
     """Write the contact sheet PNG (default ``DATA_DIR/contact_sheet_<split>.png``)."""
     path = Path(out) if out else Path(data_dir) / f"contact_sheet_{split}.png"
-    return write_image(path, contact_sheet(pick_samples(data_dir, split, rows, seed)))
+    return write_image(path, contact_sheet(pick_samples(data_dir, split, rows, seed), tile))
