@@ -111,3 +111,24 @@ def test_ood_config_composes_with_its_folder_from_the_environment(scanned_root: 
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert "test" in result.stdout and "train" not in result.stdout.replace("train_", "")
+
+
+def test_eval_sensor_gives_val_and_test_predicts_intake(tiny_data: Path) -> None:
+    from brdfgan.core.exposure import auto_expose
+    from brdfgan.data.datamodule import ShardDataModule
+    from brdfgan.data.sensor import SensorEffects, decode_srgb8, encode_srgb8
+
+    intake = SensorEffects(
+        enabled=True, vignetting_probability=0.0, white_balance_probability=0.0, noise_probability=0.0,
+        jpeg_probability=0.0, auto_exposure=True,
+    )  # fmt: skip
+    data = str(tiny_data / "data" / "tiny")
+    plain = ShardDataModule(data, batch_size=2, shuffle_buffer=0)
+    module = ShardDataModule(data, batch_size=2, shuffle_buffer=0, eval_sensor=intake)
+    for m in (plain, module):
+        m.setup("test")
+    stored, seen = next(iter(plain.test_dataloader())), next(iter(module.test_dataloader()))
+    assert stored["key"] == seen["key"]
+    for photo, got in zip(stored["photo"], seen["photo"], strict=True):
+        expected, _ = auto_expose(decode_srgb8(encode_srgb8(photo)))
+        assert torch.equal(got, expected.float()) and not torch.equal(got, photo)

@@ -60,7 +60,10 @@ auto exposure sees the whole photo, as in ``predict``. Each sample's noise comes
 seeded by ``(seed, epoch, repeat, key)`` in training (``repeat``: its pass over the shards within
 the epoch) and ``(seed, key)`` in val/test, so a rerun and a resumed run draw the same values; what
 was drawn is in ``meta["sensor"]``. The crop draws are separate, so switching the sensor on or
-off leaves every crop where it was.
+off leaves every crop where it was. ``eval_sensor`` is applied to the other splits instead,
+typically the intake alone (no effects, 8-bit sRGB and ``predict``'s auto exposure: a photo with
+an exposure error is re-exposed as ``brdfgan predict`` would), so evaluation sees what inference
+sees without noise that would make metrics less comparable.
 
 Corrupt data. :meth:`setup` verifies every shard's structure (headers only, see
 :func:`~brdfgan.data.shards.verify_shard`); truncated or garbage shards are skipped with a
@@ -478,6 +481,7 @@ class ShardDataModule(L.LightningDataModule):
         sensor: simulated phone sensor and file effects on the photos (see the module docstring);
             ``None`` or ``enabled: false``: the stored photos as they are.
         sensor_splits: the splits ``sensor`` applies to, among ``"train"``, ``"val"``, ``"test"``.
+        eval_sensor: applied to the splits not in ``sensor_splits`` (``None``: stored photos).
 
     After :meth:`setup`, :attr:`skipped` reports skipped shards and samples.
     """
@@ -499,6 +503,7 @@ class ShardDataModule(L.LightningDataModule):
         prepare: Callable[[], None] | None = None,
         sensor: SensorEffects | None = None,
         sensor_splits: Sequence[str] = ("train",),
+        eval_sensor: SensorEffects | None = None,
     ) -> None:
         super().__init__()
         if batch_size < 1:
@@ -516,9 +521,10 @@ class ShardDataModule(L.LightningDataModule):
             raise DatasetConfigError(
                 f"data.sensor_splits={sensor_splits!r}: must be a list of {', '.join(_KINDS)}"
             )
-        self.save_hyperparameters(ignore=["prepare", "sensor"])
+        self.save_hyperparameters(ignore=["prepare", "sensor", "eval_sensor"])
         # As plain values: checkpoints are read with torch.load(weights_only=True).
         self.hparams["sensor"] = None if sensor is None else asdict(sensor)
+        self.hparams["eval_sensor"] = None if eval_sensor is None else asdict(eval_sensor)
         self.data_dir = Path(data_dir)
         self.batch_size = batch_size
         self.num_workers = num_workers
@@ -531,6 +537,7 @@ class ShardDataModule(L.LightningDataModule):
         self.train_crop = train_crop
         self.sensor = sensor
         self.sensor_splits = tuple(sensor_splits)
+        self.eval_sensor = eval_sensor
         self._prepare = prepare
         self._indices: dict[str, _SplitIndex] = {}
         self._skipped_shards = 0
@@ -694,7 +701,7 @@ class ShardDataModule(L.LightningDataModule):
             seed=self.seed,
             counter=self._counter,
             batches_per_epoch=self.train_batches_per_epoch if kind == "train" else None,
-            sensor=self.sensor if kind in self.sensor_splits else None,
+            sensor=self.sensor if kind in self.sensor_splits else self.eval_sensor,
             **options,
         )
 
