@@ -104,6 +104,10 @@ _HEX_DIGEST = re.compile(r"[0-9a-f]{64}")
 # zlib level 1: noisy 16-bit renders barely compress further (< 2 % smaller at level 9, measured
 # at 512²) while encoding takes up to 2× longer; decoding costs the same for every level ≥ 1.
 PNG_COMPRESSION = 1
+# Run-length matching only (Z_RLE): on samples of the v3 recipe 28.9 instead of 56.2 ms per
+# sample of five 256² images, 0.850 instead of 0.846 MB (PNG's row filters do the work; long
+# matches are rare in noisy renders). Lossless either way: decoded pixels are identical.
+PNG_STRATEGY = cv2.IMWRITE_PNG_STRATEGY_RLE
 # Keys become tar member names; USTAR allows 100 bytes without a directory prefix, and a dot or
 # slash would confuse WebDataset's key/extension split.
 KEY_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,80}")
@@ -256,7 +260,11 @@ def _encode_png(image: Tensor) -> bytes:
         quantised = quantised[0]
     else:  # CHW RGB -> HWC BGR, OpenCV's channel order
         quantised = np.ascontiguousarray(quantised.transpose(1, 2, 0)[:, :, ::-1])
-    ok, encoded = cv2.imencode(".png", quantised, [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION])
+    ok, encoded = cv2.imencode(
+        ".png",
+        quantised,
+        [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION, cv2.IMWRITE_PNG_STRATEGY, PNG_STRATEGY],
+    )
     if not ok:
         raise ShardError(f"PNG encoding failed for an image of shape {tuple(image.shape)}")
     return encoded.tobytes()
