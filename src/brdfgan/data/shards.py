@@ -104,10 +104,12 @@ _HEX_DIGEST = re.compile(r"[0-9a-f]{64}")
 # zlib level 1: noisy 16-bit renders barely compress further (< 2 % smaller at level 9, measured
 # at 512²) while encoding takes up to 2× longer; decoding costs the same for every level ≥ 1.
 PNG_COMPRESSION = 1
-# Run-length matching only (Z_RLE): on samples of the v3 recipe 28.9 instead of 56.2 ms per
-# sample of five 256² images, 0.850 instead of 0.846 MB (PNG's row filters do the work; long
-# matches are rare in noisy renders). Lossless either way: decoded pixels are identical.
+# Run-length matching only (Z_RLE) after the Paeth row filter on every row, instead of zlib's
+# default matching after libpng trying every filter per row: on 16 samples of the v3 recipe
+# (five 256² 16-bit images each) 23.8 instead of 56.2 ms per sample, 0.857 instead of 0.846 MB
+# (the filter does the work; long matches are rare in noisy renders). Lossless either way.
 PNG_STRATEGY = cv2.IMWRITE_PNG_STRATEGY_RLE
+PNG_FILTER = cv2.IMWRITE_PNG_FILTER_PAETH
 # Keys become tar member names; USTAR allows 100 bytes without a directory prefix, and a dot or
 # slash would confuse WebDataset's key/extension split.
 KEY_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,80}")
@@ -263,7 +265,14 @@ def _encode_png(image: Tensor) -> bytes:
     ok, encoded = cv2.imencode(
         ".png",
         quantised,
-        [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION, cv2.IMWRITE_PNG_STRATEGY, PNG_STRATEGY],
+        [
+            cv2.IMWRITE_PNG_COMPRESSION,
+            PNG_COMPRESSION,
+            cv2.IMWRITE_PNG_STRATEGY,
+            PNG_STRATEGY,
+            cv2.IMWRITE_PNG_FILTER,
+            PNG_FILTER,
+        ],
     )
     if not ok:
         raise ShardError(f"PNG encoding failed for an image of shape {tuple(image.shape)}")
