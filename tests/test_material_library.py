@@ -41,9 +41,7 @@ def test_every_family_module_is_registered() -> None:
 
 
 def test_unknown_or_repeated_family_is_a_one_line_error() -> None:
-    with pytest.raises(
-        UnknownFamilyError, match=r"family 'woood'; known: anodized_metal, asphalt"
-    ):
+    with pytest.raises(UnknownFamilyError, match=r"family 'woood'; known: anodized_metal, asphalt"):
         get_family("woood")
     with pytest.raises(UnknownFamilyError, match="listed twice: marble"):
         resolve_families(["marble", "marble"])
