@@ -105,7 +105,7 @@ def mask_field(kind: str, size: int, generator: torch.Generator) -> Tensor:
         )
     else:
         raise ValueError(f"unknown mask kind {kind!r}; known: {', '.join(MASK_KINDS)}")
-    return (field - field.mean()) / field.std().clamp(min=1e-8)
+    return _standardised(field)
 
 
 def _standardised(x: Tensor) -> Tensor:

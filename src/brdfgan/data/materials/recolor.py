@@ -19,6 +19,7 @@ import kornia.color
 import torch
 from torch import Tensor
 
+from brdfgan.core.sampling import log_uniform
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialLayers
 from brdfgan.data.spec_checks import in_range, ordered
@@ -66,14 +67,10 @@ class RecolorDraw:
 def draw_recolor(config: RecolorConfig, generator: torch.Generator) -> RecolorDraw:
     """Hue shift uniform in ±``hue_shift_max``; saturation and value factors log-uniform."""
     u = torch.rand(3, generator=generator, dtype=torch.float64).tolist()
-
-    def log_uniform(low: float, high: float, t: float) -> float:
-        return math.exp(math.log(low) + (math.log(high) - math.log(low)) * t)
-
     return RecolorDraw(
         hue_shift=config.hue_shift_max * (2.0 * u[0] - 1.0),
-        saturation=log_uniform(config.saturation_min, config.saturation_max, u[1]),
-        value=log_uniform(config.value_min, config.value_max, u[2]),
+        saturation=log_uniform(u[1], config.saturation_min, config.saturation_max),
+        value=log_uniform(u[2], config.value_min, config.value_max),
     )
 
 
