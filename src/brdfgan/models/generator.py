@@ -9,6 +9,14 @@ notation ``c7s1-64, d128, d256, d512, 9×R512, u256, u128, u64, c7s1-8``:
 - ``Rk``: IN-ReLU-conv3×3-IN-ReLU-conv3×3 + identity, reflection padding.
 - ``uk``: 3×3 transposed conv, stride 2, padding 1, output_padding 1 (exactly ×2), InstanceNorm, ReLU.
 
+``upsampling="resize"`` (not the paper's; ``model=default_resize``) replaces each ``uk`` by
+resize-convolution (Odena et al. 2016, "Deconvolution and Checkerboard Artifacts"): nearest ×2
+upsampling, then a 3×3 conv with reflection padding to the same ``k`` channels, InstanceNorm, ReLU.
+A stride-2 3×3 transposed conv gives even output pixels one kernel tap per axis and odd ones two,
+so even a flat input comes out with a 2×2 pattern; nearest ×2 has a zero at the output's Nyquist
+frequency and the conv after it is shift-invariant, so no such pattern is built in. The weight
+shapes are the transposed ones swapped, so both variants have the same number of parameters.
+
 Choices the paper leaves open (all parameter-free or removing dead parameters):
 
 - After the last residual block an extra InstanceNorm + ReLU closes the pre-activation trunk, as
@@ -23,16 +31,41 @@ Choices the paper leaves open (all parameter-free or removing dead parameters):
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal, get_args
 
 from torch import Tensor, nn
 
 from brdfgan.core.svbrdf import NUM_CHANNELS
+from brdfgan.errors import UserError
 from brdfgan.models.heads import PHOTO_CHANNELS, encode_photo, init_weights, maps_from_raw
+
+Upsampling = Literal["transposed", "resize"]
+UPSAMPLINGS: tuple[str, ...] = get_args(Upsampling)
+
+
+class GeneratorConfigError(UserError):
+    """A generator constructor argument is unusable; the message names the config key."""
 
 
 def _norm_relu(channels: int) -> list[nn.Module]:
     return [nn.InstanceNorm2d(channels, affine=False), nn.ReLU(inplace=True)]
+
+
+def _upsampling_layer(upsampling: Upsampling, channels: int) -> list[nn.Module]:
+    """One ``u`` layer without its norm and activation: ``channels`` → ``channels // 2``, ×2 in H, W."""
+    if upsampling == "transposed":
+        return [
+            nn.ConvTranspose2d(channels, channels // 2, 3, stride=2, padding=1, output_padding=1, bias=False)
+        ]
+    # Nearest rather than bilinear: it is the variant Odena et al. report working best (they had
+    # trouble making bilinear work). Against checkerboard neither has an edge: each is zero-stuffing
+    # followed by a kernel with a zero at the output's Nyquist frequency ([1, 1] and
+    # [1/4, 3/4, 3/4, 1/4]); bilinear's extra low-pass only blurs detail before the conv that
+    # could learn any smoothing it needs. Reflection padding like every other stride-1 conv here.
+    return [
+        nn.Upsample(scale_factor=2, mode="nearest"),
+        nn.Conv2d(channels, channels // 2, 3, padding=1, padding_mode="reflect", bias=False),
+    ]
 
 
 class ResidualBlock(nn.Module):
@@ -65,8 +98,12 @@ class Generator(nn.Module):
         downsamplings: number of ``d`` (and ``u``) layers; H and W must be multiples of
             ``2**downsamplings`` and at least twice that.
         residual_blocks: number of ``R`` blocks at the bottleneck.
+        upsampling: the ``u`` layers: ``"transposed"`` (the paper's 3×3 stride-2 transposed convs)
+            or ``"resize"`` (nearest ×2 then a 3×3 conv, against checkerboard artefacts); same
+            parameter count, different state-dict keys.
 
-    All arguments are plain ints: ``Generator(**generator.config())`` rebuilds the architecture.
+    All arguments are plain ints or strings: ``Generator(**generator.config())`` rebuilds the
+    architecture.
 
     Shape:
         - photo: ``(B, in_channels, H, W)``, linear LDR in [0, 1], encoded to ``2x - 1`` inside
@@ -80,8 +117,12 @@ class Generator(nn.Module):
         width: int = 64,
         downsamplings: int = 3,
         residual_blocks: int = 9,
+        upsampling: Upsampling = "transposed",
     ) -> None:
         super().__init__()
+        if upsampling not in UPSAMPLINGS:
+            choices = " or ".join(map(repr, UPSAMPLINGS))
+            raise GeneratorConfigError(f"model.generator.upsampling={upsampling!r}: must be {choices}")
         if min(in_channels, width) < 1 or min(downsamplings, residual_blocks) < 0:
             raise ValueError(
                 f"Generator needs in_channels, width >= 1 and downsamplings, residual_blocks >= 0, got "
@@ -91,6 +132,7 @@ class Generator(nn.Module):
         self.width = width
         self.downsamplings = downsamplings
         self.residual_blocks = residual_blocks
+        self.upsampling: Upsampling = upsampling
 
         # c7s1-width: the first conv's bias is cancelled by the InstanceNorm after it.
         down: list[nn.Module] = [
@@ -111,11 +153,7 @@ class Generator(nn.Module):
 
         up: list[nn.Module] = []
         for _ in range(downsamplings):
-            up += [
-                nn.ConvTranspose2d(
-                    channels, channels // 2, 3, stride=2, padding=1, output_padding=1, bias=False
-                )
-            ]
+            up += _upsampling_layer(upsampling, channels)
             up += _norm_relu(channels // 2)
             channels //= 2
         self.up = nn.Sequential(*up)
@@ -125,13 +163,21 @@ class Generator(nn.Module):
         init_weights(self)
 
     def config(self) -> dict[str, Any]:
-        """Constructor arguments (plain ints), to store next to the weights."""
-        return {
+        """Constructor arguments (plain values), to store next to the weights.
+
+        ``upsampling`` only when it is not the default, so that the config of a paper-decoder
+        generator is what it was before the option existed (and a stored config without the key
+        means transposed).
+        """
+        config: dict[str, Any] = {
             "in_channels": self.in_channels,
             "width": self.width,
             "downsamplings": self.downsamplings,
             "residual_blocks": self.residual_blocks,
         }
+        if self.upsampling != "transposed":
+            config["upsampling"] = self.upsampling
+        return config
 
     @property
     def size_multiple(self) -> int:
