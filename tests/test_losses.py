@@ -6,7 +6,7 @@ import pytest
 import torch
 from torch import Tensor, nn
 
-import brdfgan.core.render as render_module
+import brdfgan.losses.rendering as rendering_module
 import brdfgan.losses.total as total_module
 from brdfgan.core.sampling import RenderingLossSampling, sample_rendering_loss_configs
 from brdfgan.core.svbrdf import NORMAL, ROUGHNESS, flat_maps, join_maps
@@ -312,8 +312,8 @@ def test_gan_loss_switched_off_term_is_never_computed(monkeypatch: pytest.Monkey
         "g_adv": _spy(monkeypatch, total_module, "lsgan_generator_loss"),
         "g_feat": _spy(monkeypatch, total_module, "feature_matching_loss"),
         "param": _spy(monkeypatch, total_module, "parameter_loss"),
-        # RenderingLoss binds the renderer function when it is built, after this patch.
-        "render": _spy(monkeypatch, render_module, "render_point_lights"),
+        # RenderingLoss binds the loss function when it is built, after this patch.
+        "render": _spy(monkeypatch, rendering_module, "rendering_loss"),
     }
     disc = _TinyDiscriminator()
     true_maps, pred = random_maps(4, 4, seed=1, batch=(1,)), random_maps(4, 4, seed=2, batch=(1,))
@@ -347,3 +347,32 @@ def test_gan_loss_asks_for_missing_discriminator_outputs() -> None:
         GANLoss().generator_terms(maps, maps)
     with pytest.raises(ValueError, match="d_real"):
         GANLoss(LossSwitches(adversarial=False)).generator_terms(maps, maps, _outputs((0, 1)))
+
+
+@pytest.mark.slow  # one torch.compile of forward and backward: ~10–30 s on CPU
+def test_compiled_rendering_loss_matches_eager_and_logs_compile_time(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    import logging
+
+    from brdfgan.losses.rendering import RenderingLoss
+
+    pred_maps = random_maps(16, 16, batch=(2,))
+    true_maps = random_maps(16, 16, batch=(2,), seed=1)
+    results = []
+    for compiled in (False, True):
+        loss_fn = RenderingLoss(seed=5, compile=compiled)
+        values, grads = [], []
+        for _ in range(2):  # the second call runs the compiled code without compiling again
+            pred = pred_maps.clone().requires_grad_(True)
+            with caplog.at_level(logging.INFO, logger="brdfgan.losses.rendering"):
+                value = loss_fn(pred, true_maps)
+            value.backward()
+            values.append(value.detach())
+            grads.append(pred.grad)
+        results.append((values, grads))
+    compile_lines = [r.getMessage() for r in caplog.records if "compiled" in r.getMessage()]
+    assert len(compile_lines) == 1 and "(2, 8, 16, 16)" in compile_lines[0]
+    (eager_values, eager_grads), (compiled_values, compiled_grads) = results
+    for eager, compiled in zip(eager_values + eager_grads, compiled_values + compiled_grads, strict=True):
+        torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-6)

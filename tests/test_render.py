@@ -196,3 +196,38 @@ def test_flash_capture_geometry() -> None:
     capture = FlashCapture(fov_deg=90.0, intensity=2.0, color=(1.0, 0.5, 0.25), plane_half_size=0.5)
     assert capture.camera_height == pytest.approx(0.5)
     assert capture.radiant_intensity == (2.0, 1.0, 0.5)
+
+
+@pytest.mark.parametrize("lights_per_config", [1, 3])
+def test_factored_renderer_matches_the_direct_evaluation(lights_per_config: int) -> None:
+    # The factored renderer against evaluate_brdf on full vector fields: values and gradients of
+    # every map, with normals tilted far enough that some texels face away from light or camera
+    # (the visibility mask), grazing and close lights, coloured intensities, float64.
+    from tests.render_reference import render_point_lights_direct
+
+    maps = random_maps(12, 10, batch=(2,), dtype=torch.float64)
+    tilt = torch.linspace(-2.5, 2.5, 10, dtype=torch.float64)
+    maps[:, 3] = maps[:, 3] + tilt  # some normals lean past 60°
+    maps[:, 3:6] = torch.nn.functional.normalize(maps[:, 3:6], dim=1)
+    g = torch.Generator().manual_seed(3)
+    views = 4
+    camera = torch.randn(2, views, 3, generator=g, dtype=torch.float64) * 0.8
+    camera[..., 2] = camera[..., 2].abs() + 0.3
+    position = torch.randn(2, views, lights_per_config, 3, generator=g, dtype=torch.float64)
+    position[..., 2] = position[..., 2].abs() * 0.5 + 0.05  # some nearly grazing
+    lights = PointLights(
+        position=position,
+        intensity=torch.rand(2, views, lights_per_config, generator=g, dtype=torch.float64) + 0.5,
+        color=torch.rand(2, views, lights_per_config, 3, generator=g, dtype=torch.float64),
+    )
+    weights = torch.rand(2, views, 3, 12, 10, generator=g, dtype=torch.float64)
+    results = []
+    for render in (render_point_lights, render_point_lights_direct):
+        pred = maps.clone().requires_grad_(True)
+        image = render(pred, camera, lights, 0.7)
+        (gradient,) = torch.autograd.grad((image * weights).sum(), pred)
+        results.append((image.detach(), gradient))
+    (fast, fast_grad), (direct, direct_grad) = results
+    assert (direct == 0).any() and (direct > 0).any()  # the visibility mask is exercised
+    torch.testing.assert_close(fast, direct, rtol=1e-10, atol=1e-12)
+    torch.testing.assert_close(fast_grad, direct_grad, rtol=1e-9, atol=1e-11)

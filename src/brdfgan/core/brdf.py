@@ -26,7 +26,7 @@ from torch import Tensor
 from brdfgan.core.svbrdf import diffuse_albedo, roughness_to_alpha, specular_albedo
 
 VECTOR_DIM = -3
-_EPS = 1e-7
+EPS = 1e-7  # the smallest norm and cosine divided by
 
 
 def dot(a: Tensor, b: Tensor) -> Tensor:
@@ -36,7 +36,7 @@ def dot(a: Tensor, b: Tensor) -> Tensor:
 
 def normalize(v: Tensor) -> Tensor:
     """Unit vectors along the vector axis. Shape: ``(*, 3, H, W)`` → same."""
-    return v / torch.linalg.vector_norm(v, dim=VECTOR_DIM, keepdim=True).clamp(min=_EPS)
+    return v / torch.linalg.vector_norm(v, dim=VECTOR_DIM, keepdim=True).clamp(min=EPS)
 
 
 def ggx_distribution(n_dot_h: Tensor, alpha: Tensor) -> Tensor:
@@ -49,7 +49,7 @@ def ggx_distribution(n_dot_h: Tensor, alpha: Tensor) -> Tensor:
 def smith_g1_ggx(n_dot_w: Tensor, alpha: Tensor) -> Tensor:
     """Exact Smith masking G1 for GGX, cosine form. Shape: ``(*, 1, H, W)`` → ``(*, 1, H, W)``."""
     a2 = alpha * alpha
-    return 2.0 * n_dot_w / (n_dot_w + torch.sqrt(a2 + (1.0 - a2) * n_dot_w * n_dot_w)).clamp(min=_EPS)
+    return 2.0 * n_dot_w / (n_dot_w + torch.sqrt(a2 + (1.0 - a2) * n_dot_w * n_dot_w)).clamp(min=EPS)
 
 
 def schlick_fresnel(f0: Tensor, h_dot_l: Tensor) -> Tensor:
@@ -57,7 +57,19 @@ def schlick_fresnel(f0: Tensor, h_dot_l: Tensor) -> Tensor:
 
     Shape: f0 ``(*, 3, H, W)``, h_dot_l ``(*, 1, H, W)`` → ``(*, 3, H, W)``.
     """
-    return f0 + (1.0 - f0) * (1.0 - h_dot_l).pow(5)
+    return f0 + (1.0 - f0) * schlick_weight(h_dot_l)
+
+
+def burley_diffuse_factor(roughness: Tensor, n_dot_l: Tensor, n_dot_v: Tensor, h_dot_l: Tensor) -> Tensor:
+    """The colourless part of the Burley lobe: the lobe is ``diffuse ×`` this,
+    ``(1 + (F_D90 − 1)(1 − n·l)^5)(1 + (F_D90 − 1)(1 − n·v)^5) / π`` with F_D90 = 0.5 + 2 r (h·l)².
+
+    Shape: ``(*, 1, H, W)`` each → ``(*, 1, H, W)``.
+    """
+    fd90_minus_1 = 2.0 * roughness * h_dot_l * h_dot_l - 0.5
+    light_scatter = 1.0 + fd90_minus_1 * (1.0 - n_dot_l).pow(5)
+    view_scatter = 1.0 + fd90_minus_1 * (1.0 - n_dot_v).pow(5)
+    return light_scatter * view_scatter / math.pi
 
 
 def burley_diffuse(
@@ -69,10 +81,23 @@ def burley_diffuse(
         - diffuse: ``(*, 3, H, W)`` linear diffuse albedo; the rest ``(*, 1, H, W)``
         - output: ``(*, 3, H, W)``
     """
-    fd90_minus_1 = 2.0 * roughness * h_dot_l * h_dot_l - 0.5
-    light_scatter = 1.0 + fd90_minus_1 * (1.0 - n_dot_l).pow(5)
-    view_scatter = 1.0 + fd90_minus_1 * (1.0 - n_dot_v).pow(5)
-    return diffuse / math.pi * light_scatter * view_scatter
+    return diffuse * burley_diffuse_factor(roughness, n_dot_l, n_dot_v, h_dot_l)
+
+
+def ggx_specular_factor(alpha: Tensor, n_dot_l: Tensor, n_dot_v: Tensor, n_dot_h: Tensor) -> Tensor:
+    """The colourless part of the Cook–Torrance lobe, ``D G / (4 (n·l)(n·v))``: the lobe is
+    ``F ×`` this.
+
+    Shape: ``(*, 1, H, W)`` each → ``(*, 1, H, W)``.
+    """
+    d = ggx_distribution(n_dot_h, alpha)
+    g = smith_g1_ggx(n_dot_l, alpha) * smith_g1_ggx(n_dot_v, alpha)
+    return d * g / (4.0 * n_dot_l * n_dot_v).clamp(min=EPS)
+
+
+def schlick_weight(h_dot_l: Tensor) -> Tensor:
+    """Schlick's ``(1 − h·l)^5``: Fresnel is ``F0 (1 − w) + w``. Shape: ``(*, 1, H, W)`` → same."""
+    return (1.0 - h_dot_l).pow(5)
 
 
 def ggx_specular(
@@ -84,9 +109,7 @@ def ggx_specular(
         - f0: ``(*, 3, H, W)``; the rest ``(*, 1, H, W)``
         - output: ``(*, 3, H, W)``
     """
-    d = ggx_distribution(n_dot_h, alpha)
-    g = smith_g1_ggx(n_dot_l, alpha) * smith_g1_ggx(n_dot_v, alpha)
-    return schlick_fresnel(f0, h_dot_l) * (d * g / (4.0 * n_dot_l * n_dot_v).clamp(min=_EPS))
+    return schlick_fresnel(f0, h_dot_l) * ggx_specular_factor(alpha, n_dot_l, n_dot_v, n_dot_h)
 
 
 def evaluate_brdf(
@@ -119,8 +142,8 @@ def evaluate_brdf(
     half = normalize(light_dir + view_dir)
     raw_n_dot_l = dot(normal, light_dir)
     raw_n_dot_v = dot(normal, view_dir)
-    n_dot_l = raw_n_dot_l.clamp(min=_EPS, max=1.0)
-    n_dot_v = raw_n_dot_v.clamp(min=_EPS, max=1.0)
+    n_dot_l = raw_n_dot_l.clamp(min=EPS, max=1.0)
+    n_dot_v = raw_n_dot_v.clamp(min=EPS, max=1.0)
     n_dot_h = dot(normal, half).clamp(min=0.0, max=1.0)
     h_dot_l = dot(half, light_dir).clamp(min=0.0, max=1.0)
 

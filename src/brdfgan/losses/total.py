@@ -19,6 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from torch import Tensor, nn
+from torch.profiler import record_function
 
 from brdfgan.core.sampling import RenderingLossSampling
 from brdfgan.losses.adversarial import (
@@ -185,9 +186,11 @@ class GANLoss(nn.Module):
         if s.feature and d_fake is not None and d_real is not None:
             terms["g_feat"] = feature_matching_loss(d_real, d_fake, self.feature_layers)
         if s.parameter:
-            terms.update(parameter_loss(pred_maps, true_maps))
+            with record_function("brdfgan/parameter_loss_forward"):
+                terms.update(parameter_loss(pred_maps, true_maps))
         if s.rendering and self.rendering_loss is not None:
-            terms["render"] = self.rendering_loss(pred_maps, true_maps)
+            with record_function("brdfgan/rendering_loss_forward"):
+                terms["render"] = self.rendering_loss(pred_maps, true_maps)
         terms["g_total"] = generator_total(terms, s, self.weight)
         return terms
 

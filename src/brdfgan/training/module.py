@@ -28,6 +28,7 @@ import torch
 from torch import Tensor, nn
 from torch.optim import Optimizer
 from torch.optim.lr_scheduler import LambdaLR
+from torch.profiler import record_function
 from torchmetrics import MetricCollection
 
 from brdfgan.core.sampling import sample_rendering_loss_configs
@@ -65,6 +66,11 @@ class SVBRDFGAN(L.LightningModule):
         gradient_clip: max gradient norm per network (``None``: no clipping).
         metrics: a factory of the evaluator's metric collection (:mod:`brdfgan.metrics`), so
             validation and test report the same numbers as ``evaluate.py``.
+        channels_last: keep the networks' weights and activations in the NHWC memory format
+            (faster convolutions on CUDA tensor cores; measured on CPU by ``make bench``).
+
+    The phases of a training step are labelled for ``torch.profiler`` (``brdfgan/…``; see
+    ``benchmarks/bench_train.py``); the labels cost nothing when no profiler runs.
     """
 
     def __init__(
@@ -77,6 +83,7 @@ class SVBRDFGAN(L.LightningModule):
         total_steps: int | None = None,
         gradient_clip: float | None = None,
         metrics: Callable[[], MetricCollection] | None = None,
+        channels_last: bool = False,
     ) -> None:
         super().__init__()
         self.automatic_optimization = False
@@ -90,6 +97,11 @@ class SVBRDFGAN(L.LightningModule):
         self.constant_lr_fraction = constant_lr_fraction
         self.total_steps = total_steps
         self.gradient_clip = gradient_clip
+        self.channels_last = channels_last
+        if channels_last:
+            self.generator.to(memory_format=torch.channels_last)
+            if self.discriminator is not None:
+                self.discriminator.to(memory_format=torch.channels_last)
         self.val_metrics: MetricCollection | None = metrics() if metrics is not None else None
         self.test_metrics: MetricCollection | None = metrics() if metrics is not None else None
         self.save_hyperparameters(ignore=["generator", "discriminator", "loss", "optimizer", "metrics"])
@@ -186,50 +198,65 @@ class SVBRDFGAN(L.LightningModule):
             return optimizers[0], optimizers[1] if len(optimizers) > 1 else None
         return optimizers, None
 
-    def _step(self, optimizer: Any, loss: Tensor) -> None:
+    def _step(self, optimizer: Any, loss: Tensor, name: str) -> None:
         optimizer.zero_grad(set_to_none=True)
-        self.manual_backward(loss)
-        if self.gradient_clip is not None:
-            self.clip_gradients(
-                optimizer, gradient_clip_val=self.gradient_clip, gradient_clip_algorithm="norm"
-            )
-        optimizer.step()
+        with record_function(f"brdfgan/{name}_backward"):
+            self.manual_backward(loss)
+        with record_function(f"brdfgan/{name}_optimizer"):
+            if self.gradient_clip is not None:
+                self.clip_gradients(
+                    optimizer, gradient_clip_val=self.gradient_clip, gradient_clip_algorithm="norm"
+                )
+            optimizer.step()
+
+    def _inputs(self, batch: Mapping[str, Any]) -> tuple[Tensor, Tensor]:
+        photo, maps = batch["photo"], batch["maps"]
+        if self.channels_last:
+            photo = photo.contiguous(memory_format=torch.channels_last)
+            maps = maps.contiguous(memory_format=torch.channels_last)
+        return photo, maps
 
     def training_step(self, batch: Mapping[str, Any], batch_idx: int) -> None:
-        photo, maps = batch["photo"], batch["maps"]
+        photo, maps = self._inputs(batch)
         g_opt, d_opt = self._optimizers()
-        fake = self.generator(photo)
+        with record_function("brdfgan/generator_forward"):
+            fake = self.generator(photo)
         logged: dict[str, Tensor] = {}
 
         if self.discriminator is not None and d_opt is not None:
             with self.toggled_optimizer(d_opt):
-                d_real = self.discriminator(photo, maps)
-                d_fake = self.discriminator(photo, fake.detach())
-                d_terms = self.loss.discriminator_terms(d_real, d_fake)
-                self._step(d_opt, d_terms["d_total"])
+                with record_function("brdfgan/discriminator_forward"):
+                    d_real = self.discriminator(photo, maps)
+                    d_fake = self.discriminator(photo, fake.detach())
+                    d_terms = self.loss.discriminator_terms(d_real, d_fake)
+                self._step(d_opt, d_terms["d_total"], "discriminator")
             logged.update(d_terms)
 
         with self.toggled_optimizer(g_opt):
             d_fake_g = d_real_g = None
             if self.discriminator is not None:
-                d_fake_g = self.discriminator(photo, fake)
-                with torch.no_grad():  # the real features are targets for feature matching
-                    d_real_g = self.discriminator(photo, maps) if self.loss.switches.feature else None
+                with record_function("brdfgan/generator_adversarial_forward"):
+                    d_fake_g = self.discriminator(photo, fake)
+                    with torch.no_grad():  # the real features are targets for feature matching
+                        d_real_g = self.discriminator(photo, maps) if self.loss.switches.feature else None
             g_terms = self.loss.generator_terms(fake, maps, d_fake_g, d_real_g)
-            self._step(g_opt, g_terms["g_total"])
+            self._step(g_opt, g_terms["g_total"], "generator")
         logged.update(g_terms)
 
-        for scheduler in self._schedulers():
-            scheduler.step()
-        self.log_dict(
-            {f"train/{name}": value.detach() for name, value in logged.items()},
-            prog_bar=False,
-            on_step=True,
-            on_epoch=True,
-            batch_size=photo.shape[0],
-        )
-        self.log("train/g_total_bar", g_terms["g_total"].detach(), prog_bar=True, logger=False)
-        self.log("train/lr", g_opt.param_groups[0]["lr"], on_step=True, on_epoch=False)
+        with record_function("brdfgan/schedule_and_logging"):
+            for scheduler in self._schedulers():
+                scheduler.step()
+            # Tensors, not numbers: Lightning reads them only when it writes a row
+            # (log_every_n_steps), so the step itself never waits for the device.
+            self.log_dict(
+                {f"train/{name}": value.detach() for name, value in logged.items()},
+                prog_bar=False,
+                on_step=True,
+                on_epoch=True,
+                batch_size=photo.shape[0],
+            )
+            self.log("train/g_total_bar", g_terms["g_total"].detach(), prog_bar=True, logger=False)
+            self.log("train/lr", g_opt.param_groups[0]["lr"], on_step=True, on_epoch=False)
 
     def on_train_epoch_end(self) -> None:
         datamodule = getattr(self.trainer, "datamodule", None)
@@ -240,7 +267,7 @@ class SVBRDFGAN(L.LightningModule):
     # -- evaluation --------------------------------------------------------------------------
 
     def _evaluate(self, batch: Mapping[str, Any], batch_idx: int, stage: str) -> Tensor:
-        photo, maps = batch["photo"], batch["maps"]
+        photo, maps = self._inputs(batch)
         fake = self.generator(photo)
         terms = parameter_loss(fake, maps)
         configs = sample_rendering_loss_configs(
