@@ -19,7 +19,8 @@ The protocol, and where each step lives:
    with Mitsuba and auto-exposed to linear LDR — :mod:`brdfgan.data.lighting`,
    :mod:`brdfgan.data.capture`, :mod:`brdfgan.mitsuba_render.capture`, :mod:`brdfgan.core.exposure`.
 5. Materials are grouped ``materials_per_shard`` at a time into WebDataset shards
-   ``<split>/<split>-NNNNNN.tar`` — :mod:`brdfgan.data.shards`. A shard is the unit of work
+   ``<split>/<split>-NNNNNN.tar``, their samples stored in ``shard_format`` —
+   :mod:`brdfgan.data.shards`. A shard is the unit of work
    and a pure function of (spec, split, shard index): re-running skips complete shards, so a
    killed run resumes without duplicates, and any subset of shards can run in another process or
    on another machine (``generate.py shard=…``). Each shard's SHA-256 is recorded the moment it
@@ -69,6 +70,8 @@ from brdfgan.data.materials.mixing import MixingConfig
 from brdfgan.data.materials.recolor import RecolorConfig
 from brdfgan.data.scanned import scanned_material_folders
 from brdfgan.data.shards import (
+    LEGACY_SHARD_FORMAT,
+    SHARD_FORMATS,
     Sample,
     ShardError,
     ShardInfo,
@@ -119,9 +122,18 @@ class DatasetSpec:
     # A folder of scanned material sets (brdfgan.data.scanned) instead of the procedural
     # families: such a dataset is test only, so real scans never become training data.
     scanned: str | None = None
+    # How samples are stored (brdfgan.data.shards): "u16z" or "png", the same 16-bit values either
+    # way. "png" here because a spec without the key (every dataset.json made before it) describes
+    # PNG shards; conf/dataset_spec/default.yaml makes new datasets "u16z". Not part of a dataset's
+    # identity: an existing dataset is finished and repaired in the format it records.
+    shard_format: str = LEGACY_SHARD_FORMAT
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "families", tuple(self.families))
+        if self.shard_format not in SHARD_FORMATS:
+            raise DatasetConfigError(
+                f"dataset_spec.shard_format={self.shard_format!r}: must be one of {', '.join(SHARD_FORMATS)}"
+            )
         for key in (
             "materials",
             "material_resolution",
@@ -437,7 +449,8 @@ def prepare_output_dir(spec: DatasetSpec, out_dir: str | os.PathLike[str]) -> Pa
     """Create ``out_dir`` (and the split folders), check it is writable, and record the spec.
 
     A directory that already holds a dataset made from a different spec is refused, naming the
-    first differing key: mixing shards of two specs would silently corrupt both.
+    first differing key: mixing shards of two specs would silently corrupt both. The shard format
+    is no such difference (see :func:`_in_recorded_format`).
     """
     root = Path(out_dir)
     if root.exists() and not root.is_dir():
@@ -461,8 +474,8 @@ def prepare_output_dir(spec: DatasetSpec, out_dir: str | os.PathLike[str]) -> Pa
             existing = json.loads(spec_file.read_text())
         except (OSError, ValueError) as error:
             raise DatasetConfigError(f"{spec_file}: unreadable dataset spec ({error})") from None
-        if existing != wanted:
-            key = _first_difference(existing, wanted)
+        if _identity(existing) != _identity(wanted):
+            key = _first_difference(_identity(existing), _identity(wanted))
             raise DatasetConfigError(
                 f"{root} holds a dataset made with a different config ({key} differs); "
                 "use another output directory or delete this one"
@@ -470,6 +483,36 @@ def prepare_output_dir(spec: DatasetSpec, out_dir: str | os.PathLike[str]) -> Pa
     else:
         _write_json_atomic(spec_file, wanted)
     return root
+
+
+def _identity(description: Any) -> Any:
+    """A recorded spec less its ``shard_format``: the formats store the same values, so a dataset
+    in one is the dataset of the same spec in the other."""
+    if not isinstance(description, dict):
+        return description
+    return {key: value for key, value in description.items() if key != "shard_format"}
+
+
+def _in_recorded_format(spec: DatasetSpec, root: Path) -> DatasetSpec:
+    """``spec`` with the shard format that the dataset in ``root`` records (``dataset.json``;
+    none recorded: PNG, the only format before u16z), so that an existing dataset is finished and
+    repaired in its own format, byte for byte as its recorded SHA-256s say."""
+    spec_file = root / SPEC_FILE
+    try:
+        recorded = json.loads(spec_file.read_text()).get("shard_format", LEGACY_SHARD_FORMAT)
+    except (OSError, ValueError, AttributeError) as error:
+        raise DatasetConfigError(f"{spec_file}: unreadable dataset spec ({error})") from None
+    if recorded not in SHARD_FORMATS:
+        raise DatasetConfigError(
+            f"{spec_file}: shard_format={recorded!r} is not one of {', '.join(SHARD_FORMATS)}"
+        )
+    if recorded == spec.shard_format:
+        return spec
+    log.warning(
+        "%s holds %s shards: continuing in %s (dataset_spec.shard_format=%s applies to new datasets)",
+        root, recorded, recorded, spec.shard_format,
+    )  # fmt: skip
+    return dataclasses.replace(spec, shard_format=recorded)
 
 
 def _first_difference(a: Any, b: Any, prefix: str = "dataset_spec") -> str:
@@ -587,6 +630,7 @@ def _run_generation(
     # Environment sources are checked before anything is written (an empty folder is an error).
     pools = build_environment_pools(spec.lighting, derive_seed(spec.seed, "lighting"))
     root = prepare_output_dir(spec, out_dir)
+    spec = _in_recorded_format(spec, root)
     jobs = plan_shards(spec)
     summary = GenerationSummary(out_dir=root)
     manifest_digests = {split: recorded_digests(root, split) for split in SPLITS}
@@ -624,7 +668,7 @@ def _run_generation(
                     before = _recorded(path, manifest_digests[job.split].get(path.name))
                 except ShardError:
                     before = set()  # a malformed record: replaced below
-                info: ShardInfo = write_shard(path, samples())
+                info: ShardInfo = write_shard(path, samples(), shard_format=spec.shard_format)
                 # Recorded at once: from here on a rerun can tell this shard's bytes from corruption.
                 write_digest(info.path, info.sha256)
                 if before and before != {info.sha256}:
@@ -693,7 +737,7 @@ def dataset_ready(spec: DatasetSpec, out_dir: str | os.PathLike[str]) -> bool:
     if not spec_file.exists() or not all((root / s / "manifest.json").exists() for s in SPLITS):
         return False
     try:
-        return json.loads(spec_file.read_text()) == spec.to_json()
+        return bool(_identity(json.loads(spec_file.read_text())) == _identity(spec.to_json()))
     except (OSError, ValueError):
         return False
 
