@@ -1,13 +1,15 @@
-"""Data loading benchmark: samples/s that ShardDataModule's train loader delivers, per worker count.
+"""Data loading benchmark: samples/s that ShardDataModule's train loader delivers, per worker
+count and shard format (``png`` and ``u16z``, :mod:`brdfgan.data.shards`).
 
-Writes a small temporary dataset per resolution (smooth procedural-looking maps with a little
-noise, photographed with the torch flash renderer and auto-exposed, plus simulated sensor noise,
-so the 16-bit PNGs compress like real renders and not like white noise), then streams it
-through the train DataLoader (shuffle buffer, decoding, batching) and times the steady state
-after the first batch. Prints Markdown tables and how many workers feed a GPU at the paper's
+Writes a small temporary dataset per resolution and format, the same samples in each (smooth
+procedural-looking maps with a little noise, photographed with the torch flash renderer and
+auto-exposed, plus simulated sensor noise, so the 16-bit planes compress like real renders and
+not like white noise), then streams it through the train DataLoader (shuffle buffer, decoding,
+batching) and times the steady state after the first batch. Prints Markdown tables (one of them
+png against u16z per worker, with the ratio) and how many workers feed a GPU at the paper's
 configuration.
 
-    python -m benchmarks.bench_datamodule [--workers 0,1,2] [--batches 12] [--samples 48]
+    python -m benchmarks.bench_datamodule [--workers 0,1,2] [--batches 12] [--samples 32]
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -25,9 +28,19 @@ from brdfgan.core.exposure import auto_expose
 from brdfgan.core.render import render_flash
 from brdfgan.core.svbrdf import join_maps, linear_to_srgb, normalize_normal
 from brdfgan.data.datamodule import ShardDataModule
-from brdfgan.data.shards import SAMPLE_MEMBERS, Sample, decode_sample, encode_sample, shard_path, write_shard
+from brdfgan.data.shards import (
+    FORMAT_MEMBERS,
+    SHARD_FORMATS,
+    Sample,
+    decode_sample,
+    encode_sample,
+    shard_path,
+    write_shard,
+)
 
 RESOLUTIONS = (512, 256)
+FORMATS = ("png", "u16z")  # old against new; the GPU feeding estimate uses NEW_FORMAT
+NEW_FORMAT = "u16z"
 SHARDS = 4
 # Paper's training configuration and an assumed GPU step time: one G+D step of the 45.6 M-param
 # generator and the two PatchGAN discriminators at batch 8, 512², on an A100-class GPU. An
@@ -67,42 +80,58 @@ def _sample(index: int, size: int) -> Sample:
     return Sample(key=f"bench-{index:05d}", photo=photo, maps=maps, meta={"index": index, "size": size})
 
 
-def _make_dataset(root: Path, size: int, samples: int) -> dict[str, float]:
+def _make_datasets(root: Path, size: int, samples: int) -> dict[str, dict[str, float]]:
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # 2-thread OpenMP collapses when the machine is shared
     try:
-        return _write_dataset(root, size, samples)
+        return _write_datasets(root, size, samples)
     finally:
         torch.set_num_threads(threads)
 
 
-def _write_dataset(root: Path, size: int, samples: int) -> dict[str, float]:
-    start = time.perf_counter()
+def _write_datasets(root: Path, size: int, samples: int) -> dict[str, dict[str, float]]:
+    """The same samples as one dataset per format, at ``root/<format>``; per format: MB per
+    sample on disk, render and encode+write seconds per sample."""
     per_shard = math.ceil(samples / SHARDS)
-    total_bytes = 0
+    render_s = 0.0
+    total_bytes = dict.fromkeys(FORMATS, 0)
+    write_s = dict.fromkeys(FORMATS, 0.0)
     for shard in range(SHARDS):
-        indices = range(shard * per_shard, min(samples, (shard + 1) * per_shard))
-        total_bytes += write_shard(
-            shard_path(root, "train", shard), (_sample(i, size) for i in indices)
-        ).bytes
+        start = time.perf_counter()
+        batch = [_sample(i, size) for i in range(shard * per_shard, min(samples, (shard + 1) * per_shard))]
+        render_s += time.perf_counter() - start
+        for shard_format in FORMATS:
+            start = time.perf_counter()
+            path = shard_path(root / shard_format, "train", shard)
+            total_bytes[shard_format] += write_shard(path, batch, shard_format=shard_format).bytes
+            write_s[shard_format] += time.perf_counter() - start
     return {
-        "mb_per_sample": total_bytes / samples / 2**20,
-        "write_s": (time.perf_counter() - start) / samples,
+        shard_format: {
+            "mb_per_sample": total_bytes[shard_format] / samples / 2**20,
+            "render_s": render_s / samples,
+            "write_s": write_s[shard_format] / samples,
+        }
+        for shard_format in FORMATS
     }
 
 
-def _decode_time(size: int, repeats: int = 5) -> float:
-    """Seconds per decode_sample with one torch thread, as in a DataLoader worker."""
-    record = {"__key__": "bench-00000", **encode_sample(_sample(0, size))}
-    assert set(record) - {"__key__"} == set(SAMPLE_MEMBERS)
+def _decode_time(size: int, shard_format: str, samples: int = 3, repeats: int = 5) -> float:
+    """Median seconds per decode_sample with one torch thread, as in a DataLoader worker."""
+    records = [
+        {"__key__": f"bench-{i:05d}", **encode_sample(_sample(i, size), shard_format)} for i in range(samples)
+    ]
+    assert all(set(r) - {"__key__"} == set(FORMAT_MEMBERS[shard_format]) for r in records)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        decode_sample(record)
-        start = time.perf_counter()
+        decode_sample(records[0])
+        times = []
         for _ in range(repeats):
-            decode_sample(record)
-        return (time.perf_counter() - start) / repeats
+            for record in records:
+                start = time.perf_counter()
+                decode_sample(record)
+                times.append(time.perf_counter() - start)
+        return statistics.median(times)
     finally:
         torch.set_num_threads(threads)
 
@@ -117,12 +146,29 @@ def _throughput(root: Path, workers: int, batches: int) -> dict[str, float]:
     start = time.perf_counter()
     next(iterator)  # worker start-up and shuffle-buffer fill
     first = time.perf_counter() - start
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     delivered = sum(len(batch["key"]) for batch in iterator)
-    elapsed = time.perf_counter() - start
+    elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu_start
     del iterator
     dm.teardown()  # stop the persistent workers before the next case forks its own
-    return {"samples_per_s": delivered / elapsed, "first_batch_s": first}
+    # Per CPU second of this process: with workers=0 the whole loader's work, whatever else the
+    # machine runs meanwhile.
+    return {
+        "samples_per_s": delivered / elapsed,
+        "samples_per_cpu_s": delivered / cpu,
+        "first_batch_s": first,
+    }
+
+
+def _single_thread_stream(root: Path, batches: int) -> dict[str, float]:
+    """The train loader in this process with one torch thread: one worker's work, decoding to
+    batches, without the transfer to the training process."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _throughput(root, 0, batches)
+    finally:
+        torch.set_num_threads(threads)
 
 
 def main() -> None:
@@ -132,19 +178,27 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=32, help="samples in each temporary dataset")
     args = parser.parse_args()
     worker_counts = [int(w) for w in args.workers.split(",")]
+    assert set(FORMATS) == set(SHARD_FORMATS)
 
     rows, datasets, per_worker = [], {}, {}
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="bench-datamodule-") as tmp:
         for size in RESOLUTIONS:
-            root = Path(tmp) / str(size)
-            datasets[size] = _make_dataset(root, size, args.samples)
-            datasets[size]["decode_ms"] = 1000 * _decode_time(size)
-            for workers in worker_counts:
-                m = _throughput(root, workers, args.batches)
-                rows.append((size, workers, m))
-                if workers == 1:
-                    per_worker[size] = m["samples_per_s"]
+            made = _make_datasets(Path(tmp) / str(size), size, args.samples)
+            for shard_format in FORMATS:
+                root = Path(tmp) / str(size) / shard_format
+                stream = _single_thread_stream(root, args.batches)
+                datasets[size, shard_format] = {
+                    **made[shard_format],
+                    "decode_ms": 1000 * _decode_time(size, shard_format),
+                    "stream_per_s": stream["samples_per_s"],
+                    "stream_per_cpu_s": stream["samples_per_cpu_s"],
+                }
+                for workers in worker_counts:
+                    m = _throughput(root, workers, args.batches)
+                    rows.append((size, shard_format, workers, m))
+                    if workers == 1:
+                        per_worker[size, shard_format] = m["samples_per_s"]
 
     print(
         f"\nShardDataModule train loader, batch {TRAIN_BATCH}, {os.cpu_count()} CPU cores, "
@@ -152,23 +206,47 @@ def main() -> None:
         f"{args.batches} timed batches after the first, {args.samples} samples in {SHARDS} shards, "
         f"1-min load average {load_before:.1f} before / {os.getloadavg()[0]:.1f} after\n"
     )
-    header = "resolution workers samples/s samples/s-per-worker ms-per-batch first-batch-s"
+    header = "resolution format workers samples/s samples/s-per-worker ms-per-batch first-batch-s"
     print("| " + " | ".join(header.split()) + " |")
     print("|" + "---|" * len(header.split()))
-    for size, workers, m in rows:
+    for size, shard_format, workers, m in rows:
         rate = m["samples_per_s"]
         cells = [
-            f"{size}²", str(workers), f"{rate:.1f}", f"{rate / max(1, workers):.1f}",
+            f"{size}²", shard_format, str(workers), f"{rate:.1f}", f"{rate / max(1, workers):.1f}",
             f"{1000 * TRAIN_BATCH / rate:.0f}", f"{m['first_batch_s']:.2f}",
         ]  # fmt: skip
         print("| " + " | ".join(cells) + " |")
 
     print(
-        "\n| resolution | MB/sample on disk | write s/sample (render+encode) | decode_sample ms (1 thread) |"
+        "\n| resolution | format | MB/sample on disk | render s/sample | encode+write s/sample "
+        "| decode_sample ms (1 thread) |"
     )
-    print("|---|---|---|---|")
-    for size, d in datasets.items():
-        print(f"| {size}² | {d['mb_per_sample']:.2f} | {d['write_s']:.2f} | {d['decode_ms']:.1f} |")
+    print("|---|---|---|---|---|---|")
+    for (size, shard_format), d in datasets.items():
+        print(
+            f"| {size}² | {shard_format} | {d['mb_per_sample']:.2f} | {d['render_s']:.2f} "
+            f"| {d['write_s']:.3f} | {d['decode_ms']:.1f} |"
+        )
+
+    old, new = FORMATS
+    print(f"\nSamples/s per worker, {old} vs {new} (the same samples in each):\n")
+    print(f"| resolution | what is timed | {old} | {new} | ratio |")
+    print("|---|---|---|---|---|")
+    for size in RESOLUTIONS:
+        measures = [
+            ("decode_sample alone, 1 torch thread", [1000 / datasets[size, f]["decode_ms"] for f in FORMATS]),
+            (
+                "train loader in-process, 1 torch thread (tar read, shuffle, decode, batch)",
+                [datasets[size, f]["stream_per_s"] for f in FORMATS],
+            ),
+            ("... per CPU second of it", [datasets[size, f]["stream_per_cpu_s"] for f in FORMATS]),
+        ]
+        if (size, old) in per_worker:
+            measures.append(
+                ("DataLoader, 1 worker process (+ transfer)", [per_worker[size, f] for f in FORMATS])
+            )
+        for what, (rate_old, rate_new) in measures:
+            print(f"| {size}² | {what} | {rate_old:.1f} | {rate_new:.1f} | {rate_new / rate_old:.1f}× |")
 
     needed = TRAIN_BATCH / ASSUMED_GPU_STEP_S
     print(
@@ -179,13 +257,13 @@ def main() -> None:
     # At 256² the step costs ~4× fewer FLOPs (docs/conventions.md#generator-cost: 106 vs 424 GFLOP
     # per image).
     for size, rate_needed in ((512, needed), (256, needed * 4)):
-        if size in per_worker:
-            workers = math.ceil(rate_needed / per_worker[size])
+        if (size, NEW_FORMAT) in per_worker:
+            rate = per_worker[size, NEW_FORMAT]
+            workers = math.ceil(rate_needed / rate)
             print(
-                f"- {size}² (≥ {rate_needed:.0f} samples/s): one worker delivers "
-                f"{per_worker[size]:.1f} samples/s on this CPU → ≥ {workers} workers per GPU, "
-                "plus a core for the training process (if the GPU host's cores are as fast "
-                "and workers scale linearly)."
+                f"- {size}² (≥ {rate_needed:.0f} samples/s): one worker delivers {rate:.1f} samples/s "
+                f"from {NEW_FORMAT} shards on this CPU → ≥ {workers} workers per GPU, plus a core for the "
+                "training process (if the GPU host's cores are as fast and workers scale linearly)."
             )
 
 
