@@ -1,7 +1,11 @@
 """Renderer forward+backward benchmark: the rendering-loss workload of one training step.
 
+Modes: ``direct`` is the renderer before issue 16 (full ``(B, V, 3, H, W)`` vector fields, kept in
+``tests/render_reference.py``), ``eager`` the library's factored renderer, ``compiled`` the same
+through ``torch.compile``.
+
 Each case runs in a fresh subprocess so its peak resident memory is its own (CPU); on CUDA the
-peak comes from the allocator. Prints a Markdown table; ratios are relative to the first row.
+peak comes from the allocator. Prints a Markdown table; ratios are relative to the direct row of the same size.
 
     python -m benchmarks.bench_renderer [--device cpu|cuda] [--repeats N]
 """
@@ -14,17 +18,21 @@ import resource
 import subprocess
 import sys
 import time
+from functools import partial
+from typing import Any
 
 import torch
 
-# (resolution, batch, configurations, torch.compile)
-CASES: list[tuple[int, int, int, int]] = [(256, 8, 10, 0), (256, 8, 10, 1), (512, 8, 10, 0), (512, 8, 10, 1)]
+MODES = ("direct", "eager", "compiled")
+# (resolution, batch, configurations, mode index)
+CASES: list[tuple[int, int, int, int]] = [(r, 8, 10, m) for r in (256, 512) for m in range(len(MODES))]
 
 
 def _measure(
-    resolution: int, batch: int, configs: int, compiled: int, device: str, repeats: int
+    resolution: int, batch: int, configs: int, mode: int, device: str, repeats: int
 ) -> dict[str, float]:
     from tests.conftest import random_maps
+    from tests.render_reference import render_point_lights_direct
 
     from brdfgan.core.render import PointLightRenderer
     from brdfgan.core.sampling import RenderingLossSampling, log_transform, sample_rendering_loss_configs
@@ -37,7 +45,9 @@ def _measure(
         batch, sampling, generator=torch.Generator().manual_seed(0), device=device
     )
 
-    renderer = PointLightRenderer(compile=bool(compiled))
+    renderer: Any = PointLightRenderer(compile=MODES[mode] == "compiled")
+    if MODES[mode] == "direct":
+        renderer = partial(render_point_lights_direct, plane_half_size=1.0)
 
     def sync() -> None:
         if device == "cuda":
@@ -92,18 +102,18 @@ def main() -> None:
     print(
         f"\nRenderer forward+backward (rendering loss: prediction + no-grad target), device={args.device}, "
         f"torch {torch.__version__}, {torch.get_num_threads()} threads, best of {args.repeats}; "
-        "ratios against the eager row of the same size\n"
+        "ratios against the direct (before) row of the same size\n"
     )
     header = "resolution batch configs mode first-step-s forward-s fwd+bwd-s peak-GiB speed-up memory"
     header += " Mpix-renders/s"
     print("| " + " | ".join(header.split()) + " |")
     print("|" + "---|" * len(header.split()))
-    eager = {case[0]: m for case, m in rows if not case[3]}
-    for (resolution, batch, configs, compiled), m in rows:
-        base = eager[resolution]
+    direct = {case[0]: m for case, m in rows if MODES[case[3]] == "direct"}
+    for (resolution, batch, configs, mode), m in rows:
+        base = direct[resolution]
         mpix = resolution * resolution * batch * configs / 1e6
         cells = [
-            f"{resolution}²", str(batch), str(configs), "compiled" if compiled else "eager",
+            f"{resolution}²", str(batch), str(configs), MODES[mode],
             f"{m['first_step_s']:.1f}", f"{m['forward_s']:.3f}", f"{m['forward_backward_s']:.3f}",
             f"{m['peak_gib']:.2f}", f"{base['forward_backward_s'] / m['forward_backward_s']:.2f}×",
             f"{m['peak_gib'] / base['peak_gib']:.2f}×", f"{mpix / m['forward_backward_s']:.1f}",

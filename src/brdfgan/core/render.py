@@ -169,7 +169,9 @@ def plane_positions(
     return torch.stack([grid_x, grid_y, torch.zeros_like(grid_x)], dim=0)
 
 
-def _check_scene_shapes(maps: Tensor, camera_position: Tensor, lights: PointLights) -> None:
+def check_scene_shapes(maps: Tensor, camera_position: Tensor, lights: PointLights) -> None:
+    """Raise ``ValueError`` unless maps ``(B, 8, H, W)``, camera ``(B, V, 3)`` and lights
+    ``(B, V, K, ·)`` fit together."""
     check_map_shape(maps)
     if maps.ndim != 4:
         raise ValueError(f"maps must have shape (B, 8, H, W), got {tuple(maps.shape)}")
@@ -213,21 +215,65 @@ def _dot(a: Components, b: Components) -> Tensor:
     return torch.addcmul(torch.addcmul(a[2] * b[2], a[1], b[1]), a[0], b[0])
 
 
+@dataclass(frozen=True)
+class ShadingInputs:
+    """What the shading needs of a map set, per texel (broadcast over configurations): linear
+    diffuse albedo and F0 ``(B, 1, 3, H, W)``, roughness and GGX α ``(B, 1, 1, H, W)``, and the
+    unit normal's components, each ``(B, 1, 1, H, W)``. Built once by :func:`shading_inputs`, so
+    that eager code does not recompute them for every configuration."""
+
+    diffuse: Tensor
+    f0: Tensor
+    roughness: Tensor
+    alpha: Tensor
+    normal: Components
+
+    @property
+    def shape(self) -> tuple[int, int, int, int]:
+        """``(B, 8, H, W)`` of the maps these came from."""
+        batch, _, _, height, width = self.roughness.shape
+        return batch, 8, height, width
+
+
+def linear_basecolor_maps(maps: Tensor) -> Tensor:
+    """``maps`` with the base colour decoded from sRGB to linear (the form
+    ``shading_inputs(..., basecolor_linear=True)`` takes). Decoding before a compiled shading
+    matters: fused into the per-configuration loop, the sRGB decoding's ``pow`` ran once per
+    configuration and was 40 % of a compiled render.
+
+    Shape: ``(B, 8, H, W)`` → same.
+    """
+    return torch.cat([srgb_to_linear(maps[:, 0:3]), maps[:, 3:]], dim=1)
+
+
+def shading_inputs(maps: Tensor, *, basecolor_linear: bool = False) -> ShadingInputs:
+    """The per-texel terms of :func:`shade_point_lights` (differentiable).
+
+    Args:
+        maps: map sets, base colour sRGB-encoded (or linear with ``basecolor_linear``).
+        basecolor_linear: the base colour is already linear (:func:`linear_basecolor_maps`).
+
+    Shape:
+        - maps: ``(B, 8, H, W)``
+        - output: see :class:`ShadingInputs`
+    """
+    parts = split_maps(maps.unsqueeze(1))  # (B, 1, C, H, W): broadcast over configurations
+    basecolor = parts.basecolor if basecolor_linear else srgb_to_linear(parts.basecolor)
+    normal = normalize_normal(parts.normal, dim=VECTOR_DIM)
+    return ShadingInputs(
+        diffuse=diffuse_albedo(basecolor, parts.metallic),
+        f0=specular_albedo(basecolor, parts.metallic),
+        roughness=parts.roughness,
+        alpha=roughness_to_alpha(parts.roughness),
+        normal=(normal[:, :, 0:1], normal[:, :, 1:2], normal[:, :, 2:3]),
+    )
+
+
 def render_point_lights(
     maps: Tensor, camera_position: Tensor, lights: PointLights, plane_half_size: float = 1.0
 ) -> Tensor:
-    """Render map sets under point lights, one image per light/view configuration.
-
-    Evaluates :func:`~brdfgan.core.brdf.evaluate_brdf` at every texel, factored for speed (tests
-    hold it to the direct evaluation, values and gradients): everything that depends only on the
-    scene (view, light and half vectors, h·l, Schlick's weight, falloff) is computed without
-    autograd, vectors are kept as separate component tensors, and per light the shading is
-    reduced to three colourless fields ``A, B, C`` so that the colour enters once,
-
-        L_k = I_k · (d · A + F0 · B + C),   A = w f_d/d,  B = w (1 − s) f_s/F,  C = w s f_s/F,
-
-    with w = cos θ_l / r² where l and v are above the shading normal (else 0) and s = (1 − h·l)^5.
-    Only ``(B, V, 1, H, W)`` fields are materialised until the last step.
+    """Render map sets under point lights, one image per light/view configuration:
+    :func:`shade_point_lights` of :func:`shading_inputs`.
 
     Args:
         maps: map sets in the layout of :mod:`brdfgan.core.svbrdf` (base color sRGB-encoded,
@@ -245,24 +291,44 @@ def render_point_lights(
         - lights: position ``(B, V, K, 3)``, intensity ``(B, V, K)``, color ``(B, V, K, 3)``
         - output: ``(B, V, 3, H, W)``
     """
-    _check_scene_shapes(maps, camera_position, lights)
-    _, _, height, width = maps.shape
-    parts = split_maps(maps.unsqueeze(1))  # (B, 1, C, H, W): broadcast over configurations
-    basecolor = srgb_to_linear(parts.basecolor)
-    diffuse = diffuse_albedo(basecolor, parts.metallic)
-    f0 = specular_albedo(basecolor, parts.metallic)
-    alpha = roughness_to_alpha(parts.roughness)
-    normal = normalize_normal(parts.normal, dim=VECTOR_DIM)
-    n: Components = (normal[:, :, 0:1], normal[:, :, 1:2], normal[:, :, 2:3])  # (B, 1, 1, H, W)
+    check_scene_shapes(maps, camera_position, lights)
+    return shade_point_lights(shading_inputs(maps), camera_position, lights, plane_half_size)
+
+
+def shade_point_lights(
+    inputs: ShadingInputs, camera_position: Tensor, lights: PointLights, plane_half_size: float = 1.0
+) -> Tensor:
+    """The radiance of :func:`render_point_lights` from the maps' :func:`shading_inputs`.
+
+    Evaluates :func:`~brdfgan.core.brdf.evaluate_brdf` at every texel, factored for speed (tests
+    hold it to the direct evaluation, values and gradients): everything that depends only on the
+    scene (view, light and half vectors, h·l, Schlick's weight, falloff) is computed without
+    autograd, vectors are kept as separate component tensors, and per light the shading is
+    reduced to three colourless fields ``A, B, C`` so that the colour enters once,
+
+        L_k = I_k · (d · A + F0 · B + C),   A = w f_d/d,  B = w (1 − s) f_s/F,  C = w s f_s/F,
+
+    with w = cos θ_l / r² where l and v are above the shading normal (else 0) and s = (1 − h·l)^5.
+    Only ``(B, V, 1, H, W)`` fields are materialised until the last step.
+
+    Shape:
+        - inputs: from maps ``(B, 8, H, W)``
+        - camera_position: ``(B, V, 3)``
+        - lights: position ``(B, V, K, 3)``, intensity ``(B, V, K)``, color ``(B, V, K, 3)``
+        - output: ``(B, V, 3, H, W)``
+    """
+    n = inputs.normal
+    batch, _, height, width = inputs.shape
+    dtype, device = inputs.roughness.dtype, inputs.roughness.device
 
     with torch.no_grad():  # the scene: no map enters here
         s = plane_half_size
-        xs = -s + (torch.arange(width, dtype=maps.dtype, device=maps.device) + 0.5) * (2.0 * s / width)
-        ys = s - (torch.arange(height, dtype=maps.dtype, device=maps.device) + 0.5) * (2.0 * s / height)
+        xs = -s + (torch.arange(width, dtype=dtype, device=device) + 0.5) * (2.0 * s / width)
+        ys = s - (torch.arange(height, dtype=dtype, device=device) + 0.5) * (2.0 * s / height)
         xs, ys = xs.view(1, 1, 1, 1, width), ys.view(1, 1, 1, height, 1)
 
         def towards(points: Tensor) -> Components:  # (B, V, 3) → separable offsets from the texels
-            p = points.to(maps.dtype)[..., None, None, None]  # (B, V, 3, 1, 1, 1)
+            p = points.to(dtype)[..., None, None, None]  # (B, V, 3, 1, 1, 1)
             return (p[:, :, 0] - xs, p[:, :, 1] - ys, p[:, :, 2])
 
         view, _ = _unit(*towards(camera_position))
@@ -273,7 +339,7 @@ def render_point_lights(
             h_dot_l = _dot(half, light).clamp_(min=0.0, max=1.0)
             falloff = distance_sq.clamp_(min=1e-12).reciprocal_()
             scene.append((light, half, h_dot_l, schlick_weight(h_dot_l), falloff))
-        intensity = lights.radiant_intensity().to(maps.dtype)[..., None, None]  # (B, V, K, 3, 1, 1)
+        intensity = lights.radiant_intensity().to(dtype)[..., None, None]  # (B, V, K, 3, 1, 1)
 
     n_dot_v_raw = _dot(n, view)
     n_dot_v = n_dot_v_raw.clamp(min=EPS, max=1.0)
@@ -284,17 +350,15 @@ def render_point_lights(
         n_dot_h = _dot(n, half).clamp(min=0.0, max=1.0)
         visible = (n_dot_l_raw > 0) & (n_dot_v_raw > 0)
         # cos θ_l / r², zero where either direction is below the shading normal.
-        weight = torch.where(
-            visible, n_dot_l_raw * falloff, torch.zeros((), dtype=maps.dtype, device=maps.device)
-        )
-        colourless_diffuse = weight * burley_diffuse_factor(parts.roughness, n_dot_l, n_dot_v, h_dot_l)
-        colourless_specular = weight * ggx_specular_factor(alpha, n_dot_l, n_dot_v, n_dot_h)
-        light_k = torch.addcmul(schlick * colourless_specular, diffuse, colourless_diffuse)
-        light_k = torch.addcmul(light_k, f0, colourless_specular - schlick * colourless_specular)
+        weight = torch.where(visible, n_dot_l_raw * falloff, torch.zeros((), dtype=dtype, device=device))
+        colourless_diffuse = weight * burley_diffuse_factor(inputs.roughness, n_dot_l, n_dot_v, h_dot_l)
+        colourless_specular = weight * ggx_specular_factor(inputs.alpha, n_dot_l, n_dot_v, n_dot_h)
+        light_k = torch.addcmul(schlick * colourless_specular, inputs.diffuse, colourless_diffuse)
+        light_k = torch.addcmul(light_k, inputs.f0, colourless_specular - schlick * colourless_specular)
         light_k = light_k * intensity[:, :, k]
         radiance = light_k if radiance is None else radiance + light_k
     if radiance is None:  # no lights
-        return maps.new_zeros(maps.shape[0], camera_position.shape[1], 3, height, width)
+        return torch.zeros(batch, camera_position.shape[1], 3, height, width, dtype=dtype, device=device)
     return radiance
 
 

@@ -471,7 +471,10 @@ class ShardDataModule(L.LightningDataModule):
         train_split, val_split, test_split: folder names; ``None`` disables that split.
         val_samples: cap on validation samples (a fixed subset), ``None`` for all.
         seed: seed of the shard permutations and shuffle buffers (mixed with epoch, rank, worker).
-        pin_memory: DataLoader ``pin_memory``.
+        pin_memory: DataLoader ``pin_memory`` (page-locked batches: faster, asynchronous copies
+            to a GPU; nothing to gain on CPU).
+        prefetch_factor: batches each worker decodes ahead (DataLoader ``prefetch_factor``; only
+            with workers, ``None``: PyTorch's default of 2).
         epoch_samples: samples per training epoch over all ranks; default: the valid samples in
             the train split (counted in ``setup``).
         train_crop: train on random ``train_crop``² windows of each sample (see
@@ -498,6 +501,7 @@ class ShardDataModule(L.LightningDataModule):
         val_samples: int | None = None,
         seed: int = 0,
         pin_memory: bool = False,
+        prefetch_factor: int | None = None,
         epoch_samples: int | None = None,
         train_crop: int | None = None,
         prepare: Callable[[], None] | None = None,
@@ -512,7 +516,12 @@ class ShardDataModule(L.LightningDataModule):
             raise ValueError(f"num_workers must be >= 0, got {num_workers}")
         if shuffle_buffer < 0:
             raise ValueError(f"shuffle_buffer must be >= 0, got {shuffle_buffer}")
-        named = (("val_samples", val_samples), ("epoch_samples", epoch_samples), ("train_crop", train_crop))
+        named = (
+            ("val_samples", val_samples),
+            ("epoch_samples", epoch_samples),
+            ("train_crop", train_crop),
+            ("prefetch_factor", prefetch_factor),
+        )
         for name, value in named:
             if value is not None and value < 1:
                 raise ValueError(f"{name} must be >= 1 or None, got {value}")
@@ -528,6 +537,7 @@ class ShardDataModule(L.LightningDataModule):
         self.data_dir = Path(data_dir)
         self.batch_size = batch_size
         self.num_workers = num_workers
+        self.prefetch_factor = prefetch_factor
         self.shuffle_buffer = shuffle_buffer
         self.splits = {"train": train_split, "val": val_split, "test": test_split}
         self.val_samples = val_samples
@@ -712,6 +722,7 @@ class ShardDataModule(L.LightningDataModule):
             num_workers=self.num_workers,
             pin_memory=self.pin_memory,
             persistent_workers=persistent,
+            prefetch_factor=self.prefetch_factor if self.num_workers > 0 else None,
         )
 
     def _warn_eval_split(self, kind: str, index: _SplitIndex) -> None:

@@ -14,7 +14,13 @@ from collections.abc import Callable
 import torch
 from torch import Tensor, nn
 
-from brdfgan.core.render import PointLights, render_point_lights
+from brdfgan.core.render import (
+    PointLights,
+    check_scene_shapes,
+    linear_basecolor_maps,
+    shade_point_lights,
+    shading_inputs,
+)
 from brdfgan.core.sampling import (
     RenderConfigs,
     RenderingLossSampling,
@@ -25,8 +31,8 @@ from brdfgan.core.svbrdf import check_map_pair, check_map_shape
 
 log = logging.getLogger(__name__)
 
-# render(maps, camera_position, lights, plane_half_size) -> (B, V, 3, H, W), as render_point_lights.
-RenderFn = Callable[[Tensor, Tensor, PointLights, float], Tensor]
+# image_loss(pred, target with linear base colour, camera_position, lights, plane_half_size) -> scalar.
+ImageLossFn = Callable[[Tensor, Tensor, Tensor, PointLights, float], Tensor]
 
 
 def configs_to(
@@ -46,14 +52,41 @@ def configs_to(
     )
 
 
+def shaded_image_loss(
+    pred: Tensor,
+    target: Tensor,
+    camera_position: Tensor,
+    lights: PointLights,
+    plane_half_size: float = 1.0,
+) -> Tensor:
+    """Mean absolute difference of ``log(1 + x)`` of two map sets with *linear* base colour
+    (:func:`~brdfgan.core.render.linear_basecolor_maps`) rendered by
+    :func:`~brdfgan.core.render.render_point_lights`; the target without autograd (it is data).
+    The part of :func:`rendering_loss` that :class:`RenderingLoss` compiles.
+
+    Shape:
+        - pred, target: ``(B, 8, H, W)``, base colour linear
+        - camera_position: ``(B, V, 3)``, lights ``(B, V, K, ·)``
+        - output: scalar
+    """
+    pred_inputs = shading_inputs(pred, basecolor_linear=True)
+    pred_image = shade_point_lights(pred_inputs, camera_position, lights, plane_half_size)
+    with torch.no_grad():
+        target_inputs = shading_inputs(target, basecolor_linear=True)
+        target_image = shade_point_lights(target_inputs, camera_position, lights, plane_half_size)
+    return (log_transform(pred_image) - log_transform(target_image)).abs().mean()
+
+
 def rendering_loss(
     pred: Tensor,
     target: Tensor,
     configs: RenderConfigs,
-    render: RenderFn = render_point_lights,
     plane_half_size: float = 1.0,
+    *,
+    image_loss: ImageLossFn = shaded_image_loss,
 ) -> Tensor:
-    """Mean absolute difference of ``log(1 + x)`` of both map sets rendered under ``configs``.
+    """Mean absolute difference of ``log(1 + x)`` of both map sets rendered under ``configs``
+    (with :func:`~brdfgan.core.render.render_point_lights`).
 
     The target is rendered without autograd (it is data). Rendering runs in at least float32 —
     point-light radiance spans orders of magnitude, too much for half precision — on the device
@@ -63,8 +96,9 @@ def rendering_loss(
         pred: predicted maps.
         target: ground-truth maps.
         configs: the light/view configurations, shared by both renderings.
-        render: the renderer, called as ``render(maps, camera_position, lights, plane_half_size)``.
         plane_half_size: half the side of the sample square (as used to draw ``configs``).
+        image_loss: :func:`shaded_image_loss` or a compiled version of it; it receives the
+            maps with their base colour decoded to linear here.
 
     Shape:
         - pred, target: ``(B, 8, H, W)``
@@ -80,15 +114,11 @@ def rendering_loss(
         )
     dtype = torch.promote_types(pred.dtype, torch.float32)
     configs = configs_to(configs, pred.device, dtype)
-    pred_image = render(pred.to(dtype), configs.camera_position, configs.lights, plane_half_size)
+    check_scene_shapes(pred, configs.camera_position, configs.lights)
+    pred_linear = linear_basecolor_maps(pred.to(dtype))
     with torch.no_grad():
-        target_image = render(
-            target.to(device=pred.device, dtype=dtype),
-            configs.camera_position,
-            configs.lights,
-            plane_half_size,
-        )
-    return (log_transform(pred_image) - log_transform(target_image)).abs().mean()
+        target_linear = linear_basecolor_maps(target.to(device=pred.device, dtype=dtype))
+    return image_loss(pred_linear, target_linear, configs.camera_position, configs.lights, plane_half_size)
 
 
 class RenderingLoss(nn.Module):
@@ -109,11 +139,12 @@ class RenderingLoss(nn.Module):
         sampling: how configurations are drawn (default: the paper's 5 random + 5 specular).
         seed: initial seed of the generator.
         plane_half_size: half the side of the sample square.
-        compile: run the whole loss (both renderings, the log transform, the L1) through
-            ``torch.compile``, which fuses its ~150 elementwise steps forward and backward into a
-            few loops. It compiles once per input shape (training crops have one) — ~10–30 s on
-            CPU, logged — and then runs several times faster than eager (``make bench``). Off:
-            the eager factored renderer, for varying shapes and short runs.
+        compile: run the shading of both map sets, the log transform and the L1
+            (:func:`shaded_image_loss`) through ``torch.compile``, which fuses its ~150
+            elementwise steps forward and backward into a few loops. It compiles once per input
+            shape (training crops have one) — ~10–40 s on CPU, logged — and then runs several
+            times faster than eager (``make bench``). Off: the eager factored renderer, for
+            varying shapes and short runs.
 
     Shape:
         - pred, target: ``(B, 8, H, W)``
@@ -131,8 +162,8 @@ class RenderingLoss(nn.Module):
         self.sampling = sampling
         self.plane_half_size = plane_half_size
         self.compiled = compile
-        self._loss: Callable[..., Tensor] = (
-            torch.compile(rendering_loss, dynamic=False) if compile else rendering_loss
+        self._image_loss: ImageLossFn = (
+            torch.compile(shaded_image_loss, dynamic=False) if compile else shaded_image_loss
         )
         self._compiled_shapes: set[tuple[int, ...]] = set()
         self.rng = torch.Generator(device="cpu")
@@ -170,7 +201,7 @@ class RenderingLoss(nn.Module):
         time can be logged in one line; the real call then runs the compiled code)."""
         start = time.perf_counter()
         probe = pred.detach().clone().requires_grad_(True)
-        self._loss(probe, target, configs, plane_half_size=self.plane_half_size).backward()
+        rendering_loss(probe, target, configs, self.plane_half_size, image_loss=self._image_loss).backward()
         self._compiled_shapes.add(tuple(pred.shape))
         log.info(
             "rendering loss compiled for maps %s on %s in %.1f s (once per shape)",
@@ -187,7 +218,7 @@ class RenderingLoss(nn.Module):
         configs = self.sample_configs(pred.shape[0], device=pred.device, dtype=dtype)
         if self.compiled and pred.requires_grad and tuple(pred.shape) not in self._compiled_shapes:
             self._compile_for(pred, target, configs)
-        loss = self._loss(pred, target, configs, plane_half_size=self.plane_half_size)
+        loss = rendering_loss(pred, target, configs, self.plane_half_size, image_loss=self._image_loss)
         return (loss, configs) if return_configs else loss
 
     def extra_repr(self) -> str:
