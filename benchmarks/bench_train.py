@@ -12,8 +12,9 @@ valid maps, their flash photos from the project's renderer) in a fresh subproces
 
 Variants: ``before`` is the step as it was (the direct vector-field renderer of
 ``tests/render_reference.py``, eager, Adam's default loop); ``eager`` the factored renderer without
-compilation; ``after`` the training configs' defaults (the compiled loss), and rows with one more
-option each (``channels_last``, fused Adam) so each option's effect is measured in the same run.
+compilation; ``after`` the training configs' defaults (the compiled loss, fused Adam), and rows
+with one option changed each (Adam not fused, ``channels_last``) so each option's effect is
+measured in the same run.
 
     python -m benchmarks.bench_train [--steps N] [--quick]
 """
@@ -50,17 +51,17 @@ DEFAULT_RECIPE = ("experiment=default_model",)  # width 16, 4 blocks, full loss,
 PAPER_WIDTH = ("experiment=default_model", "model=paper")  # the paper's networks (45.6 M + 2 D)
 
 VARIANT_OVERRIDES: dict[str, tuple[str, ...]] = {
-    "before": ("loss.compile=false",),
-    "eager": ("loss.compile=false",),
-    "after": (),
-    "after+channels_last": ("+model.channels_last=true",),
-    "after+fused_adam": ("+model.optimizer.fused=true",),
+    "before": ("loss.compile=false", "model.optimizer.fused=false"),
+    "eager": ("loss.compile=false", "model.optimizer.fused=false"),
+    "after (defaults)": (),
+    "after, Adam not fused": ("model.optimizer.fused=false",),
+    "after + channels_last": ("model.channels_last=true",),
 }
 
 
 def _cases(quick: bool) -> list[Case]:
     default = [Case("default recipe (128², batch 4)", v, DEFAULT_RECIPE, 128, 4) for v in VARIANT_OVERRIDES]
-    paper_variants = ("before", "after") if quick else ("before", "eager", "after")
+    paper_variants = ("before", "after (defaults)") if quick else ("before", "eager", "after (defaults)")
     paper = [Case("paper width (256², batch 2)", v, PAPER_WIDTH, 256, 2) for v in paper_variants]
     return default + paper
 
@@ -223,7 +224,7 @@ COMPONENT_ORDER = (
 def _print_components(rows: list[tuple[Case, dict[str, Any]]]) -> None:
     for recipe in dict.fromkeys(case.recipe for case, _ in rows):
         group = [
-            (case, m) for case, m in rows if case.recipe == recipe and case.variant in ("before", "after")
+            (case, m) for case, m in rows if case.recipe == recipe and case.variant in ("before", "after (defaults)")
         ]
         if len(group) < 2:
             continue
