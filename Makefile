@@ -63,6 +63,7 @@ format: setup
 
 bench: setup
 	$(PY) -m benchmarks.bench_renderer
+	$(PY) -m benchmarks.bench_train
 	$(PY) -m benchmarks.bench_capture
 	$(PY) -m benchmarks.bench_generate
 	$(PY) -m benchmarks.bench_datamodule
