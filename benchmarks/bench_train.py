@@ -14,7 +14,7 @@ Variants: ``before`` is the step as it was (the direct vector-field renderer of
 ``tests/render_reference.py``, eager, Adam's default loop); ``eager`` the factored renderer without
 compilation; ``after`` the training configs' defaults (the compiled loss, fused Adam), and rows
 with one option changed each (Adam not fused, ``channels_last``) so each option's effect is
-measured in the same run.
+measured in the same run. Last, the shard loader's samples/s per worker at 512² for both formats.
 
     python -m benchmarks.bench_train [--steps N] [--quick]
 """
@@ -224,7 +224,9 @@ COMPONENT_ORDER = (
 def _print_components(rows: list[tuple[Case, dict[str, Any]]]) -> None:
     for recipe in dict.fromkeys(case.recipe for case, _ in rows):
         group = [
-            (case, m) for case, m in rows if case.recipe == recipe and case.variant in ("before", "after (defaults)")
+            (case, m)
+            for case, m in rows
+            if case.recipe == recipe and case.variant in ("before", "after (defaults)")
         ]
         if len(group) < 2:
             continue
@@ -245,10 +247,42 @@ def _print_components(rows: list[tuple[Case, dict[str, Any]]]) -> None:
             print(f"| {component} | " + " | ".join(cells) + " |")
 
 
+def _print_loader(size: int = 512, samples: int = 16, batches: int = 6) -> None:
+    """The shard loader's samples/s per worker at ``size``² (the measurement of
+    ``benchmarks.bench_datamodule``, for both shard formats, on the same samples)."""
+    import tempfile
+
+    from benchmarks.bench_datamodule import (
+        FORMATS,
+        _decode_time,
+        _make_datasets,
+        _single_thread_stream,
+        _throughput,
+    )
+
+    with tempfile.TemporaryDirectory() as folder:
+        root = Path(folder)
+        _make_datasets(root, size, samples)
+        rates = {
+            shard_format: (
+                1.0 / _decode_time(size, shard_format),
+                _single_thread_stream(root / shard_format, batches)["samples_per_s"],
+                _throughput(root / shard_format, 1, batches)["samples_per_s"],
+            )
+            for shard_format in FORMATS
+        }
+    print(f"\nShard loader at {size}², samples/s per worker (one torch thread)\n")
+    print("| format | decode_sample | train loader in-process | one DataLoader worker |")
+    print("|---|---|---|---|")
+    for shard_format, (decode, stream, worker) in rates.items():
+        print(f"| {shard_format} | {decode:.1f} | {stream:.1f} | {worker:.1f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=8, help="timed steps per case (after 3 warm-up steps)")
     parser.add_argument("--quick", action="store_true", help="fewer paper-width variants")
+    parser.add_argument("--no-loader", action="store_true", help="skip the shard loader table")
     parser.add_argument("--case", help=argparse.SUPPRESS)
     args = parser.parse_args()
     cases = _cases(args.quick)
@@ -292,6 +326,8 @@ def main() -> None:
         ]  # fmt: skip
         print("| " + " | ".join(cells) + " |")
     _print_components(rows)
+    if not args.no_loader:
+        _print_loader()
 
 
 if __name__ == "__main__":
