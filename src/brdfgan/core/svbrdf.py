@@ -196,9 +196,12 @@ def normalize_normal(normal: Tensor, dim: int = -3, eps: float = 1e-8) -> Tensor
     # Summed products rather than linalg.vector_norm: a norm over the strided channel axis is
     # several times slower on CPU, and this runs on every normal map the data pipeline touches.
     length = (normal * normal).sum(dim=dim, keepdim=True).sqrt()
-    up = torch.zeros_like(normal).narrow(dim, 2, 1).fill_(1.0)
-    flat = torch.cat([torch.zeros_like(up), torch.zeros_like(up), up], dim=dim)
-    return torch.where(length > eps, normal / length.clamp(min=eps), flat)
+    # +Z as a broadcast (1, …, 3, …, 1) tensor, not a full-size one: the fallback is rare.
+    shape = [1] * normal.ndim
+    shape[dim] = 3
+    up = normal.new_zeros(shape)
+    up.narrow(dim, 2, 1).fill_(1.0)
+    return torch.where(length > eps, normal / length.clamp(min=eps), up)
 
 
 def roughness_to_alpha(roughness: Tensor) -> Tensor:
