@@ -9,7 +9,7 @@ from torch import Tensor, nn
 import brdfgan.losses.rendering as rendering_module
 import brdfgan.losses.total as total_module
 from brdfgan.core.sampling import RenderingLossSampling, sample_rendering_loss_configs
-from brdfgan.core.svbrdf import NORMAL, ROUGHNESS, flat_maps, join_maps
+from brdfgan.core.svbrdf import METALLIC, NORMAL, ROUGHNESS, flat_maps, join_maps
 from brdfgan.losses import (
     ANGULAR_EPS,
     GANLoss,
@@ -376,3 +376,35 @@ def test_compiled_rendering_loss_matches_eager_and_logs_compile_time(
     (eager_values, eager_grads), (compiled_values, compiled_grads) = results
     for eager, compiled in zip(eager_values + eager_grads, compiled_values + compiled_grads, strict=True):
         torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-6)
+
+
+def test_metallic_bce_golden_values_and_its_minimiser_is_the_mean() -> None:
+    from brdfgan.losses.parameter import metallic_bce
+
+    pred = torch.tensor([0.25, 0.5, 0.9]).view(1, 3, 1)
+    target = torch.tensor([0.0, 1.0, 1.0]).view(1, 3, 1)
+    expected = torch.tensor([-math.log(0.75), -math.log(0.5), -math.log(0.9)]).view(1, 3, 1)
+    torch.testing.assert_close(metallic_bce(pred, target), expected)
+    # A constant prediction against a map with 20 % metal: BCE is lowest at 0.2 (the mean), L1
+    # at 0 (the median) — why the option exists.
+    truth = (torch.arange(100) < 20).float().view(1, 1, 10, 10)
+    candidates = torch.linspace(0.0, 1.0, 101)
+    bce = torch.stack([metallic_bce(torch.full_like(truth, float(c)), truth).mean() for c in candidates])
+    l1 = torch.stack([(torch.full_like(truth, float(c)) - truth).abs().mean() for c in candidates])
+    assert candidates[bce.argmin()].item() == pytest.approx(0.2)
+    assert candidates[l1.argmin()].item() == 0.0
+
+
+def test_parameter_loss_metallic_option_changes_only_the_metallic_term() -> None:
+    pred, true_maps = random_maps(8, 8, seed=1, batch=(2,)), random_maps(8, 8, seed=2, batch=(2,))
+    pred[:, METALLIC] = pred[:, METALLIC].clamp(0.1, 0.9)
+    l1 = parameter_loss(pred, true_maps)
+    bce = parameter_loss(pred, true_maps, metallic="bce")
+    for name in ("param_basecolor", "param_normal", "param_roughness"):
+        torch.testing.assert_close(l1[name], bce[name])
+    assert not torch.allclose(l1["param_metallic"], bce["param_metallic"])
+    torch.testing.assert_close(bce["param"] - l1["param"], bce["param_metallic"] - l1["param_metallic"])
+    with pytest.raises(ValueError, match="metallic"):
+        parameter_loss(pred, true_maps, metallic="l2")  # type: ignore[arg-type]
+    loss = GANLoss(LossSwitches(adversarial=False, feature=False, rendering=False), metallic_loss="bce")
+    torch.testing.assert_close(loss.generator_terms(pred, true_maps)["param_metallic"], bce["param_metallic"])

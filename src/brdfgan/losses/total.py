@@ -28,7 +28,7 @@ from brdfgan.losses.adversarial import (
     lsgan_discriminator_loss,
     lsgan_generator_loss,
 )
-from brdfgan.losses.parameter import parameter_loss
+from brdfgan.losses.parameter import MetallicLoss, parameter_loss
 from brdfgan.losses.rendering import RenderingLoss
 
 GENERATOR_WEIGHT = 0.25  # the paper's ¼
@@ -112,6 +112,8 @@ class GANLoss(nn.Module):
         feature_layers: leading discriminator layers compared by feature matching.
         weight: the generator total's factor (paper: ¼).
         feature_weight: λ of the discriminator total (paper: 0.01).
+        metallic_loss: the parameter loss's metallic term, ``"l1"`` (paper) or ``"bce"`` (see
+            :func:`~brdfgan.losses.parameter.metallic_bce`).
     """
 
     def __init__(
@@ -124,6 +126,7 @@ class GANLoss(nn.Module):
         feature_layers: int = FEATURE_LAYERS,
         weight: float = GENERATOR_WEIGHT,
         feature_weight: float = FEATURE_WEIGHT,
+        metallic_loss: MetallicLoss = "l1",
     ) -> None:
         super().__init__()
         self.switches = switches
@@ -132,6 +135,7 @@ class GANLoss(nn.Module):
         self.feature_layers = feature_layers
         self.weight = weight
         self.feature_weight = feature_weight
+        self.metallic_loss: MetallicLoss = metallic_loss
         self.rendering_loss = (
             RenderingLoss(rendering_sampling, seed=seed, plane_half_size=plane_half_size, compile=compile)
             if switches.rendering
@@ -187,7 +191,7 @@ class GANLoss(nn.Module):
             terms["g_feat"] = feature_matching_loss(d_real, d_fake, self.feature_layers)
         if s.parameter:
             with record_function("brdfgan/parameter_loss_forward"):
-                terms.update(parameter_loss(pred_maps, true_maps))
+                terms.update(parameter_loss(pred_maps, true_maps, self.metallic_loss))
         if s.rendering and self.rendering_loss is not None:
             with record_function("brdfgan/rendering_loss_forward"):
                 terms["render"] = self.rendering_loss(pred_maps, true_maps)
@@ -214,4 +218,7 @@ class GANLoss(nn.Module):
     forward = generator_terms  # calling the module computes the generator terms
 
     def extra_repr(self) -> str:
-        return f"switches={self.switches}, weight={self.weight}, feature_weight={self.feature_weight}"
+        return (
+            f"switches={self.switches}, weight={self.weight}, feature_weight={self.feature_weight}, "
+            f"metallic_loss={self.metallic_loss}"
+        )
