@@ -241,3 +241,34 @@ def test_gradients_reach_every_parameter() -> None:
     for name, p in [*g.named_parameters(prefix="G"), *d.named_parameters(prefix="D")]:
         assert p.grad is not None, name
         assert torch.isfinite(p.grad).all() and p.grad.abs().max() > 1e-8, name
+
+
+def test_unit_z_normal_head_is_the_height_gradient_form() -> None:
+    from brdfgan.models.heads import maps_from_raw
+
+    raw = torch.zeros(1, 8, 2, 2)
+    raw[0, 3, 0, 0], raw[0, 4, 0, 1] = 0.5, -2.0
+    raw[0, 5] = 7.0  # unused by unit_z: the softplus head would shrink every tilt by ~1/7
+    unit_z = maps_from_raw(raw, "unit_z")[0, 3:6]
+    expected = torch.nn.functional.normalize(torch.tensor([[[0.5, 0.0], [0.0, 0.0]],
+                                                           [[0.0, -2.0], [0.0, 0.0]],
+                                                           [[1.0, 1.0], [1.0, 1.0]]]), dim=0)  # fmt: skip
+    torch.testing.assert_close(unit_z, expected)
+    softplus_z = maps_from_raw(raw)[0, 3:6]
+    assert softplus_z[0, 0, 0] < 0.5 * unit_z[0, 0, 0]
+    # Same gradient scale for any raw z: the tilt's gradient at flat is 1 (tangent), not 1/z.
+    raw = torch.zeros(1, 8, 1, 1, requires_grad=True)
+    maps_from_raw(raw, "unit_z")[0, 3].sum().backward()
+    assert raw.grad is not None and raw.grad[0, 3].item() == pytest.approx(1.0)
+
+
+def test_generator_normal_head_option_round_trips_and_checks() -> None:
+    from brdfgan.errors import UserError
+
+    default = Generator(width=8, residual_blocks=1)
+    assert "normal_head" not in default.config()
+    unit = Generator(width=8, residual_blocks=1, normal_head="unit_z")
+    assert Generator(**unit.config()).normal_head == "unit_z"
+    assert set(unit.state_dict()) == set(default.state_dict())
+    with pytest.raises(UserError, match=r"model\.generator\.normal_head"):
+        Generator(width=8, normal_head="tanh")  # type: ignore[arg-type]

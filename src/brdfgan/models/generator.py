@@ -37,7 +37,14 @@ from torch import Tensor, nn
 
 from brdfgan.core.svbrdf import NUM_CHANNELS
 from brdfgan.errors import UserError
-from brdfgan.models.heads import PHOTO_CHANNELS, encode_photo, init_weights, maps_from_raw
+from brdfgan.models.heads import (
+    NORMAL_HEADS,
+    PHOTO_CHANNELS,
+    NormalHead,
+    encode_photo,
+    init_weights,
+    maps_from_raw,
+)
 
 Upsampling = Literal["transposed", "resize"]
 UPSAMPLINGS: tuple[str, ...] = get_args(Upsampling)
@@ -101,6 +108,8 @@ class Generator(nn.Module):
         upsampling: the ``u`` layers: ``"transposed"`` (the paper's 3×3 stride-2 transposed convs)
             or ``"resize"`` (nearest ×2 then a 3×3 conv, against checkerboard artefacts); same
             parameter count, different state-dict keys.
+        normal_head: ``"softplus_z"`` (default, the shipped models) or ``"unit_z"`` (see
+            :func:`~brdfgan.models.heads.maps_from_raw`); same parameters.
 
     All arguments are plain ints or strings: ``Generator(**generator.config())`` rebuilds the
     architecture.
@@ -118,8 +127,12 @@ class Generator(nn.Module):
         downsamplings: int = 3,
         residual_blocks: int = 9,
         upsampling: Upsampling = "transposed",
+        normal_head: NormalHead = "softplus_z",
     ) -> None:
         super().__init__()
+        if normal_head not in NORMAL_HEADS:
+            choices = " or ".join(map(repr, NORMAL_HEADS))
+            raise GeneratorConfigError(f"model.generator.normal_head={normal_head!r}: must be {choices}")
         if upsampling not in UPSAMPLINGS:
             choices = " or ".join(map(repr, UPSAMPLINGS))
             raise GeneratorConfigError(f"model.generator.upsampling={upsampling!r}: must be {choices}")
@@ -133,6 +146,7 @@ class Generator(nn.Module):
         self.downsamplings = downsamplings
         self.residual_blocks = residual_blocks
         self.upsampling: Upsampling = upsampling
+        self.normal_head: NormalHead = normal_head
 
         # c7s1-width: the first conv's bias is cancelled by the InstanceNorm after it.
         down: list[nn.Module] = [
@@ -165,9 +179,9 @@ class Generator(nn.Module):
     def config(self) -> dict[str, Any]:
         """Constructor arguments (plain values), to store next to the weights.
 
-        ``upsampling`` only when it is not the default, so that the config of a paper-decoder
-        generator is what it was before the option existed (and a stored config without the key
-        means transposed).
+        ``upsampling`` and ``normal_head`` only when they are not the defaults, so that the config
+        of a paper generator is what it was before the options existed (and a stored config
+        without a key means its default).
         """
         config: dict[str, Any] = {
             "in_channels": self.in_channels,
@@ -177,6 +191,8 @@ class Generator(nn.Module):
         }
         if self.upsampling != "transposed":
             config["upsampling"] = self.upsampling
+        if self.normal_head != "softplus_z":
+            config["normal_head"] = self.normal_head
         return config
 
     @property
@@ -205,4 +221,4 @@ class Generator(nn.Module):
     def forward(self, photo: Tensor) -> Tensor:
         self.check_input(photo)
         features = self.residual(self.down(encode_photo(photo)))
-        return maps_from_raw(self.out(self.up(features)))
+        return maps_from_raw(self.out(self.up(features)), self.normal_head)

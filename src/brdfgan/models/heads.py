@@ -9,6 +9,8 @@ map set that always satisfies :func:`brdfgan.core.svbrdf.validate_maps`.
 
 from __future__ import annotations
 
+from typing import Literal
+
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
@@ -21,6 +23,10 @@ PHOTO_CHANNELS = 3
 NORMAL_Z_MIN = 1e-3
 INIT_STD = 0.02
 
+# How the normal's three raw channels become a unit normal (see maps_from_raw).
+NormalHead = Literal["softplus_z", "unit_z"]
+NORMAL_HEADS: tuple[str, ...] = ("softplus_z", "unit_z")
+
 
 def encode_photo(photo: Tensor) -> Tensor:
     """Linear LDR photo in [0, 1] → centred range [-1, 1] (``2x - 1``), the networks' input scale.
@@ -30,7 +36,7 @@ def encode_photo(photo: Tensor) -> Tensor:
     return photo * 2.0 - 1.0
 
 
-def maps_from_raw(raw: Tensor) -> Tensor:
+def maps_from_raw(raw: Tensor, normal_head: NormalHead = "softplus_z") -> Tensor:
     """The generator's output head: 8 unconstrained channels → a valid map set.
 
     - basecolor, roughness, metallic: ``sigmoid`` (range [0, 1]).
@@ -39,6 +45,12 @@ def maps_from_raw(raw: Tensor) -> Tensor:
       gradient for z_raw around 0; a raw output of 0 gives a flat +Z normal,
       and the tilt is driven linearly by x and y, unlike a ``tanh``/``sqrt(1 - x² - y²)`` head whose
       gradient blows up near the horizon.
+      With ``normal_head="unit_z"`` instead ``z = 1`` and the third raw channel is unused:
+      ``normalize(x, y, 1)``, the height-gradient form. Why: the softplus head is scale-free —
+      the loss only sees the direction, so nothing holds ``|(x, y, z)|`` — and under Adam the raw
+      z drifted to ~8 in a 19-minute run (logs of issue 16), which divides the tilt's gradient by
+      8 and left the predicted normals flat (mean |x, y| 0.003 against 0.035 in the data). With
+      z fixed, a raw (x, y) is the tangent of the tilt and its gradient at flat is 1.
 
     Shape:
         - raw: ``(*, 8, H, W)``
@@ -46,7 +58,8 @@ def maps_from_raw(raw: Tensor) -> Tensor:
     """
     basecolor = torch.sigmoid(raw[..., BASECOLOR, :, :])
     xy = raw[..., NORMAL.start : NORMAL.start + 2, :, :]
-    z = F.softplus(raw[..., NORMAL.start + 2 : NORMAL.stop, :, :]) + NORMAL_Z_MIN
+    z_raw = raw[..., NORMAL.start + 2 : NORMAL.stop, :, :]
+    z = torch.ones_like(z_raw) if normal_head == "unit_z" else F.softplus(z_raw) + NORMAL_Z_MIN
     normal = normalize_normal(torch.cat([xy, z], dim=-3))
     roughness = torch.sigmoid(raw[..., ROUGHNESS, :, :])
     metallic = torch.sigmoid(raw[..., METALLIC, :, :])
