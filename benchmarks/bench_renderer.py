@@ -5,7 +5,8 @@ Modes: ``direct`` is the renderer before issue 16 (full ``(B, V, 3, H, W)`` vect
 through ``torch.compile``.
 
 Each case runs in a fresh subprocess so its peak resident memory is its own (CPU); on CUDA the
-peak comes from the allocator. Prints a Markdown table; ratios are relative to the direct row of the same size.
+peak comes from the allocator. Prints a Markdown table; ratios are relative to the direct row of the
+same size.
 
     python -m benchmarks.bench_renderer [--device cpu|cuda] [--repeats N]
 """

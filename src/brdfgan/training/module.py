@@ -99,9 +99,9 @@ class SVBRDFGAN(L.LightningModule):
         self.gradient_clip = gradient_clip
         self.channels_last = channels_last
         if channels_last:
-            self.generator.to(memory_format=torch.channels_last)
+            self.generator.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
             if self.discriminator is not None:
-                self.discriminator.to(memory_format=torch.channels_last)
+                self.discriminator.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
         self.val_metrics: MetricCollection | None = metrics() if metrics is not None else None
         self.test_metrics: MetricCollection | None = metrics() if metrics is not None else None
         self.save_hyperparameters(ignore=["generator", "discriminator", "loss", "optimizer", "metrics"])
