@@ -3,7 +3,6 @@ still read, damage named, and the dataset_spec.shard_format key."""
 
 from __future__ import annotations
 
-import io
 import json
 import logging
 import shutil
@@ -43,6 +42,7 @@ from brdfgan.data.shards import (
 )
 from tests.conftest import random_maps
 from tests.test_generation import shard_hashes, tiny_spec, torch_photographer
+from tests.test_shards import write_raw_shard
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
@@ -72,14 +72,6 @@ def png_planes(data: bytes) -> np.ndarray:
     image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     assert image is not None and image.dtype == np.uint16
     return image[None] if image.ndim == 2 else image.transpose(2, 0, 1)[::-1]  # BGR -> RGB planes
-
-
-def write_raw_shard(path: Path, members: dict[str, bytes]) -> None:
-    with tarfile.open(path, "w", format=tarfile.USTAR_FORMAT) as tar:
-        for name, data in members.items():
-            info = tarfile.TarInfo(name)
-            info.size = len(data)
-            tar.addfile(info, io.BytesIO(data))
 
 
 # ---------------------------------------------------------------------------------------------
