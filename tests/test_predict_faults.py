@@ -213,13 +213,19 @@ def test_interrupts_raise_makes_signals_a_keyboard_interrupt_that_cleans_up(
         os.kill(os.getpid(), sig)  # lands while the staging folder is being filled
         raise AssertionError(f"{sig.name} did not interrupt")
 
-    before = signal.getsignal(sig)
-    with pytest.raises(KeyboardInterrupt), interrupts_raise():
-        write_material(
-            tmp_path / "m", random_maps(8, 8), ExportOptions(), {}, extra_files={"x.png": terminated}
-        )
-    assert list(tmp_path.iterdir()) == []  # no staging folder, no result
-    assert signal.getsignal(sig) is before  # the previous handler is back
+    # A shell starts background jobs with SIGINT ignored, and interrupts_raise leaves an ignored
+    # signal ignored (its docstring): start from the default a terminal gives the process.
+    outside = signal.signal(sig, signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL)
+    try:
+        before = signal.getsignal(sig)
+        with pytest.raises(KeyboardInterrupt), interrupts_raise():
+            write_material(
+                tmp_path / "m", random_maps(8, 8), ExportOptions(), {}, extra_files={"x.png": terminated}
+            )
+        assert list(tmp_path.iterdir()) == []  # no staging folder, no result
+        assert signal.getsignal(sig) is before  # the previous handler is back
+    finally:
+        signal.signal(sig, outside)
 
 
 # --- a full disk ------------------------------------------------------------------------------
