@@ -154,8 +154,9 @@ def corrupted_in_place(workdir: Path) -> str:
     shutil.copytree(reference(), out)
     shard = out / "train" / "train-000000.tar"
     with tarfile.open(shard) as tar:
-        member = next(info for info in tar if info.name.endswith(".basecolor.png"))
-    with shard.open("r+b") as handle:  # flip bytes inside the PNG data, headers untouched
+        # The first image member of either shard format (dataset_spec.shard_format).
+        member = next(info for info in tar if info.name.endswith((".basecolor.png", ".maps.u16z")))
+    with shard.open("r+b") as handle:  # flip bytes inside the image data, headers untouched
         handle.seek(member.offset_data + member.size // 2)
         chunk = handle.read(32)
         handle.seek(member.offset_data + member.size // 2)
@@ -224,7 +225,7 @@ SCENARIOS = [
         disk_full,
     ),
     Scenario(
-        "PNG corrupted in place in a complete shard",
+        "an image member corrupted in place in a complete shard",
         "rerun reports the shard (SHA-256 mismatch) and rewrites it byte-identical to the original",
         corrupted_in_place,
     ),
