@@ -149,6 +149,26 @@ def view_footprint(pose: CameraPose, width: int, height: int) -> np.ndarray:
     return np.stack(corners)
 
 
+def texel_centres(
+    height: int,
+    width: int,
+    plane_half_size: float = 1.0,
+    *,
+    dtype: torch.dtype = torch.float32,
+    device: torch.device | str | None = None,
+) -> tuple[Tensor, Tensor]:
+    """World x of each texel column and y of each texel row on the sample square, row 0 at +Y
+    (the separable form of :func:`plane_positions`).
+
+    Shape:
+        - output: ``(width,)``, ``(height,)``
+    """
+    s = plane_half_size
+    xs = -s + (torch.arange(width, dtype=dtype, device=device) + 0.5) * (2.0 * s / width)
+    ys = s - (torch.arange(height, dtype=dtype, device=device) + 0.5) * (2.0 * s / height)
+    return xs, ys
+
+
 def plane_positions(
     height: int,
     width: int,
@@ -162,9 +182,7 @@ def plane_positions(
     Shape:
         - output: ``(3, height, width)``
     """
-    s = plane_half_size
-    xs = -s + (torch.arange(width, dtype=dtype, device=device) + 0.5) * (2.0 * s / width)
-    ys = s - (torch.arange(height, dtype=dtype, device=device) + 0.5) * (2.0 * s / height)
+    xs, ys = texel_centres(height, width, plane_half_size, dtype=dtype, device=device)
     grid_y, grid_x = torch.meshgrid(ys, xs, indexing="ij")
     return torch.stack([grid_x, grid_y, torch.zeros_like(grid_x)], dim=0)
 
@@ -322,9 +340,7 @@ def shade_point_lights(
     dtype, device = inputs.roughness.dtype, inputs.roughness.device
 
     with torch.no_grad():  # the scene: no map enters here
-        s = plane_half_size
-        xs = -s + (torch.arange(width, dtype=dtype, device=device) + 0.5) * (2.0 * s / width)
-        ys = s - (torch.arange(height, dtype=dtype, device=device) + 0.5) * (2.0 * s / height)
+        xs, ys = texel_centres(height, width, plane_half_size, dtype=dtype, device=device)
         xs, ys = xs.view(1, 1, 1, 1, width), ys.view(1, 1, 1, height, 1)
 
         def towards(points: Tensor) -> Components:  # (B, V, 3) → separable offsets from the texels
@@ -353,8 +369,9 @@ def shade_point_lights(
         weight = torch.where(visible, n_dot_l_raw * falloff, torch.zeros((), dtype=dtype, device=device))
         colourless_diffuse = weight * burley_diffuse_factor(inputs.roughness, n_dot_l, n_dot_v, h_dot_l)
         colourless_specular = weight * ggx_specular_factor(inputs.alpha, n_dot_l, n_dot_v, n_dot_h)
-        light_k = torch.addcmul(schlick * colourless_specular, inputs.diffuse, colourless_diffuse)
-        light_k = torch.addcmul(light_k, inputs.f0, colourless_specular - schlick * colourless_specular)
+        schlick_specular = schlick * colourless_specular
+        light_k = torch.addcmul(schlick_specular, inputs.diffuse, colourless_diffuse)
+        light_k = torch.addcmul(light_k, inputs.f0, colourless_specular - schlick_specular)
         light_k = light_k * intensity[:, :, k]
         radiance = light_k if radiance is None else radiance + light_k
     if radiance is None:  # no lights
