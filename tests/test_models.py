@@ -272,3 +272,21 @@ def test_generator_normal_head_option_round_trips_and_checks() -> None:
     assert set(unit.state_dict()) == set(default.state_dict())
     with pytest.raises(UserError, match=r"model\.generator\.normal_head"):
         Generator(width=8, normal_head="tanh")  # type: ignore[arg-type]
+
+
+def test_raw_from_maps_inverts_the_unit_z_head() -> None:
+    from brdfgan.models.heads import RAW_EPS, raw_from_maps
+
+    maps = random_maps(16, 12, seed=3)
+    back = maps_from_raw(raw_from_maps(maps), "unit_z")
+    # Exact up to the logit's clamp to [eps, 1 - eps] (random_maps keeps normals well above the z clamp).
+    torch.testing.assert_close(back, maps, atol=RAW_EPS, rtol=0)
+    # Saturated values and grazing or flat normals stay finite and decode to valid maps.
+    edge = maps.clone()
+    edge[0:3], edge[6], edge[7] = 0.0, 1.0, 0.0
+    edge[3:6] = torch.tensor([1.0, 0.0, 0.0]).view(3, 1, 1)
+    raw = raw_from_maps(edge)
+    assert torch.isfinite(raw).all() and raw[5].abs().max() == 0
+    validate_maps(maps_from_raw(raw, "unit_z"))
+    # Any raw value is valid maps: the parameterisation test-time refinement optimises.
+    validate_maps(maps_from_raw(torch.randn(2, 8, 5, 5) * 30, "unit_z"))

@@ -22,6 +22,11 @@ PHOTO_CHANNELS = 3
 # normalisation never divides by ~0 (finite gradients) and the normal never points into the surface.
 NORMAL_Z_MIN = 1e-3
 INIT_STD = 0.02
+# raw_from_maps: values in [0, 1] are clamped to [RAW_EPS, 1 - RAW_EPS] before the logit (logits
+# within ±6.9, where the sigmoid's slope is still 1e-3 of its peak), and a normal's z to at least
+# RAW_NORMAL_Z_MIN before the slopes x/z, y/z are taken (tilts up to 87°).
+RAW_EPS = 1e-3
+RAW_NORMAL_Z_MIN = 0.05
 
 # How the normal's three raw channels become a unit normal (see maps_from_raw).
 NormalHead = Literal["softplus_z", "unit_z"]
@@ -64,6 +69,30 @@ def maps_from_raw(raw: Tensor, normal_head: NormalHead = "softplus_z") -> Tensor
     roughness = torch.sigmoid(raw[..., ROUGHNESS, :, :])
     metallic = torch.sigmoid(raw[..., METALLIC, :, :])
     return join_maps(basecolor, normal, roughness, metallic)
+
+
+def raw_from_maps(maps: Tensor, eps: float = RAW_EPS) -> Tensor:
+    """The inverse of :func:`maps_from_raw` with ``normal_head="unit_z"``: raw channels whose head
+    output is ``maps`` — logits of base colour, roughness and metallic (clamped to
+    ``[eps, 1 − eps]`` first, so a saturated value stays finite), the normal as its slopes
+    ``(x / z, y / z)`` with z at least :data:`RAW_NORMAL_Z_MIN`, and 0 in the unused third normal
+    channel. Test-time refinement (:mod:`brdfgan.inference.refine`) optimises these: any raw
+    value decodes to valid maps.
+
+    Shape:
+        - maps: ``(*, 8, H, W)`` in the layout of :mod:`brdfgan.core.svbrdf`
+        - output: ``(*, 8, H, W)``
+    """
+    maps = maps.clamp(min=-1.0, max=1.0)
+    unit = maps.clamp(eps, 1.0 - eps)
+    normal = maps[..., NORMAL, :, :]
+    z = normal[..., 2:3, :, :].clamp(min=RAW_NORMAL_Z_MIN)
+    return join_maps(
+        torch.logit(unit[..., BASECOLOR, :, :]),
+        torch.cat([normal[..., 0:2, :, :] / z, torch.zeros_like(z)], dim=-3),
+        torch.logit(unit[..., ROUGHNESS, :, :]),
+        torch.logit(unit[..., METALLIC, :, :]),
+    )
 
 
 def init_weights(module: nn.Module) -> None:

@@ -49,6 +49,7 @@ from PIL import Image, UnidentifiedImageError
 from brdfgan.core.exposure import LUMINANCE_WEIGHTS
 from brdfgan.core.svbrdf import srgb_decoding_table, srgb_to_linear
 from brdfgan.errors import UserError
+from brdfgan.inference.intake.lens import Lens, lens_from_exif
 from brdfgan.io.images import ImageIOError, read_image
 
 __all__ = [
@@ -122,6 +123,8 @@ class Photo:
         colorspace: ``"srgb"`` (the stored values were decoded with the sRGB curve) or ``"linear"``.
         orientation: the EXIF orientation tag that was applied (1 = none).
         warnings: human-readable warnings for the user.
+        lens: the focal length the EXIF states (JPEG/PNG), for the refinement's field of view
+            (:mod:`brdfgan.inference.intake.lens`); ``None`` when there is none.
     """
 
     path: Path
@@ -131,6 +134,7 @@ class Photo:
     colorspace: str
     orientation: int
     warnings: tuple[str, ...]
+    lens: Lens | None = None
 
     @property
     def height(self) -> int:
@@ -149,6 +153,7 @@ class Photo:
             "colorspace": self.colorspace,
             "exif_orientation": self.orientation,
             "size": [self.width, self.height],
+            "lens": None if self.lens is None else self.lens.to_json(),
         }
 
 
@@ -320,7 +325,9 @@ def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
             pil_format, mode, (width, height) = image.format, image.mode, image.size
             if pil_format in ("JPEG", "MPO"):  # MPO: multi-picture JPEG written by many cameras
                 source: Source = "jpeg"
-                orientation = _orientation_tag(image.getexif().get(_EXIF_ORIENTATION_TAG, 1), warnings)
+                exif = image.getexif()
+                orientation = _orientation_tag(exif.get(_EXIF_ORIENTATION_TAG, 1), warnings)
+                lens = lens_from_exif(exif, width)
                 _check_mode(path, mode)
                 if mode != "RGB":
                     raise PhotoError(path, f"unsupported JPEG mode {mode!r}, expected RGB")
@@ -331,7 +338,10 @@ def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
                 source = "png"
                 _check_mode(path, mode)
                 _check_size(path, width, height)
-                orientation = _orientation_tag(_png_exif_orientation(data), warnings)
+                exif = _png_exif(data)
+                stated = 1 if exif is None else exif.get(_EXIF_ORIENTATION_TAG, 1)
+                orientation = _orientation_tag(stated, warnings)
+                lens = None if exif is None else lens_from_exif(exif, width)
                 stored = None
             else:
                 raise PhotoError(
@@ -384,6 +394,7 @@ def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
         colorspace=colorspace,
         orientation=orientation,
         warnings=tuple(warnings),
+        lens=lens,
     )
 
 
@@ -409,8 +420,8 @@ def _orientation_tag(value: Any, warnings: list[str]) -> int:
     return 1
 
 
-def _png_exif_orientation(data: bytes) -> int:
-    """The orientation in a PNG's ``eXIf`` chunk, found by walking the chunk headers.
+def _png_exif(data: bytes) -> Image.Exif | None:
+    """The EXIF of a PNG's ``eXIf`` chunk (``None`` without one), found by walking the chunk headers.
 
     Pillow's ``getexif()`` on a PNG decodes the whole image to look for an ``eXIf`` chunk after
     the pixel data; walking the chunks costs nothing.
@@ -421,11 +432,11 @@ def _png_exif_orientation(data: bytes) -> int:
         if kind == b"eXIf":
             exif = Image.Exif()
             exif.load(data[offset + 8 : offset + 8 + length])
-            return int(exif.get(_EXIF_ORIENTATION_TAG, 1))
+            return exif
         if kind == b"IEND":
             break
         offset += 12 + length  # length, type, data, CRC
-    return 1
+    return None
 
 
 def _decode_png(path: Path, data: bytes) -> np.ndarray:
