@@ -285,6 +285,26 @@ def test_gradients_reach_every_parameter() -> None:
     assert not missing
 
 
+def test_normal_head_is_shared_with_the_generator_and_stored_only_when_not_the_default() -> None:
+    from brdfgan.models.heads import GeneratorConfigError
+
+    photo = rand(1, 3, 16, 16, seed=1)
+    unit_z = Deschaintre2018(width=4, levels=4, normal_head="unit_z")
+    assert unit_z.config() == {"in_channels": 3, "width": 4, "levels": 4, "normal_head": "unit_z"}
+    rebuilt = Deschaintre2018(**unit_z.config())
+    rebuilt.load_state_dict(unit_z.state_dict())
+    torch.testing.assert_close(rebuilt(photo), unit_z(photo))
+    # Same weights, the other head: a different normal map, the same other maps.
+    softplus = Deschaintre2018(width=4, levels=4)
+    softplus.load_state_dict(unit_z.state_dict())
+    assert "normal_head" not in softplus.config()
+    a, b = unit_z(photo), softplus(photo)
+    torch.testing.assert_close(a[:, [0, 1, 2, 6, 7]], b[:, [0, 1, 2, 6, 7]])
+    assert not torch.allclose(a[:, 3:6], b[:, 3:6])
+    with pytest.raises(GeneratorConfigError, match=r"model\.generator\.normal_head='flat'"):
+        Deschaintre2018(normal_head="flat")  # type: ignore[arg-type]
+
+
 def test_wrong_input_is_a_value_error() -> None:
     net = Deschaintre2018(width=4, levels=6)
     with pytest.raises(ValueError, match=r"multiples of 64.*48×64"):
@@ -300,7 +320,8 @@ def test_wrong_input_is_a_value_error() -> None:
 
 def test_config_composes_and_builds_without_discriminator(tmp_path: Path) -> None:
     cfg = compose_train(["model=deschaintre2018", "loss=no_adv", "loss.switches.feature=false"], tmp_path)
-    assert set(cfg.model.generator) == {"_target_", "in_channels", "width", "levels"}  # nothing leaked
+    keys = {"_target_", "in_channels", "width", "levels", "normal_head"}
+    assert set(cfg.model.generator) == keys  # nothing of the default generator leaked
     _, module, _ = build(cfg)
     assert isinstance(module.generator, Deschaintre2018) and module.discriminator is None
     assert module.generator.config() == {"in_channels": 3, "width": 16, "levels": 8}

@@ -47,7 +47,14 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from brdfgan.core.svbrdf import NUM_CHANNELS
-from brdfgan.models.heads import PHOTO_CHANNELS, encode_photo, init_weights, maps_from_raw
+from brdfgan.models.heads import (
+    PHOTO_CHANNELS,
+    NormalHead,
+    check_normal_head,
+    encode_photo,
+    init_weights,
+    maps_from_raw,
+)
 
 LEAK = 0.2
 MAX_WIDTH_FACTOR = 8  # channels stop doubling at 8 × width (512 for width 64), as in pix2pix
@@ -88,16 +95,26 @@ class Deschaintre2018(nn.Module):
         width: channels of the first level (64 in the paper); doubled per level up to 8 × width.
         levels: encoder (and decoder) levels; H and W must be multiples of ``2**levels``
             (8 for 256² input: a 1×1 bottleneck, as in the paper).
+        normal_head: how the normal's raw channels become a unit normal
+            (:func:`~brdfgan.models.heads.maps_from_raw`), so a baseline can share the head of the
+            model it is compared with.
 
-    All arguments are plain ints: ``Deschaintre2018(**net.config())`` rebuilds the architecture.
+    ``Deschaintre2018(**net.config())`` rebuilds the architecture.
 
     Shape:
         - photo: ``(B, in_channels, H, W)``, linear LDR in [0, 1], encoded to ``2x - 1`` inside
         - output: ``(B, 8, H, W)``, a valid map set (layout of :mod:`brdfgan.core.svbrdf`)
     """
 
-    def __init__(self, in_channels: int = PHOTO_CHANNELS, width: int = 64, levels: int = 8) -> None:
+    def __init__(
+        self,
+        in_channels: int = PHOTO_CHANNELS,
+        width: int = 64,
+        levels: int = 8,
+        normal_head: NormalHead = "softplus_z",
+    ) -> None:
         super().__init__()
+        self.normal_head: NormalHead = check_normal_head(normal_head)
         if min(in_channels, width, levels) < 1:
             raise ValueError(
                 "Deschaintre2018 needs in_channels, width, levels >= 1, "
@@ -150,8 +167,12 @@ class Deschaintre2018(nn.Module):
             nn.init.normal_(fc.weight, 0.0, FEATURE_BIAS_INIT_SCALE * math.sqrt(1.0 / fc.in_features))
 
     def config(self) -> dict[str, Any]:
-        """Constructor arguments (plain ints), to store next to the weights."""
-        return {"in_channels": self.in_channels, "width": self.width, "levels": self.levels}
+        """Constructor arguments (plain values), to store next to the weights; ``normal_head`` only
+        when it is not the default (a stored config without it means the default)."""
+        config: dict[str, Any] = {"in_channels": self.in_channels, "width": self.width, "levels": self.levels}
+        if self.normal_head != "softplus_z":
+            config["normal_head"] = self.normal_head
+        return config
 
     @property
     def size_multiple(self) -> int:
@@ -198,4 +219,4 @@ class Deschaintre2018(nn.Module):
                 out = torch.cat([out, skips[-1 - index]], dim=1)
             out, state = self._site(site, up(F.leaky_relu(out, LEAK)), state)
             site += 1
-        return maps_from_raw(out)
+        return maps_from_raw(out, self.normal_head)

@@ -36,11 +36,11 @@ from typing import Any, Literal, get_args
 from torch import Tensor, nn
 
 from brdfgan.core.svbrdf import NUM_CHANNELS
-from brdfgan.errors import UserError
 from brdfgan.models.heads import (
-    NORMAL_HEADS,
     PHOTO_CHANNELS,
+    GeneratorConfigError,
     NormalHead,
+    check_normal_head,
     encode_photo,
     init_weights,
     maps_from_raw,
@@ -48,10 +48,6 @@ from brdfgan.models.heads import (
 
 Upsampling = Literal["transposed", "resize"]
 UPSAMPLINGS: tuple[str, ...] = get_args(Upsampling)
-
-
-class GeneratorConfigError(UserError):
-    """A generator constructor argument is unusable; the message names the config key."""
 
 
 def _norm_relu(channels: int) -> list[nn.Module]:
@@ -130,9 +126,6 @@ class Generator(nn.Module):
         normal_head: NormalHead = "softplus_z",
     ) -> None:
         super().__init__()
-        if normal_head not in NORMAL_HEADS:
-            choices = " or ".join(map(repr, NORMAL_HEADS))
-            raise GeneratorConfigError(f"model.generator.normal_head={normal_head!r}: must be {choices}")
         if upsampling not in UPSAMPLINGS:
             choices = " or ".join(map(repr, UPSAMPLINGS))
             raise GeneratorConfigError(f"model.generator.upsampling={upsampling!r}: must be {choices}")
@@ -146,7 +139,7 @@ class Generator(nn.Module):
         self.downsamplings = downsamplings
         self.residual_blocks = residual_blocks
         self.upsampling: Upsampling = upsampling
-        self.normal_head: NormalHead = normal_head
+        self.normal_head: NormalHead = check_normal_head(normal_head)
 
         # c7s1-width: the first conv's bias is cancelled by the InstanceNorm after it.
         down: list[nn.Module] = [

@@ -16,6 +16,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, ROUGHNESS, join_maps, normalize_normal
+from brdfgan.errors import UserError
 
 PHOTO_CHANNELS = 3
 # Lower bound on the normal's z before normalisation: keeps the vector length >= 1e-3, so the
@@ -31,6 +32,18 @@ RAW_NORMAL_Z_MIN = 0.05
 # How the normal's three raw channels become a unit normal (see maps_from_raw).
 NormalHead = Literal["softplus_z", "unit_z"]
 NORMAL_HEADS: tuple[str, ...] = ("softplus_z", "unit_z")
+
+
+class GeneratorConfigError(UserError):
+    """A generator constructor argument is unusable; the message names the config key."""
+
+
+def check_normal_head(normal_head: str) -> NormalHead:
+    """``normal_head`` if it is one of :data:`NORMAL_HEADS`, else a one-line error naming the key."""
+    if normal_head not in NORMAL_HEADS:
+        choices = " or ".join(map(repr, NORMAL_HEADS))
+        raise GeneratorConfigError(f"model.generator.normal_head={normal_head!r}: must be {choices}")
+    return normal_head  # type: ignore[return-value]
 
 
 def encode_photo(photo: Tensor) -> Tensor:

@@ -338,10 +338,10 @@ def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
                 source = "png"
                 _check_mode(path, mode)
                 _check_size(path, width, height)
-                exif = _png_exif(data)
-                stated = 1 if exif is None else exif.get(_EXIF_ORIENTATION_TAG, 1)
+                png_exif = _png_exif(data)
+                stated = 1 if png_exif is None else png_exif.get(_EXIF_ORIENTATION_TAG, 1)
                 orientation = _orientation_tag(stated, warnings)
-                lens = None if exif is None else lens_from_exif(exif, width)
+                lens = None if png_exif is None else lens_from_exif(png_exif, width)
                 stored = None
             else:
                 raise PhotoError(
