@@ -47,8 +47,11 @@ class Case:
     batch: int
 
 
-DEFAULT_RECIPE = ("experiment=default_model",)  # width 16, 4 blocks, full loss, 128² crops, batch 4
-PAPER_WIDTH = ("experiment=default_model", "model=paper")  # the paper's networks (45.6 M + 2 D)
+# The GAN step (full loss) at the default model's size: width 16, 4 blocks, 128² crops, batch 4.
+DEFAULT_RECIPE = ("experiment=default_model", "loss=full")
+# The step v3 was trained with: the same without discriminators (loss=supervised).
+V3_RECIPE = ("experiment=default_model",)
+PAPER_WIDTH = ("experiment=default_model", "loss=full", "model=paper")  # the paper's networks (45.6 M + 2 D)
 
 VARIANT_OVERRIDES: dict[str, tuple[str, ...]] = {
     "before": ("loss.compile=false", "model.optimizer.fused=false"),
@@ -60,10 +63,13 @@ VARIANT_OVERRIDES: dict[str, tuple[str, ...]] = {
 
 
 def _cases(quick: bool) -> list[Case]:
-    default = [Case("default recipe (128², batch 4)", v, DEFAULT_RECIPE, 128, 4) for v in VARIANT_OVERRIDES]
+    gan = "default recipe, GAN (128², batch 4)"
+    default = [Case(gan, v, DEFAULT_RECIPE, 128, 4) for v in VARIANT_OVERRIDES]
+    supervised = "v3 recipe, supervised (128², batch 4)"
+    v3 = [Case(supervised, v, V3_RECIPE, 128, 4) for v in ("before", "after (defaults)")]
     paper_variants = ("before", "after (defaults)") if quick else ("before", "eager", "after (defaults)")
     paper = [Case("paper width (256², batch 2)", v, PAPER_WIDTH, 256, 2) for v in paper_variants]
-    return default + paper
+    return default + v3 + paper
 
 
 def _synthetic_batches(count: int, batch: int, size: int) -> list[dict[str, torch.Tensor]]:
@@ -230,7 +236,7 @@ def _print_components(rows: list[tuple[Case, dict[str, Any]]]) -> None:
         ]
         if len(group) < 2:
             continue
-        print(f"\nOne GAN step, {recipe}: component | ms | share (torch.profiler over 3 steps)\n")
+        print(f"\nOne training step, {recipe}: component | ms | share (torch.profiler over 3 steps)\n")
         names = [name for name, _ in group]
         print("| component | " + " | ".join(f"{c.variant} ms | {c.variant} share" for c in names) + " |")
         print("|---|" + "---|---|" * len(group))

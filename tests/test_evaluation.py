@@ -215,12 +215,13 @@ def _fake_training_run(run_dir: Path, overrides: list[str], epoch: int, step: in
 def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> None:
     from brdfgan.inference.model.export_weights import training_summary
 
-    gan = _fake_training_run(tmp_path / "gan", ["experiment=default_model"], epoch=6, step=4900)
+    gan = _fake_training_run(tmp_path / "gan", ["experiment=default_model", "loss=full"], epoch=6, step=4900)
     content = ["experiment=default_model_finetune", f"init_from={gan}"]
     finetune = _fake_training_run(tmp_path / "finetune", content, epoch=5, step=2100)
     summary = training_summary(tmp_path / "finetune", finetune, "test CPU")
     assert summary["optimizer_steps"] == 2100 and summary["epochs"] == 6
     assert summary["loss"] == {"adversarial": False, "feature": False, "parameter": True, "rendering": True}
+    assert summary["metallic_loss"] == "bce"  # v3's recipe (experiment=default_model)
     earlier = summary["init_from"]
     assert earlier["run"] == str(tmp_path / "gan")
     assert earlier["optimizer_steps"] == 4900 and earlier["epochs"] == 7

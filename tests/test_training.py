@@ -49,6 +49,8 @@ def test_every_loss_and_experiment_composes_and_builds(tmp_path: Path, loss: str
         assert spec.materials >= 1000 and spec.resolution == 256 and not spec.families
         assert spec.mixing.fraction > 0 and spec.recolor.probability > 0 and spec.capture.tilt_max_deg > 0
         assert cfg.data.sensor.enabled
+        # v3: cross-entropy metallic term and the unit-z normal head, whatever the loss group.
+        assert cfg.loss.metallic_loss == "bce" and cfg.model.generator.normal_head == "unit_z"
     _, module, trainer = build(cfg)
     switches = module.loss.switches
     assert switches.adversarial == (loss != "no_adv") and switches.feature == (loss != "no_feat")
@@ -61,7 +63,7 @@ def test_default_model_finetune_is_stage_one_without_a_discriminator(tmp_path: P
     stage2 = compose_train(["experiment=default_model_finetune"], tmp_path)
     assert stage2.init_from.endswith("logs/default_model/gan/checkpoints/last.ckpt")
     assert stage2.data == stage1.data and stage2.model.generator == stage1.model.generator
-    assert stage2.loss == compose_train(["loss=supervised"], tmp_path).loss
+    assert stage2.loss == stage1.loss and not stage1.loss.switches.adversarial  # v3: one supervised stage
     _, module, _ = build(stage2)
     assert module.discriminator is None and module.loss.switches.parameter and module.loss.switches.rendering
 

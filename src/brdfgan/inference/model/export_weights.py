@@ -74,6 +74,15 @@ def run_test_metrics(
     return json.loads(metrics.read_text()).get("model", {}) if same else None
 
 
+def run_overrides(run_dir: Path) -> list[str] | None:
+    """The command-line overrides the run was started with (Hydra's ``.hydra/overrides.yaml``)."""
+    path = RunFolder(run_dir).hydra_path.with_name("overrides.yaml")
+    if not path.is_file():
+        return None
+    overrides = OmegaConf.load(path)
+    return [str(item) for item in overrides] if OmegaConf.is_list(overrides) else None
+
+
 def training_summary(
     run_dir: Path, checkpoint: Path, hardware: str | None, test_metrics: dict[str, Any] | None = None
 ) -> dict[str, Any]:
@@ -96,6 +105,8 @@ def training_summary(
         },
         "batch_size": int(data.batch_size),
         "loss": {k: bool(v) for k, v in config.loss.switches.items() if not str(k).startswith("_")},
+        "metallic_loss": str(config.loss.get("metallic_loss", "l1")),
+        "overrides": run_overrides(run_dir),
         "epochs": int(state.get("epoch", -1)) + 1,
         "optimizer_steps": int(state.get("global_step", 0)),
         "checkpoint": checkpoint.name,
