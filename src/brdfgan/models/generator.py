@@ -38,8 +38,8 @@ from torch import Tensor, nn
 from brdfgan.core.svbrdf import NUM_CHANNELS
 from brdfgan.models.heads import (
     PHOTO_CHANNELS,
-    GeneratorConfigError,
     NormalHead,
+    check_choice,
     check_normal_head,
     encode_photo,
     init_weights,
@@ -126,9 +126,7 @@ class Generator(nn.Module):
         normal_head: NormalHead = "softplus_z",
     ) -> None:
         super().__init__()
-        if upsampling not in UPSAMPLINGS:
-            choices = " or ".join(map(repr, UPSAMPLINGS))
-            raise GeneratorConfigError(f"model.generator.upsampling={upsampling!r}: must be {choices}")
+        check_choice("model.generator.upsampling", upsampling, UPSAMPLINGS)
         if min(in_channels, width) < 1 or min(downsamplings, residual_blocks) < 0:
             raise ValueError(
                 f"Generator needs in_channels, width >= 1 and downsamplings, residual_blocks >= 0, got "

@@ -38,11 +38,15 @@ class GeneratorConfigError(UserError):
     """A generator constructor argument is unusable; the message names the config key."""
 
 
+def check_choice(key: str, value: str, choices: tuple[str, ...]) -> None:
+    """A one-line error naming the config key unless ``value`` is one of ``choices``."""
+    if value not in choices:
+        raise GeneratorConfigError(f"{key}={value!r}: must be {' or '.join(map(repr, choices))}")
+
+
 def check_normal_head(normal_head: str) -> NormalHead:
     """``normal_head`` if it is one of :data:`NORMAL_HEADS`, else a one-line error naming the key."""
-    if normal_head not in NORMAL_HEADS:
-        choices = " or ".join(map(repr, NORMAL_HEADS))
-        raise GeneratorConfigError(f"model.generator.normal_head={normal_head!r}: must be {choices}")
+    check_choice("model.generator.normal_head", normal_head, NORMAL_HEADS)
     return normal_head  # type: ignore[return-value]
 
 
@@ -96,8 +100,7 @@ def raw_from_maps(maps: Tensor, eps: float = RAW_EPS) -> Tensor:
         - maps: ``(*, 8, H, W)`` in the layout of :mod:`brdfgan.core.svbrdf`
         - output: ``(*, 8, H, W)``
     """
-    maps = maps.clamp(min=-1.0, max=1.0)
-    unit = maps.clamp(eps, 1.0 - eps)
+    unit = maps.clamp(eps, 1.0 - eps)  # the logits' inputs; the normal is read from maps itself
     normal = maps[..., NORMAL, :, :]
     z = normal[..., 2:3, :, :].clamp(min=RAW_NORMAL_Z_MIN)
     return join_maps(
