@@ -115,7 +115,9 @@ def test_compiled_renderer_matches_eager() -> None:
     lights = PointLights(camera[:, :, None] + 0.2, torch.full((2, 1, 1), 5.0), torch.ones(2, 1, 1, 3))
     eager = PointLightRenderer()(maps, camera, lights)
     compiled = PointLightRenderer(compile=True)(maps, camera, lights)
-    torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-6)
+    # Inductor fuses and reorders the float32 maths (and picks its vector ISA per machine): up to
+    # 1.1e-4 relative was measured on a texel at the edge of a highlight, so 3e-4 is the bound.
+    torch.testing.assert_close(compiled, eager, rtol=3e-4, atol=1e-6)
 
 
 @pytest.mark.parametrize("name", ["basecolor", "normal", "roughness", "metallic"])
