@@ -35,6 +35,8 @@ from brdfgan.core.brdf import (
     schlick_weight,
 )
 from brdfgan.core.svbrdf import (
+    NORMAL,
+    NUM_CHANNELS,
     check_map_shape,
     diffuse_albedo,
     normalize_normal,
@@ -147,6 +149,56 @@ def view_footprint(pose: CameraPose, width: int, height: int) -> np.ndarray:
             raise ValueError(f"the image corner ray {ray.tolist()} does not reach the plane z = 0")
         corners.append(origin - origin[2] / ray[2] * ray)
     return np.stack(corners)
+
+
+def view_plane_points(pose: CameraPose, height: int, width: int) -> np.ndarray:
+    """Where the ray through each pixel centre of the photo of ``pose`` meets the plane z = 0
+    (the pixel convention of :func:`project_to_image`; :func:`view_footprint` gives the corners).
+
+    Shape:
+        - output: ``(height, width, 2)`` world ``(x, y)``, float64
+    """
+    if height < 1 or width < 1:
+        raise ValueError(f"need a positive image size, got {height}x{width}")
+    right, up, forward = camera_frame(pose)
+    tan_x = math.tan(math.radians(pose.fov_deg) / 2.0)
+    tan_y = tan_x * height / width
+    sx = (np.arange(width) + 0.5) / width * 2.0 - 1.0
+    sy = 1.0 - (np.arange(height) + 0.5) / height * 2.0
+    rays = forward + sx[None, :, None] * tan_x * right + sy[:, None, None] * tan_y * up
+    if not (rays[..., 2] < 0.0).all():
+        raise ValueError("some pixel rays do not reach the plane z = 0")
+    origin = np.asarray(pose.origin, dtype=np.float64)
+    points = origin - (origin[2] / rays[..., 2])[..., None] * rays
+    return points[..., :2]
+
+
+def maps_in_view(maps: Tensor, pose: CameraPose, plane_half_size: float = 1.0) -> Tensor:
+    """The texture-space maps of the sample as the photo taken from ``pose`` sees them, pixel for
+    pixel: each map is sampled (bilinearly) where the ray through the pixel centre meets the
+    plane, and the normals are renormalised. For the nominal camera (centred, framing the square)
+    this is the identity up to rounding; for a tilted, closer or farther camera it is the warp that
+    puts every texel under the pixel that photographs it. Normals stay in the sample's tangent frame
+    (+X, +Y of the plane), which a camera tilted by a few degrees sees almost unrotated.
+
+    Points off the sample square take the nearest border texel.
+
+    Shape:
+        - maps: ``(8, H, W)`` in the layout of :mod:`brdfgan.core.svbrdf`
+        - output: ``(8, H, W)``
+    """
+    if maps.ndim != 3 or maps.shape[0] != NUM_CHANNELS:
+        raise ValueError(f"maps must have shape ({NUM_CHANNELS}, H, W), got {tuple(maps.shape)}")
+    height, width = maps.shape[-2:]
+    points = torch.from_numpy(view_plane_points(pose, height, width) / plane_half_size)
+    # grid_sample's (x, y) in [-1, 1] with align_corners=False are the outer texel edges: x = -1 is
+    # the left edge (world -s), y = -1 the top edge (world +s, row 0 is +Y).
+    grid = torch.stack([points[..., 0], -points[..., 1]], dim=-1).to(maps.dtype)
+    warped = F.grid_sample(
+        maps[None], grid[None], mode="bilinear", padding_mode="border", align_corners=False
+    )[0]
+    warped[NORMAL] = normalize_normal(warped[NORMAL], dim=0)
+    return warped
 
 
 def texel_centres(

@@ -34,6 +34,7 @@ range does not shift the others' values. Photos are square (the dataset's ``reso
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -45,9 +46,11 @@ from brdfgan.core.render import (
     Vector3,
     camera_frame,
     capture_camera_height,
+    maps_in_view,
     project_to_image,
     view_footprint,
 )
+from brdfgan.data.shards import Sample
 from brdfgan.data.spec_checks import in_range, ordered
 
 FOV_RANGE_DEG = (1.0, 120.0)
@@ -250,3 +253,43 @@ class CaptureSampling:
             exposure_ev=_uniform(u[6], self.exposure_ev_min, self.exposure_ev_max),
             plane_half_size=plane_half_size,
         )
+
+
+def recorded_camera(meta: Mapping[str, Any]) -> CameraPose | None:
+    """The camera pose a sample's ``meta["capture"]`` records (:meth:`CaptureDraw.to_json`), or
+    ``None`` for samples of datasets made before the capture randomisation (nominal camera)."""
+    capture = meta.get("capture")
+    if not isinstance(capture, Mapping) or "camera_origin" not in capture:
+        return None
+    return CameraPose(
+        _vector(np.asarray(capture["camera_origin"], dtype=np.float64)),
+        _vector(np.asarray(capture["camera_target"], dtype=np.float64)),
+        _vector(np.asarray(capture["camera_up"], dtype=np.float64)),
+        float(capture["fov_deg"]),
+    )
+
+
+def maps_as_photographed(maps: torch.Tensor, meta: Mapping[str, Any]) -> torch.Tensor:
+    """The sample's texture-space maps resampled into its photo's pixels
+    (:func:`~brdfgan.core.render.maps_in_view` of :func:`recorded_camera`), so that pixel (i, j)
+    of the maps describes the surface that pixel (i, j) of the photo shows.
+
+    Why: a randomised capture looks at the sample from a few per cent closer and up to a few
+    degrees tilted, so in texture space a texel lies up to ~5 px (at 256²) away from where the photo
+    shows it. Fine relief then has no fixed relation to the photo — measured on the v3 data, the
+    high-pass correlation between photo and base colour was 0.05–0.5 in texture space and 0.8–0.9
+    in the photo's view — and a network learns only what survives that blur (its normals came out
+    flat). Unchanged (the same tensor) for samples without a recorded camera.
+
+    Shape:
+        - maps: ``(8, H, W)``
+        - output: ``(8, H, W)``
+    """
+    pose = recorded_camera(meta)
+    return maps if pose is None else maps_in_view(maps, pose)
+
+
+def sample_as_photographed(sample: Sample) -> Sample:
+    """The sample with :func:`maps_as_photographed` maps; ``meta["maps_view"] = "photo"`` says so."""
+    maps = maps_as_photographed(sample.maps, sample.meta)
+    return Sample(sample.key, sample.photo, maps, {**sample.meta, "maps_view": "photo"}, check=False)
