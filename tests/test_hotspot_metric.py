@@ -337,7 +337,7 @@ class OffsetModel(nn.Module):
         super().__init__()
         self.anchor = nn.Parameter(torch.zeros(()))  # so .to(device) has something to move
 
-    def forward(self, photo: Tensor) -> Tensor:
+    def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
         error = photo[:, :1].double() - 0.5
         height, width = photo.shape[-2:]
         maps = mid_maps(height, width, batch=photo.shape[0]).to(photo.device)

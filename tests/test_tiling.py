@@ -68,7 +68,7 @@ def make_photo(height: int, width: int, seed: int = 1) -> Tensor:
     return (texture / (1.0 + 1.5 * (x**2 + y**2))).clamp(0.0, 1.0)
 
 
-def tiny_generator(seed: int = 0, **overrides: int) -> Generator:
+def tiny_generator(seed: int = 0, **overrides: int | bool) -> Generator:
     torch.manual_seed(seed)
     return Generator(**{**TINY, **overrides}).eval()
 
@@ -306,6 +306,21 @@ def test_tiled_matches_untiled(generator: Generator, photo: Tensor, untiled: Ten
     error = pixel_error(tiled, untiled)
     assert error.max() < 1e-3  # measured 1.7e-4
     assert error.mean() < 1e-5  # measured 1.0e-6
+
+
+@pytest.mark.parametrize("frame", [None, torch.tensor([[40.0, 150.0, 0.006]])])
+def test_flash_aware_tiles_see_the_whole_photo_geometry(photo: Tensor, frame: Tensor | None) -> None:
+    """Each tile gets the whole photo's flash frame moved to its corner, so tiled and untiled agree
+    as for a plain generator; the default frame is the whole photo's centre, not each tile's."""
+    aware = tiny_generator(flash_geometry=True)
+    untiled = predict_direct(aware, photo, frame)
+    tiled = predict_tiled(aware, photo, TILED, flash=frame)
+    error = pixel_error(tiled, untiled)
+    assert error.max() < 1e-3
+    assert error.mean() < 1e-5
+    with torch.no_grad():  # the geometry matters: another frame gives other maps
+        elsewhere = predict_direct(aware, photo, torch.tensor([[0.0, 0.0, 0.02]]))
+    assert pixel_error(elsewhere, untiled).mean() > 1e-3
 
 
 def test_seams_are_no_worse_than_the_interior(generator: Generator, photo: Tensor, untiled: Tensor) -> None:

@@ -79,7 +79,7 @@ import logging
 import multiprocessing
 import random
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from itertools import count, islice
 from pathlib import Path
@@ -91,6 +91,9 @@ import webdataset as wds
 from lightning.pytorch.loops.progress import _ProcessedTracker
 from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
+from brdfgan.core.flash_geometry import pixel_scale
+from brdfgan.core.render import FlashCapture
+from brdfgan.data.capture import sample_as_photographed
 from brdfgan.data.sensor import SensorEffects
 from brdfgan.data.shards import (
     MANIFEST_NAME,
@@ -102,6 +105,7 @@ from brdfgan.data.shards import (
     verify_shard,
 )
 from brdfgan.data.spec_checks import DatasetConfigError
+from brdfgan.metrics import hotspot_centres
 
 __all__ = ["ShardDataModule", "ShardStream", "ShardWarning", "SkipStats", "collate_samples"]
 
@@ -181,12 +185,47 @@ def collate_samples(samples: Sequence[Sample]) -> dict[str, Any]:
         raise ShardError(
             f"samples of different sizes {sorted(sizes)} in one batch ({keys}); regenerate the data"
         )
+    meta = [dict(sample.meta) for sample in samples]
+    height, width = samples[0].photo.shape[-2:]
     return {
         "photo": torch.stack([sample.photo for sample in samples]).float(),
         "maps": torch.stack([sample.maps for sample in samples]).float(),
+        "flash": flash_frames(meta, height, width),
         "key": [sample.key for sample in samples],
-        "meta": [dict(sample.meta) for sample in samples],
+        "meta": meta,
     }
+
+
+# Samples without meta["capture"] come from datasets made before the capture randomisation, all
+# photographed by the nominal FlashCapture (camera centred, flash at the lens).
+LEGACY_FOV_DEG = FlashCapture().fov_deg
+
+
+def flash_frames(meta: Sequence[Mapping[str, Any]], height: int, width: int) -> torch.Tensor:
+    """The :mod:`flash frame <brdfgan.core.flash_geometry>` of every sample of a batch.
+
+    The hotspot is :func:`~brdfgan.metrics.hotspot_centres` (the recorded ``hotspot_px``, shifted by
+    a ``train_crop``); the scale comes from the recorded ``capture.fov_deg`` (else the nominal
+    capture's) across the stored photo's width (``meta["photo_size"]`` for a crop, else ``width``).
+
+    Shape:
+        - output: ``(B, 3)`` float32
+    """
+    centres = hotspot_centres(meta, height, width)
+    scales = []
+    for index, sample in enumerate(meta):
+        capture = sample.get("capture")
+        fov = capture.get("fov_deg", LEGACY_FOV_DEG) if isinstance(capture, Mapping) else LEGACY_FOV_DEG
+        photo_width = width
+        if sample.get("train_crop") is not None:
+            size = sample.get("photo_size")
+            if not isinstance(size, Sequence) or len(size) != 2:
+                raise ShardError(
+                    f"sample {index}: a train crop without meta['photo_size'] has no known scale"
+                )
+            photo_width = size[0]
+        scales.append(pixel_scale(float(fov), float(photo_width)))
+    return torch.cat([centres, torch.tensor(scales, dtype=torch.float64)[:, None]], dim=1).float()
 
 
 class ShardStream(IterableDataset):
@@ -215,6 +254,7 @@ class ShardStream(IterableDataset):
         max_samples: int | None = None,
         crop: int | None = None,
         sensor: SensorEffects | None = None,
+        align_maps: bool = True,
     ) -> None:
         super().__init__()
         if kind not in _KINDS:
@@ -233,6 +273,7 @@ class ShardStream(IterableDataset):
         self.max_samples = max_samples
         self.crop = crop
         self.sensor = sensor if sensor is not None and sensor.enabled else None
+        self.align_maps = align_maps
         # Counts the iterations of this copy of the dataset: in the main process (no workers)
         # or in a persistent worker, which keeps its copy between epochs.
         self.epoch = 0
@@ -364,7 +405,7 @@ class ShardStream(IterableDataset):
                 warnings.warn(f"skipping a corrupt sample: {error}", ShardWarning, stacklevel=1)
                 self.counter.add(self.kind, _SAMPLES)
                 continue
-            yield sample
+            yield sample_as_photographed(sample) if self.align_maps else sample
 
 
 def random_crop(sample: Sample, size: int, rng: random.Random) -> Sample:
@@ -372,7 +413,8 @@ def random_crop(sample: Sample, size: int, rng: random.Random) -> Sample:
 
     The generator is fully convolutional, so training on crops of the rendered photos is
     training on smaller photos with the flash hotspot anywhere in (or outside) the window.
-    ``meta["train_crop"]`` records the window as ``[x, y, size]``.
+    ``meta["train_crop"]`` records the window as ``[x, y, size]`` and ``meta["photo_size"]`` the
+    sample's ``[width, height]`` before the crop (the flash frame's scale needs it).
 
     Shape:
         - sample.photo: ``(3, H, W)``, sample.maps: ``(8, H, W)`` with ``H, W >= size``
@@ -384,7 +426,7 @@ def random_crop(sample: Sample, size: int, rng: random.Random) -> Sample:
     y = rng.randrange(height - size + 1)
     x = rng.randrange(width - size + 1)
     window = (..., slice(y, y + size), slice(x, x + size))
-    meta = {**sample.meta, "train_crop": [x, y, size]}
+    meta = {**sample.meta, "train_crop": [x, y, size], "photo_size": [width, height]}
     return Sample(sample.key, sample.photo[window], sample.maps[window], meta, check=False)
 
 
@@ -485,6 +527,10 @@ class ShardDataModule(L.LightningDataModule):
             ``None`` or ``enabled: false``: the stored photos as they are.
         sensor_splits: the splits ``sensor`` applies to, among ``"train"``, ``"val"``, ``"test"``.
         eval_sensor: applied to the splits not in ``sensor_splits`` (``None``: stored photos).
+        align_maps: resample each sample's maps into its photo's pixels (the recorded camera,
+            :func:`~brdfgan.data.capture.maps_as_photographed`), for training and evaluation alike;
+            ``False`` reads them in texture space as stored (how models before v4 were trained and
+            measured).
 
     After :meth:`setup`, :attr:`skipped` reports skipped shards and samples.
     """
@@ -508,6 +554,7 @@ class ShardDataModule(L.LightningDataModule):
         sensor: SensorEffects | None = None,
         sensor_splits: Sequence[str] = ("train",),
         eval_sensor: SensorEffects | None = None,
+        align_maps: bool = True,
     ) -> None:
         super().__init__()
         if batch_size < 1:
@@ -548,6 +595,7 @@ class ShardDataModule(L.LightningDataModule):
         self.sensor = sensor
         self.sensor_splits = tuple(sensor_splits)
         self.eval_sensor = eval_sensor
+        self.align_maps = align_maps
         self._prepare = prepare
         self._indices: dict[str, _SplitIndex] = {}
         self._skipped_shards = 0
@@ -712,6 +760,7 @@ class ShardDataModule(L.LightningDataModule):
             counter=self._counter,
             batches_per_epoch=self.train_batches_per_epoch if kind == "train" else None,
             sensor=self.sensor if kind in self.sensor_splits else self.eval_sensor,
+            align_maps=self.align_maps,
             **options,
         )
 

@@ -19,6 +19,7 @@ class EvaluateConfig:
     device: str = "auto"
     grid_samples: int = 6
     grid_keys: list[str] | None = None
+    flash_frame: str = "recorded"  # recorded | centred (see conf/evaluate.yaml)
     paths: dict[str, Any] = field(default_factory=dict)
     data: dict[str, Any] = field(default_factory=dict)
     logger: dict[str, Any] | None = None

@@ -22,13 +22,17 @@ import torch
 from torch import Tensor, nn
 from torchmetrics import MetricCollection
 
+from brdfgan.core.flash_geometry import centred_flash_frame
 from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
+from brdfgan.data.datamodule import flash_frames
 from brdfgan.data.shards import Sample
+from brdfgan.errors import UserError
 from brdfgan.io.atomic import atomic_replace, write_text_atomic
 from brdfgan.io.images import write_image
 from brdfgan.metrics import hotspot_centres
 
+FLASH_FRAME_SOURCES = ("recorded", "centred")
 PAPER_MAPS = ("diffuse", "specular", "normal", "roughness")
 ALL_MAPS = (*PAPER_MAPS, "basecolor", "metallic")
 # The predicted maps whose hotspot ratio the table shows (metrics.json/.csv hold all of them).
@@ -41,11 +45,16 @@ def evaluate_models(
     batches: Iterable[Mapping[str, Any]],
     make_metrics: Callable[[], MetricCollection],
     device: torch.device | str = "cpu",
+    flash_frame: str = "recorded",
 ) -> dict[str, dict[str, float]]:
     """Metric values per model name. ``make_metrics()`` builds a fresh metric per model; every
     model sees the same batches in the same order. The flash positions of ``batch["meta"]``
     (:func:`~brdfgan.metrics.hotspot_centres`) go to the metrics as ``hotspot``; a batch without
-    ``meta`` has them at the image centres."""
+    ``meta`` has them at the image centres. ``flash_frame``: ``"recorded"`` passes the batches'
+    flash frames to the models, ``"centred"`` the frame of a photo centred on its hotspot with the
+    default field of view (what ``brdfgan predict`` assumes without EXIF)."""
+    if flash_frame not in FLASH_FRAME_SOURCES:
+        raise UserError(f"flash_frame={flash_frame!r}: must be {' or '.join(map(repr, FLASH_FRAME_SOURCES))}")
     metrics = {name: make_metrics().to(device) for name in models}
     for model in models.values():
         model.to(device).eval()
@@ -54,8 +63,12 @@ def evaluate_models(
         truth = batch["maps"].to(device)
         meta = batch.get("meta")
         hotspot = None if meta is None else hotspot_centres(meta, *truth.shape[-2:]).to(device)
+        flash = batch.get("flash") if flash_frame == "recorded" else None
+        if flash is None:
+            flash = centred_flash_frame(photo.shape[0], *photo.shape[-2:])
+        flash = flash.to(device)
         for name, model in models.items():
-            metrics[name].update(model(photo), truth, hotspot=hotspot)
+            metrics[name].update(model(photo, flash), truth, hotspot=hotspot)
     return {name: {k: float(v) for k, v in metric.compute().items()} for name, metric in metrics.items()}
 
 
@@ -146,7 +159,8 @@ def comparison_grid(generator: nn.Module, samples: Sequence[Sample]) -> np.ndarr
     """
     photos = torch.stack([s.photo for s in samples])
     truth = torch.stack([s.maps for s in samples])
-    pred = generator.eval()(photos)
+    flash = flash_frames([s.meta for s in samples], *photos.shape[-2:])
+    pred = generator.eval()(photos, flash)
     capture = FlashCapture()
     renders = _novel_light_render(torch.cat([truth, pred]), capture)
     rows = []

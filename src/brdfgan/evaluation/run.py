@@ -12,6 +12,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from brdfgan.config_check import check_config
+from brdfgan.data.capture import sample_as_photographed
 from brdfgan.data.shards import Sample, iter_shard, list_shards
 from brdfgan.errors import UserError
 from brdfgan.evaluation.evaluator import evaluate_models, markdown_table, write_grid, write_results
@@ -20,14 +21,19 @@ from brdfgan.runs import load_generator, model_name
 log = logging.getLogger(__name__)
 
 
-def fixed_samples(data_dir: Path, split: str, count: int, keys: Sequence[str] | None = None) -> list[Sample]:
+def fixed_samples(
+    data_dir: Path, split: str, count: int, keys: Sequence[str] | None = None, *, align_maps: bool = True
+) -> list[Sample]:
     """The first ``count`` samples of a split in shard and key order, or the samples named by
-    ``keys`` (in that order) — a list fixed before training, not cherry-picked afterwards."""
+    ``keys`` (in that order) — a list fixed before training, not cherry-picked afterwards. With
+    ``align_maps`` their maps are resampled into the photos' pixels, as the DataModule reads them
+    (:func:`~brdfgan.data.capture.sample_as_photographed`)."""
     wanted = list(keys) if keys else None
     found: dict[str, Sample] = {}
     samples: list[Sample] = []
     for shard in list_shards(data_dir, split):
-        for sample in iter_shard(shard):
+        for stored in iter_shard(shard):
+            sample = sample_as_photographed(stored) if align_maps else stored
             if wanted is None:
                 if len(samples) == count:
                     return samples
@@ -82,9 +88,15 @@ def evaluate(cfg: DictConfig, out_dir: str | Path) -> dict[str, dict[str, float]
     datamodule.splits["test"] = cfg.split  # the test loader streams each sample once, in order
     datamodule.setup("test")
     make_metrics = hydra.utils.instantiate(cfg.metrics)
-    results = evaluate_models(models, datamodule.test_dataloader(), make_metrics, device)
+    results = evaluate_models(models, datamodule.test_dataloader(), make_metrics, device, cfg.flash_frame)
     written = write_results(results, out_dir)
-    samples = fixed_samples(Path(datamodule.data_dir), cfg.split, cfg.grid_samples, cfg.get("grid_keys"))
+    samples = fixed_samples(
+        Path(datamodule.data_dir),
+        cfg.split,
+        cfg.grid_samples,
+        cfg.get("grid_keys"),
+        align_maps=datamodule.align_maps,
+    )
     for name, model in models.items():
         if samples:
             written.append(write_grid(model.cpu(), samples, Path(out_dir) / f"grid_{name}.png"))

@@ -28,6 +28,7 @@ from typing import Any, Literal
 from torch import Tensor
 
 from brdfgan.errors import UserError, disk_full_message, is_disk_full, one_line
+from brdfgan.inference.intake.lens import crop_field_of_view
 from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, read_photo
 from brdfgan.inference.intake.preprocess import Crop, preprocess
 from brdfgan.inference.model.tiling import TilingConfig, predict_direct, predict_tiled
@@ -69,11 +70,13 @@ class Predictor:
         resolution = options.resolution or model.resolution
         return cls(model, options, resolution, options.tiling.runs_tiled(resolution, resolution))
 
-    def maps(self, photo: Tensor) -> Tensor:
-        """The generator's maps of one prepared photo. Shape: ``(3, N, N)`` → ``(8, N, N)``."""
+    def maps(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        """The generator's maps of one prepared photo with its flash frame (default: centred).
+
+        Shape: ``(3, N, N)`` and ``(1, 3)`` → ``(8, N, N)``."""
         if self.tiled:
-            return predict_tiled(self.model.generator, photo[None], self.options.tiling)[0]
-        return predict_direct(self.model.generator, photo[None])[0]
+            return predict_tiled(self.model.generator, photo[None], self.options.tiling, flash=flash)[0]
+        return predict_direct(self.model.generator, photo[None], flash)[0]
 
 
 @dataclass(frozen=True)
@@ -133,13 +136,17 @@ def predict_photo(path: Path, out_dir: Path, predictor: Predictor) -> PhotoResul
     options = predictor.options
     photo = read_photo(path, options.colorspace)
     prepared = preprocess(photo, predictor.resolution, options.crop)
-    maps = predictor.maps(prepared.photo)
+    fov_deg, fov_source = crop_field_of_view(photo.lens, photo.width, photo.height, prepared.crop.size)
+    maps = predictor.maps(prepared.photo, prepared.flash_frame(fov_deg))
     warnings = photo.warnings + prepared.warnings
     metadata = {
         "name": out_dir.name,
         "model": predictor.model.to_json(),
         "input": photo.to_json(),
         **prepared.to_json(),
+        # The crop's horizontal field of view: what a flash-aware network is told about the
+        # geometry (brdfgan.core.flash_geometry), and the capture model of a refinement.
+        "field_of_view": {"degrees": fov_deg, "source": fov_source},
         "inference": options.tiling.to_json(predictor.tiled),
         "input_statistics": prepared.stats,
         "brdf": BRDF_DESCRIPTION,

@@ -369,10 +369,11 @@ def hotspot_centres(meta: Sequence[Mapping[str, Any]], height: int, width: int) 
 
     - ``meta["capture"]["hotspot_px"] = [x, y]``: the position in the stored photo;
     - without it (older datasets: flash at the lens, camera centred over the sample): the centre
-      of the stored photo, which is the batch image unless the sample was cropped;
+      of the stored photo, ``meta["photo_size"] / 2`` when recorded (a train crop records it),
+      else the batch image's;
     - ``meta["train_crop"] = [x0, y0, size]`` (:func:`brdfgan.data.datamodule.random_crop`)
-      shifts the position by ``(-x0, -y0)``. A crop of a sample without ``hotspot_px`` is an
-      error: the stored photo's size, hence its centre, is not recorded.
+      shifts the position by ``(-x0, -y0)``. A crop with neither ``hotspot_px`` nor
+      ``photo_size`` is an error: the stored photo's centre is not known.
 
     A position may lie outside the image (a crop that missed the highlight).
 
@@ -389,12 +390,19 @@ def hotspot_centres(meta: Sequence[Mapping[str, Any]], height: int, width: int) 
         position = capture.get("hotspot_px") if isinstance(capture, Mapping) else None
         crop = sample.get("train_crop")
         if position is None:
-            if crop is not None:
+            size = sample.get("photo_size")
+            if crop is not None and size is None:
                 raise ValueError(
-                    f"sample {index}: a train crop without meta['capture']['hotspot_px'] "
-                    "has no known flash position (the stored photo's size is not recorded)"
+                    f"sample {index}: a train crop without meta['capture']['hotspot_px'] or "
+                    "meta['photo_size'] has no known flash position"
                 )
-            x, y = width / 2.0, height / 2.0
+            x, y = (
+                (width / 2.0, height / 2.0)
+                if size is None
+                else _point(size, f"sample {index}: meta['photo_size']")
+            )
+            if size is not None:
+                x, y = x / 2.0, y / 2.0
         else:
             x, y = _point(position, f"sample {index}: meta['capture']['hotspot_px']")
         if crop is not None:

@@ -203,7 +203,9 @@ class Deschaintre2018(nn.Module):
             state = F.selu(self.global_steps[index](torch.cat([state, means], dim=1)))
         return out, state
 
-    def forward(self, photo: Tensor) -> Tensor:
+    def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        # ``flash`` (the photo's flash frame) is accepted like the generator's and not read: the
+        # baseline is Deschaintre et al.'s network as published.
         self.check_input(photo)
         x = encode_photo(photo)
         state = F.selu(self.global_input(x.mean(dim=(-2, -1))))

@@ -45,8 +45,8 @@ class ConstantMaps(nn.Module):
     def config(self) -> dict[str, Any]:
         return {}
 
-    def forward(self, photo: Tensor) -> Tensor:
-        """Shape: photo ``(B, 3, H, W)`` → maps ``(B, 8, H, W)``."""
+    def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        """Shape: photo ``(B, 3, H, W)`` → maps ``(B, 8, H, W)``; ``flash`` (the flash frame) is unused."""
         batch, _, height, width = photo.shape
         values = self.values.to(photo.dtype)
         return values.view(1, NUM_CHANNELS, 1, 1).expand(batch, NUM_CHANNELS, height, width).clone()
@@ -67,8 +67,8 @@ class PhotoAsBasecolor(nn.Module):
     def config(self) -> dict[str, Any]:
         return {}
 
-    def forward(self, photo: Tensor) -> Tensor:
-        """Shape: photo ``(B, 3, H, W)`` linear LDR → maps ``(B, 8, H, W)``."""
+    def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        """Shape: photo ``(B, 3, H, W)`` linear LDR → maps ``(B, 8, H, W)``; ``flash`` is unused."""
         batch, _, height, width = photo.shape
         maps = photo.new_zeros(batch, NUM_CHANNELS, height, width)
         maps[:, BASECOLOR] = linear_to_srgb(photo.clamp(0.0, 1.0))

@@ -110,8 +110,8 @@ class SVBRDFGAN(L.LightningModule):
         # Each DDP rank draws its own rendering-loss configurations.
         self.loss.reseed(int(self.loss.seed) + self.global_rank)
 
-    def forward(self, photo: Tensor) -> Tensor:
-        return self.generator(photo)
+    def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        return self.generator(photo, flash)
 
     # -- exact resume ------------------------------------------------------------------------
 
@@ -220,7 +220,7 @@ class SVBRDFGAN(L.LightningModule):
         photo, maps = self._inputs(batch)
         g_opt, d_opt = self._optimizers()
         with record_function("brdfgan/generator_forward"):
-            fake = self.generator(photo)
+            fake = self.generator(photo, batch.get("flash"))
         logged: dict[str, Tensor] = {}
 
         if self.discriminator is not None and d_opt is not None:
@@ -268,7 +268,7 @@ class SVBRDFGAN(L.LightningModule):
 
     def _evaluate(self, batch: Mapping[str, Any], batch_idx: int, stage: str) -> Tensor:
         photo, maps = self._inputs(batch)
-        fake = self.generator(photo)
+        fake = self.generator(photo, batch.get("flash"))
         terms = parameter_loss(fake, maps)
         configs = sample_rendering_loss_configs(
             photo.shape[0],

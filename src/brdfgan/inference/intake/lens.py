@@ -25,10 +25,8 @@ import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
-# The centre of the v3 training captures' horizontal field of view after the centre crop,
-# 40–75° (conf/dataset_spec/default_model.yaml, capture.fov_*): what a photo without EXIF is
-# assumed to have.
-DEFAULT_FOV_DEG = 57.5
+from brdfgan.core.flash_geometry import DEFAULT_FOV_DEG
+
 FULL_FRAME_DIAGONAL_MM = math.hypot(36.0, 24.0)
 
 # EXIF tags (the Exif sub-IFD, 0x8769).

@@ -37,6 +37,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from brdfgan.core.exposure import auto_expose, luminance
+from brdfgan.core.flash_geometry import pixel_scale
 from brdfgan.inference.intake.photo import Photo, PhotoError
 
 __all__ = [
@@ -154,6 +155,20 @@ class Preprocessed:
     resized_from: int
     stats: dict[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+
+    def flash_frame(self, fov_deg: float) -> Tensor:
+        """The :mod:`flash frame <brdfgan.core.flash_geometry>` of :attr:`photo`: the detected
+        highlight (``stats``; the image centre when none stood out) moved into the crop and scaled
+        to the network's resolution, with the horizontal field of view ``fov_deg`` across the crop.
+
+        Shape: output ``(1, 3)``.
+        """
+        size = int(self.photo.shape[-1])
+        factor = size / self.crop.size
+        # find_hotspot puts pixel i at i; the frame puts its centre at i + 0.5.
+        x = (self.stats["hotspot_x"] + 0.5 - self.crop.x) * factor
+        y = (self.stats["hotspot_y"] + 0.5 - self.crop.y) * factor
+        return torch.tensor([[x, y, pixel_scale(fov_deg, size)]], dtype=torch.float32)
 
     def to_json(self) -> dict[str, Any]:
         """The ``crop``, ``resolution``, ``resized_from`` and ``exposure_scale`` entries of

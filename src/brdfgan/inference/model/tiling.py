@@ -60,6 +60,12 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from brdfgan.core.flash_geometry import (
+    centred_flash_frame,
+    check_flash_frame,
+    crop_flash_frame,
+    resize_flash_frame,
+)
 from brdfgan.core.svbrdf import NORMAL, NUM_CHANNELS, normalize_normal
 from brdfgan.errors import UserError
 from brdfgan.models.heads import PHOTO_CHANNELS
@@ -156,8 +162,9 @@ def _uses_input_statistics(module: nn.Module) -> bool:
     return isinstance(module, nn.InstanceNorm2d) and (module.training or not module.track_running_stats)
 
 
-def norm_statistics(model: nn.Module, photo: Tensor) -> NormStatistics:
-    """Run ``model`` once on ``photo`` and record the input statistics of every ``InstanceNorm2d``.
+def norm_statistics(model: nn.Module, photo: Tensor, flash: Tensor | None = None) -> NormStatistics:
+    """Run ``model`` once on ``photo`` (with its flash frame ``flash``, when given) and record the
+    input statistics of every ``InstanceNorm2d``.
 
     The forward runs under ``torch.inference_mode()``; its output is discarded. Hooks are removed
     afterwards, also on exceptions.
@@ -186,7 +193,7 @@ def norm_statistics(model: nn.Module, photo: Tensor) -> NormStatistics:
             if _uses_input_statistics(module):
                 handles.append(module.register_forward_pre_hook(record(name)))
         with torch.inference_mode():
-            model(photo)
+            model(photo, flash)
     finally:
         for handle in handles:
             handle.remove()
@@ -478,18 +485,33 @@ def _inference(model: nn.Module) -> Iterator[None]:
         model.train(was_training)
 
 
-def predict_direct(generator: nn.Module, photo: Tensor) -> Tensor:
+def _whole_photo_frame(photo: Tensor, flash: Tensor | None) -> Tensor:
+    # Without a frame the photo is centred on its hotspot: the centre of the photo itself, not of
+    # the padded photo or of a tile, which is what the network would assume for its own input.
+    if flash is None:
+        return centred_flash_frame(photo.shape[0], *photo.shape[-2:])
+    check_flash_frame(flash, photo.shape[0])
+    return flash.float().cpu()
+
+
+def predict_direct(generator: nn.Module, photo: Tensor, flash: Tensor | None = None) -> Tensor:
     """One untiled pass: pad to a size the model accepts, run, crop back.
+
+    ``flash`` is the photos' :mod:`flash frame <brdfgan.core.flash_geometry>` (default: centred on
+    each photo, the default field of view); networks without ``flash_geometry`` ignore it.
+    Padding adds pixels after the last row and column, so the frame needs no shift.
 
     Shape:
         - photo: ``(B, 3, H, W)``, linear LDR in [0, 1], H, W >= 2
+        - flash: ``(B, 3)``
         - output: ``(B, 8, H, W)`` on the photo's device and dtype
     """
     _check_photo(photo, single=False)
     device, dtype = _model_placement(generator, photo)
     height, width = photo.shape[-2:]
+    frame = _whole_photo_frame(photo, flash).to(device)
     with _inference(generator):
-        maps = generator(_pad_for(generator, photo).to(device=device, dtype=dtype))
+        maps = generator(_pad_for(generator, photo).to(device=device, dtype=dtype), frame)
         return maps[..., :height, :width].to(device=photo.device, dtype=photo.dtype)
 
 
@@ -498,8 +520,13 @@ def predict_tiled(
     photo: Tensor,
     config: TilingConfig = TilingConfig(),
     progress: ProgressCallback | None = None,
+    flash: Tensor | None = None,
 ) -> Tensor:
     """Overlapping tiles with frozen InstanceNorm statistics, blended into one map set.
+
+    Every tile gets the whole photo's flash frame moved to the tile's corner (and the statistics
+    pass the frame of the downscaled photo), so a flash-aware network sees the same geometry as
+    in one untiled pass; ``flash`` as in :func:`predict_direct`.
 
     Peak memory: the padded photo, the ``(1, 8, H, W)`` output buffer and one tile's activations
     (plus the statistics pass at ``stats_resolution``). ``progress(done, total)`` is called after
@@ -507,10 +534,12 @@ def predict_tiled(
 
     Shape:
         - photo: ``(1, 3, H, W)``, linear LDR in [0, 1], H, W >= 2
+        - flash: ``(1, 3)``
         - output: ``(1, 8, H, W)``, valid maps (normals renormalised after blending), on the photo's
           device and dtype
     """
     _check_photo(photo, single=True)
+    frame = _whole_photo_frame(photo, flash)
     multiple = _size_multiple(generator)
     if config.tile % multiple:
         raise TilingError(f"tile {config.tile} must be a multiple of the model's size multiple {multiple}")
@@ -549,8 +578,9 @@ def predict_tiled(
         frozen: AbstractContextManager[None] = nullcontext()
         if config.freeze_statistics:
             small = stats_photo(generator, padded, config.stats_resolution)
+            small_frame = resize_flash_frame(frame, small.shape[-1] / full_w).to(device)
             frozen = frozen_instance_norm(
-                generator, norm_statistics(generator, small.to(device=device, dtype=dtype))
+                generator, norm_statistics(generator, small.to(device=device, dtype=dtype), small_frame)
             )
 
         out = torch.zeros(1, NUM_CHANNELS, full_h, full_w, device=photo.device, dtype=photo.dtype)
@@ -559,7 +589,8 @@ def predict_tiled(
             for y, window_y in zip(ys, wy, strict=True):
                 for x, window_x in zip(xs, wx, strict=True):
                     tile = padded[..., y : y + tile_h, x : x + tile_w].to(device=device, dtype=dtype)
-                    maps = generator(tile).to(device=photo.device, dtype=photo.dtype)
+                    tile_frame = crop_flash_frame(frame, x, y).to(device)
+                    maps = generator(tile, tile_frame).to(device=photo.device, dtype=photo.dtype)
                     out[..., y : y + tile_h, x : x + tile_w] += maps * (window_y[:, None] * window_x[None, :])
                     done += 1
                     if progress is not None:
@@ -578,8 +609,10 @@ def predict_maps(
     config: TilingConfig = TilingConfig(),
     *,
     progress: ProgressCallback | None = None,
+    flash: Tensor | None = None,
 ) -> Tensor:
     """Estimate the maps of a photo of any size: untiled when it is small, tiled otherwise.
+    ``flash``: the photo's flash frame, as in :func:`predict_direct`.
 
     Photos with ``H * W <= config.max_direct_pixels`` run in one pass (:func:`predict_direct`,
     ``progress(1, 1)`` after it); larger ones with :func:`predict_tiled`. Runs under
@@ -594,8 +627,8 @@ def predict_maps(
     _check_photo(photo, single=True)
     height, width = photo.shape[-2:]
     if not config.runs_tiled(height, width):
-        maps = predict_direct(generator, photo)
+        maps = predict_direct(generator, photo, flash)
         if progress is not None:
             progress(1, 1)
         return maps
-    return predict_tiled(generator, photo, config, progress)
+    return predict_tiled(generator, photo, config, progress, flash)

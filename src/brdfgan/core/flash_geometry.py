@@ -1,0 +1,127 @@
+"""Where each pixel lies relative to the flash: the input channels a flash-aware network reads.
+
+Why a network needs this. Under the flash, a surface tilted by ``t = (n_x, n_y)`` brightens or
+darkens to first order by ``t · l_xy / l_z``, where ``l`` is the direction towards the flash: the
+sign of the shading caused by a bump depends on which side of the flash it lies. A fully
+convolutional network with reflection padding sees only a window of the photo and cannot tell
+where that window is (training uses random crops, inference tiles), so a bump lit from the left
+and a dent lit from the right look alike to it: the conditional mean of the tilt is ~0 and the
+predicted normals come out flat. Handing it ``-l_xy / l_z`` per pixel resolves that sign
+(CoordConv, Liu et al. 2018, with the coordinates made physical).
+
+The **flash frame** of a photo is three numbers per photo, ``(x, y, s)``:
+
+- ``(x, y)``: the flash hotspot in the photo's continuous pixel coordinates (``x`` along columns
+  from the left edge, ``y`` along rows from the top; pixel ``(i, j)`` spans ``[j, j+1) × [i, i+1)``,
+  the convention of :func:`brdfgan.metrics.hotspot_centres`). For a flash at the lens the hotspot
+  is the foot of the perpendicular from the flash to the surface, the point the flash faces.
+- ``s``: the tangent of the viewing angle per pixel, ``2 tan(fov/2) / photo_width`` for the
+  horizontal field of view ``fov`` across the whole photo.
+
+:func:`flash_offset_channels` turns a frame into two channels, the offset of each pixel centre
+from the hotspot in units of the camera distance: ``((j + ½ − x) s, −(i + ½ − y) s)`` — +X right,
++Y up like the normals (docs/conventions.md#maps-and-encodings). For a camera parallel to the
+surface with the flash at the lens this is exactly ``(p − f)_xy / f_z = −l_xy / l_z``.
+
+A frame follows the image through crops (:func:`crop_flash_frame`: the hotspot moves, ``s``
+stays) and resizes (:func:`resize_flash_frame`: both scale), so a tile, a padded photo or a
+downscaled photo keeps the geometry of the whole.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+# The horizontal field of view a photo is assumed to have when nothing says otherwise: the centre
+# of the v3 training captures' 40–75° (conf/dataset_spec/default_model.yaml, capture.fov_*), after
+# the preprocessing's centre crop. Photos without EXIF focal length get it.
+DEFAULT_FOV_DEG = 57.5
+FLASH_FRAME_SIZE = 3
+FLASH_CHANNELS = 2
+
+
+def check_flash_frame(frame: Tensor, batch: int | None = None) -> None:
+    """Raise ``ValueError`` unless ``frame`` is a finite ``(B, 3)`` floating tensor with ``s > 0``."""
+    if not isinstance(frame, Tensor) or frame.ndim != 2 or frame.shape[1] != FLASH_FRAME_SIZE:
+        shape = tuple(frame.shape) if isinstance(frame, Tensor) else type(frame).__name__
+        raise ValueError(f"a flash frame must be a (B, {FLASH_FRAME_SIZE}) tensor (x, y, s), got {shape}")
+    if batch is not None and frame.shape[0] != batch:
+        raise ValueError(f"flash frame for {frame.shape[0]} photos, but the batch holds {batch}")
+    if not frame.is_floating_point() or not torch.isfinite(frame).all() or (frame[:, 2] <= 0).any():
+        raise ValueError("a flash frame must hold finite floats with a positive scale s")
+
+
+def pixel_scale(fov_deg: float, photo_width: float) -> float:
+    """``s`` of a photo ``photo_width`` pixels wide with horizontal field of view ``fov_deg``."""
+    if not 0.0 < fov_deg < 180.0 or not photo_width > 0:
+        raise ValueError(f"need 0 < fov_deg < 180 and photo_width > 0, got {fov_deg=}, {photo_width=}")
+    return 2.0 * math.tan(math.radians(fov_deg) / 2.0) / photo_width
+
+
+def centred_flash_frame(
+    batch: int, height: int, width: int, fov_deg: float = DEFAULT_FOV_DEG, *, device=None, dtype=None
+) -> Tensor:
+    """The frame of photos whose hotspot is their centre (what ``brdfgan predict``'s hotspot crop
+    produces) with field of view ``fov_deg`` across their width.
+
+    Shape:
+        - output: ``(batch, 3)``
+    """
+    row = [width / 2.0, height / 2.0, pixel_scale(fov_deg, width)]
+    return (
+        torch.tensor(row, device=device, dtype=dtype or torch.float32).expand(batch, FLASH_FRAME_SIZE).clone()
+    )
+
+
+def crop_flash_frame(frame: Tensor, x0: float | Tensor, y0: float | Tensor) -> Tensor:
+    """The frame of the window whose top-left pixel corner is ``(x0, y0)`` (a crop, a tile, or a
+    negative offset for padding on the top/left).
+
+    Shape:
+        - frame: ``(B, 3)``; x0, y0: numbers or ``(B,)``
+        - output: ``(B, 3)``
+    """
+    check_flash_frame(frame)
+    shift = torch.stack(
+        torch.broadcast_tensors(
+            *(torch.as_tensor(v, dtype=frame.dtype, device=frame.device) for v in (x0, y0))
+        ),
+        -1,
+    )
+    return torch.cat([frame[:, :2] - shift, frame[:, 2:]], dim=1)
+
+
+def resize_flash_frame(frame: Tensor, factor: float) -> Tensor:
+    """The frame of the photo resized by ``factor`` (new pixels per old pixel): the hotspot's
+    coordinates scale by it, the tangent per pixel by its inverse.
+
+    Shape:
+        - frame: ``(B, 3)``
+        - output: ``(B, 3)``
+    """
+    check_flash_frame(frame)
+    if not factor > 0:
+        raise ValueError(f"resize factor must be positive, got {factor}")
+    return torch.cat([frame[:, :2] * factor, frame[:, 2:] / factor], dim=1)
+
+
+def flash_offset_channels(frame: Tensor, height: int, width: int) -> Tensor:
+    """Per pixel, the offset of its centre from the flash hotspot in units of the camera distance
+    (module docstring): ``((j + ½ − x) s, −(i + ½ − y) s)``.
+
+    Shape:
+        - frame: ``(B, 3)`` ``(x, y, s)``
+        - output: ``(B, 2, height, width)`` in the frame's dtype and device
+    """
+    check_flash_frame(frame)
+    if height < 1 or width < 1:
+        raise ValueError(f"need a positive size, got {height}x{width}")
+    columns = torch.arange(width, device=frame.device, dtype=frame.dtype) + 0.5
+    rows = torch.arange(height, device=frame.device, dtype=frame.dtype) + 0.5
+    x, y, s = (frame[:, k, None, None] for k in range(FLASH_FRAME_SIZE))
+    offset_x = (columns[None, None, :] - x) * s
+    offset_y = (y - rows[None, :, None]) * s
+    return torch.stack(torch.broadcast_tensors(offset_x, offset_y), dim=1)
