@@ -16,6 +16,7 @@ from brdfgan.core.flash_geometry import (
     centred_flash_frame,
     crop_flash_frame,
     flash_offset_channels,
+    flash_side_channels,
     pixel_scale,
     resize_flash_frame,
 )
@@ -36,6 +37,24 @@ def test_golden_values_of_a_2x4_photo() -> None:
     assert got.shape == (1, 2, 2, 4)
     assert torch.equal(got[0, 0], torch.tensor([[-0.75, -0.25, 0.25, 0.75]] * 2))
     assert torch.equal(got[0, 1], torch.tensor([[0.25] * 4, [-0.25] * 4]))
+
+
+def test_side_channels_split_the_offsets_by_sign() -> None:
+    frame = torch.tensor([[2.0, 1.0, 0.5]])
+    sides = flash_side_channels(frame, 2, 4)
+    assert sides.shape == (1, 4, 2, 4)
+    assert torch.equal(sides[0, 0], torch.tensor([[0.0, 0.0, 0.25, 0.75]] * 2))
+    assert torch.equal(sides[0, 2], torch.tensor([[0.75, 0.25, 0.0, 0.0]] * 2))
+    assert torch.equal(sides[0, 1], torch.tensor([[0.25] * 4, [0.0] * 4]))
+    assert torch.equal(sides[0, 3], torch.tensor([[0.0] * 4, [0.25] * 4]))
+    # What an InstanceNorm keeps: the plain offsets of crops left and right of the flash normalise
+    # to the same ramp, the side channels do not.
+    left, right = torch.tensor([[40.0, 2.0, 0.01]]), torch.tensor([[-8.0, 2.0, 0.01]])
+    norm = torch.nn.InstanceNorm2d(2)
+    plain = [norm(flash_offset_channels(f, 4, 8)) for f in (left, right)]
+    torch.testing.assert_close(plain[0], plain[1])
+    split = [torch.nn.InstanceNorm2d(4)(flash_side_channels(f, 4, 8)) for f in (left, right)]
+    assert (split[0] - split[1]).abs().amax() > 1.0
 
 
 @pytest.mark.parametrize("fov_deg", [40.0, 57.5, 75.0])
@@ -114,19 +133,21 @@ def test_batches_carry_frames_that_follow_the_train_crop() -> None:
 def test_generator_reads_the_frame_only_with_the_option() -> None:
     torch.manual_seed(0)
     photo = torch.rand(2, 3, 32, 32)
-    elsewhere = torch.tensor([[0.0, 0.0, 0.02], [32.0, 5.0, 0.05]])
+    # Same scale as the default frame, the hotspot moved: only the side of the flash differs.
+    elsewhere = centred_flash_frame(2, 32, 32)
+    elsewhere[:, :2] = torch.tensor([[0.0, 0.0], [40.0, 5.0]])
     plain = Generator(**TINY).eval()
     with torch.no_grad():
         assert torch.equal(plain(photo), plain(photo, elsewhere))
     aware = Generator(**TINY, flash_geometry=True).eval()
-    assert aware.down[0].in_channels == 5
-    assert (
-        sum(p.numel() for p in aware.parameters()) - sum(p.numel() for p in plain.parameters()) == 2 * 4 * 49
-    )
+    assert aware.down[0].in_channels == 7
+    extra = sum(p.numel() for p in aware.parameters()) - sum(p.numel() for p in plain.parameters())
+    assert extra == 4 * 4 * 49
     with torch.no_grad():
         default = aware(photo)
         assert torch.equal(default, aware(photo, centred_flash_frame(2, 32, 32)))
-        assert not torch.allclose(default, aware(photo, elsewhere))
+        moved = aware(photo, elsewhere)
+        assert (moved - default).abs().amax() > 1e-3, "a moved hotspot must change the maps"
     with pytest.raises(ValueError, match="batch holds 2"):
         aware(photo, elsewhere[:1])
 

@@ -408,3 +408,46 @@ def test_parameter_loss_metallic_option_changes_only_the_metallic_term() -> None
         parameter_loss(pred, true_maps, metallic="l2")  # type: ignore[arg-type]
     loss = GANLoss(LossSwitches(adversarial=False, feature=False, rendering=False), metallic_loss="bce")
     torch.testing.assert_close(loss.generator_terms(pred, true_maps)["param_metallic"], bce["param_metallic"])
+
+
+def test_tilt_squared_error_golden_values_and_its_minimiser_is_the_mean() -> None:
+    from brdfgan.losses.parameter import tilt_squared_error
+
+    flat = torch.tensor([0.0, 0.0, 1.0]).view(1, 3, 1, 1)
+    tilted = torch.tensor([0.6, 0.0, 0.8]).view(1, 3, 1, 1)  # slope 0.75 along x
+    both = torch.tensor([0.0, 0.6, 0.8]).view(1, 3, 1, 1)
+    torch.testing.assert_close(tilt_squared_error(tilted, flat), torch.full((1, 1, 1), 0.5625))
+    torch.testing.assert_close(tilt_squared_error(tilted, both), torch.full((1, 1, 1), 2 * 0.5625))
+    assert tilt_squared_error(tilted, tilted).item() == 0.0
+    # Against a field that is flat on 60 % of the texels and tilted on the rest, a constant slope
+    # scores best at the mean slope with this error and at flat with the angle — why the term exists.
+    truth = torch.zeros(1, 3, 10, 10)
+    truth[:, 2] = 1.0
+    truth[:, :, 6:] = tilted
+    candidates = torch.linspace(0.0, 0.75, 16)
+
+    def constant(slope: float) -> Tensor:
+        vector = torch.tensor([slope, 0.0, 1.0])
+        return (vector / vector.norm()).view(1, 3, 1, 1).expand(1, 3, 10, 10)
+
+    squared = torch.stack([tilt_squared_error(constant(float(c)), truth).mean() for c in candidates])
+    angle = torch.stack([angular_distance(constant(float(c)), truth).mean() for c in candidates])
+    assert candidates[squared.argmin()].item() == pytest.approx(0.3)
+    assert candidates[angle.argmin()].item() == 0.0
+
+
+def test_normal_tilt_weight_adds_to_the_normal_term_only() -> None:
+    from brdfgan.losses.parameter import tilt_squared_error
+
+    pred, true_maps = random_maps(8, 8, seed=1, batch=(2,)), random_maps(8, 8, seed=2, batch=(2,))
+    paper = parameter_loss(pred, true_maps)
+    tilted = parameter_loss(pred, true_maps, normal_tilt_weight=2.0)
+    extra = 2.0 * tilt_squared_error(pred[:, NORMAL], true_maps[:, NORMAL]).mean()
+    torch.testing.assert_close(tilted["param_normal"], paper["param_normal"] + extra)
+    torch.testing.assert_close(tilted["param"], paper["param"] + extra)
+    for name in ("param_basecolor", "param_roughness", "param_metallic"):
+        torch.testing.assert_close(tilted[name], paper[name])
+    with pytest.raises(ValueError, match="normal_tilt_weight"):
+        parameter_loss(pred, true_maps, normal_tilt_weight=-1.0)
+    loss = GANLoss(LossSwitches(adversarial=False, feature=False, rendering=False), normal_tilt_weight=2.0)
+    torch.testing.assert_close(loss.generator_terms(pred, true_maps)["param_normal"], tilted["param_normal"])

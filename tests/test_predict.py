@@ -247,3 +247,36 @@ def test_high_resolution_runs_tiled_and_matches_the_untiled_prediction(tmp_path:
         # Frozen statistics + discarded tile margins: only residual padding effects remain
         # (measured: max 8e-3, mean 4e-5 for this random tiny network).
         assert np.abs(a - b).max() < 2e-2 and np.abs(a - b).mean() < 5e-4, name
+
+
+def test_a_flash_aware_model_gets_the_detected_hotspot_and_the_field_of_view(tmp_path: Path) -> None:
+    from brdfgan.core.flash_geometry import DEFAULT_FOV_DEG, centred_flash_frame, pixel_scale
+    from brdfgan.inference.intake.photo import read_photo
+    from brdfgan.inference.intake.preprocess import Crop, preprocess
+    from brdfgan.inference.model.tiling import predict_direct
+
+    torch.manual_seed(0)
+    generator = Generator(width=4, residual_blocks=1, flash_geometry=True)
+    with torch.no_grad():  # at initialisation the geometry barely moves the output: make it count
+        generator.down[0].weight[:, 3:] *= 200.0
+    path = save_weights(tmp_path / "aware.safetensors", generator, target="brdfgan.models.generator.Generator",
+                        config=generator.config(), model_id="aware", extra={"resolution": 64})  # fmt: skip
+    # A user crop with the highlight at its right edge: the frame must say so.
+    photo_path = flash_photo(tmp_path / "edge.png")
+    crop = Crop(0, 0, 96)
+    predictor = Predictor.create(load_model(path), PredictOptions(preview=False, crop=crop))
+    result = predict_photo(photo_path, tmp_path / "out" / "edge", predictor)
+    document = json.loads((result.output / "material.json").read_text())
+    assert document["field_of_view"] == {"degrees": DEFAULT_FOV_DEG, "source": "training default"}
+
+    prepared = preprocess(read_photo(photo_path), 64, crop)
+    frame = prepared.flash_frame(DEFAULT_FOV_DEG)
+    x, y, s = frame[0].tolist()
+    assert x == pytest.approx((document["input_statistics"]["hotspot_x"] + 0.5) * 64 / 96)
+    assert x > 60 and s == pytest.approx(pixel_scale(DEFAULT_FOV_DEG, 64))
+    loaded = load_model(path).generator
+    expected = predict_direct(loaded, prepared.photo[None], frame)[0]
+    written = torch.from_numpy(read_rgb(result.output / "roughness.png")[..., 0]).float()
+    torch.testing.assert_close(written, expected[6], atol=0.6 / 255, rtol=0)
+    centred = predict_direct(loaded, prepared.photo[None], centred_flash_frame(1, 64, 64))[0]
+    assert (centred[6] - expected[6]).abs().max() > 2 / 255  # the frame matters: the check can tell

@@ -22,6 +22,7 @@ from torch import Tensor, nn
 from torch.profiler import record_function
 
 from brdfgan.core.sampling import RenderingLossSampling
+from brdfgan.errors import UserError
 from brdfgan.losses.adversarial import (
     DiscriminatorOutputs,
     feature_matching_loss,
@@ -114,6 +115,8 @@ class GANLoss(nn.Module):
         feature_weight: λ of the discriminator total (paper: 0.01).
         metallic_loss: the parameter loss's metallic term, ``"l1"`` (paper) or ``"bce"`` (see
             :func:`~brdfgan.losses.parameter.metallic_bce`).
+        normal_tilt_weight: weight of the squared slope error added to the normal term (0, the
+            paper: none; see :func:`~brdfgan.losses.parameter.tilt_squared_error`).
     """
 
     def __init__(
@@ -127,8 +130,12 @@ class GANLoss(nn.Module):
         weight: float = GENERATOR_WEIGHT,
         feature_weight: float = FEATURE_WEIGHT,
         metallic_loss: MetallicLoss = "l1",
+        normal_tilt_weight: float = 0.0,
     ) -> None:
         super().__init__()
+        if not normal_tilt_weight >= 0.0:
+            raise UserError(f"loss.normal_tilt_weight={normal_tilt_weight}: must be >= 0")
+        self.normal_tilt_weight = float(normal_tilt_weight)
         self.switches = switches
         self.seed = seed
         self.rendering_sampling = rendering_sampling
@@ -191,7 +198,9 @@ class GANLoss(nn.Module):
             terms["g_feat"] = feature_matching_loss(d_real, d_fake, self.feature_layers)
         if s.parameter:
             with record_function("brdfgan/parameter_loss_forward"):
-                terms.update(parameter_loss(pred_maps, true_maps, self.metallic_loss))
+                terms.update(
+                    parameter_loss(pred_maps, true_maps, self.metallic_loss, self.normal_tilt_weight)
+                )
         if s.rendering and self.rendering_loss is not None:
             with record_function("brdfgan/rendering_loss_forward"):
                 terms["render"] = self.rendering_loss(pred_maps, true_maps)
@@ -220,5 +229,5 @@ class GANLoss(nn.Module):
     def extra_repr(self) -> str:
         return (
             f"switches={self.switches}, weight={self.weight}, feature_weight={self.feature_weight}, "
-            f"metallic_loss={self.metallic_loss}"
+            f"metallic_loss={self.metallic_loss}, normal_tilt_weight={self.normal_tilt_weight}"
         )

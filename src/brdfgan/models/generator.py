@@ -28,9 +28,9 @@ Choices the paper leaves open (all parameter-free or removing dead parameters):
   starts with an InstanceNorm. InstanceNorm is ``affine=False`` (pix2pixHD's default).
   The paper preset has 45,598,408 parameters (45.6 M as published; 45,609,032 with all biases).
 
-``flash_geometry=True`` (not the paper's) adds two input channels beside the photo: each pixel's
-offset from the flash hotspot, :func:`~brdfgan.core.flash_geometry.flash_offset_channels` of the
-photo's flash frame. Without them a window of the photo does not say on which side of the flash it
+``flash_geometry=True`` (not the paper's) adds four input channels beside the photo: each pixel's
+offset from the flash hotspot split by sign, :func:`~brdfgan.core.flash_geometry.flash_side_channels`
+of the photo's flash frame (split so that the InstanceNorm after the first conv cannot remove it). Without them a window of the photo does not say on which side of the flash it
 lies, so the sign of a tilt is ambiguous to the network (the module docstring of
 :mod:`brdfgan.core.flash_geometry`). A photo given without a frame is taken to be centred on its
 hotspot with the default field of view (:func:`~brdfgan.core.flash_geometry.centred_flash_frame`),
@@ -48,7 +48,7 @@ from brdfgan.core.flash_geometry import (
     FLASH_CHANNELS,
     centred_flash_frame,
     check_flash_frame,
-    flash_offset_channels,
+    flash_side_channels,
 )
 from brdfgan.core.svbrdf import NUM_CHANNELS
 from brdfgan.models.heads import (
@@ -122,7 +122,7 @@ class Generator(nn.Module):
         normal_head: ``"softplus_z"`` (default, the shipped models) or ``"unit_z"`` (see
             :func:`~brdfgan.models.heads.maps_from_raw`); same parameters.
         flash_geometry: read the flash frame's two offset channels beside the photo (module
-            docstring); the first conv gets ``2 · width · 49`` more weights.
+            docstring); the first conv gets ``4 · width · 49`` more weights.
 
     All arguments are plain ints or strings: ``Generator(**generator.config())`` rebuilds the
     architecture.
@@ -240,7 +240,7 @@ class Generator(nn.Module):
             if flash is None:
                 flash = centred_flash_frame(batch, height, width, device=photo.device)
             check_flash_frame(flash, batch)
-            offsets = flash_offset_channels(flash.to(device=photo.device, dtype=torch.float32), height, width)
-            x = torch.cat([x, offsets.to(x.dtype)], dim=1)
+            sides = flash_side_channels(flash.to(device=photo.device, dtype=torch.float32), height, width)
+            x = torch.cat([x, sides.to(x.dtype)], dim=1)
         features = self.residual(self.down(x))
         return maps_from_raw(self.out(self.up(features)), self.normal_head)
