@@ -257,7 +257,7 @@ def test_a_flash_aware_model_gets_the_detected_hotspot_and_the_field_of_view(tmp
 
     torch.manual_seed(0)
     generator = Generator(width=4, residual_blocks=1, flash_geometry=True)
-    with torch.no_grad():  # at initialisation the geometry barely moves the output: make it count
+    with torch.no_grad():  # at initialisation the geometry barely moves the maps: make it count
         generator.down[0].weight[:, 3:] *= 200.0
     path = save_weights(tmp_path / "aware.safetensors", generator, target="brdfgan.models.generator.Generator",
                         config=generator.config(), model_id="aware", extra={"resolution": 64})  # fmt: skip

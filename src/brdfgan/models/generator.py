@@ -29,11 +29,13 @@ Choices the paper leaves open (all parameter-free or removing dead parameters):
   The paper preset has 45,598,408 parameters (45.6 M as published; 45,609,032 with all biases).
 
 ``flash_geometry=True`` (not the paper's) adds four input channels beside the photo: each pixel's
-offset from the flash hotspot split by sign, :func:`~brdfgan.core.flash_geometry.flash_side_channels`
-of the photo's flash frame (split so that the InstanceNorm after the first conv cannot remove it). Without them a window of the photo does not say on which side of the flash it
-lies, so the sign of a tilt is ambiguous to the network (the module docstring of
-:mod:`brdfgan.core.flash_geometry`). A photo given without a frame is taken to be centred on its
-hotspot with the default field of view (:func:`~brdfgan.core.flash_geometry.centred_flash_frame`),
+offset from the flash hotspot split by sign,
+:func:`~brdfgan.core.flash_geometry.flash_side_channels` of the photo's flash frame (split so that
+the InstanceNorm after the first conv cannot remove it). Without them a window of the photo does
+not say on which side of the flash it lies, so the sign of a tilt is ambiguous to the network (the
+module docstring of :mod:`brdfgan.core.flash_geometry`). A photo given without a frame is taken to
+be centred on its hotspot with the default field of view
+(:func:`~brdfgan.core.flash_geometry.centred_flash_frame`),
 what ``brdfgan predict``'s hotspot crop produces.
 """
 
