@@ -259,7 +259,8 @@ def test_a_flash_aware_model_gets_the_detected_hotspot_and_the_field_of_view(tmp
     generator = Generator(width=4, residual_blocks=1, flash_geometry=True)
     with torch.no_grad():  # at initialisation the geometry barely moves the maps: make it count
         generator.down[0].weight[:, 3:] *= 200.0
-    path = save_weights(tmp_path / "aware.safetensors", generator, target="brdfgan.models.generator.Generator",
+    target = "brdfgan.models.generator.Generator"
+    path = save_weights(tmp_path / "aware.safetensors", generator, target=target,
                         config=generator.config(), model_id="aware", extra={"resolution": 64})  # fmt: skip
     # A user crop with the highlight at its right edge: the frame must say so.
     photo_path = flash_photo(tmp_path / "edge.png")
@@ -271,7 +272,7 @@ def test_a_flash_aware_model_gets_the_detected_hotspot_and_the_field_of_view(tmp
 
     prepared = preprocess(read_photo(photo_path), 64, crop)
     frame = prepared.flash_frame(DEFAULT_FOV_DEG)
-    x, y, s = frame[0].tolist()
+    x, _, s = frame[0].tolist()
     assert x == pytest.approx((document["input_statistics"]["hotspot_x"] + 0.5) * 64 / 96)
     assert x > 60 and s == pytest.approx(pixel_scale(DEFAULT_FOV_DEG, 64))
     loaded = load_model(path).generator
