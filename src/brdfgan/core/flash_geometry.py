@@ -62,7 +62,13 @@ def pixel_scale(fov_deg: float, photo_width: float) -> float:
 
 
 def centred_flash_frame(
-    batch: int, height: int, width: int, fov_deg: float = DEFAULT_FOV_DEG, *, device=None, dtype=None
+    batch: int,
+    height: int,
+    width: int,
+    fov_deg: float = DEFAULT_FOV_DEG,
+    *,
+    device: torch.device | str | None = None,
+    dtype: torch.dtype | None = None,
 ) -> Tensor:
     """The frame of photos whose hotspot is their centre (what ``brdfgan predict``'s hotspot crop
     produces) with field of view ``fov_deg`` across their width.
