@@ -215,10 +215,11 @@ GOLDEN: list[tuple[str, int, int, int, tuple[Golden, ...]]] = [
 def _assert_golden(field: Tensor, golden: Golden) -> None:
     total, squares, samples = golden
     flat = field.flatten()
-    # Tight tolerances: one lattice value read from the wrong cell moves these far more, while
-    # a last-bit difference of sin/cos on another CPU does not fail the test.
-    assert field.double().sum().item() == pytest.approx(total, rel=1e-9, abs=1e-6)
-    assert field.double().square().sum().item() == pytest.approx(squares, rel=1e-9)
+    # Tight tolerances: one lattice value read from the wrong cell moves these far more (> 1e-4),
+    # while last-bit float32 differences on another CPU do not fail the test (an AMD EPYC machine
+    # put Worley sums 1.5e-9 relative off the goldens made on another; 1e-7 leaves room for that).
+    assert field.double().sum().item() == pytest.approx(total, rel=1e-7, abs=1e-6)
+    assert field.double().square().sum().item() == pytest.approx(squares, rel=1e-7)
     picked = [flat[0].item(), flat[777 % flat.numel()].item(), flat[-1].item()]
     assert picked == pytest.approx(list(samples), rel=1e-6, abs=1e-9)
 
