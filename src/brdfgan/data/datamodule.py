@@ -105,7 +105,7 @@ from brdfgan.data.shards import (
     verify_shard,
 )
 from brdfgan.data.spec_checks import DatasetConfigError
-from brdfgan.metrics import hotspot_centres
+from brdfgan.metrics import hotspot_centres, stored_photo_size
 
 __all__ = ["ShardDataModule", "ShardStream", "ShardWarning", "SkipStats", "collate_samples"]
 
@@ -206,7 +206,7 @@ def flash_frames(meta: Sequence[Mapping[str, Any]], height: int, width: int) -> 
 
     The hotspot is :func:`~brdfgan.metrics.hotspot_centres` (the recorded ``hotspot_px``, shifted by
     a ``train_crop``); the scale comes from the recorded ``capture.fov_deg`` (else the nominal
-    capture's) across the stored photo's width (``meta["photo_size"]`` for a crop, else ``width``).
+    capture's) across the stored photo's width (:func:`~brdfgan.metrics.stored_photo_size`).
 
     Shape:
         - output: ``(B, 3)`` float32
@@ -216,15 +216,8 @@ def flash_frames(meta: Sequence[Mapping[str, Any]], height: int, width: int) -> 
     for index, sample in enumerate(meta):
         capture = sample.get("capture")
         fov = capture.get("fov_deg", LEGACY_FOV_DEG) if isinstance(capture, Mapping) else LEGACY_FOV_DEG
-        photo_width = width
-        if sample.get("train_crop") is not None:
-            size = sample.get("photo_size")
-            if not isinstance(size, Sequence) or len(size) != 2:
-                raise ShardError(
-                    f"sample {index}: a train crop without meta['photo_size'] has no known scale"
-                )
-            photo_width = size[0]
-        scales.append(pixel_scale(float(fov), float(photo_width)))
+        photo_width, _ = stored_photo_size(sample, index, height, width)
+        scales.append(pixel_scale(float(fov), photo_width))
     return torch.cat([centres, torch.tensor(scales, dtype=torch.float64)[:, None]], dim=1).float()
 
 

@@ -22,7 +22,6 @@ import torch
 from torch import Tensor, nn
 from torchmetrics import MetricCollection
 
-from brdfgan.core.flash_geometry import centred_flash_frame
 from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
 from brdfgan.data.datamodule import flash_frames
@@ -63,10 +62,9 @@ def evaluate_models(
         truth = batch["maps"].to(device)
         meta = batch.get("meta")
         hotspot = None if meta is None else hotspot_centres(meta, *truth.shape[-2:]).to(device)
+        # None: each network's own default, the photo centred on its hotspot with the default FOV.
         flash = batch.get("flash") if flash_frame == "recorded" else None
-        if flash is None:
-            flash = centred_flash_frame(photo.shape[0], *photo.shape[-2:])
-        flash = flash.to(device)
+        flash = None if flash is None else flash.to(device)
         for name, model in models.items():
             metrics[name].update(model(photo, flash), truth, hotspot=hotspot)
     return {name: {k: float(v) for k, v in metric.compute().items()} for name, metric in metrics.items()}

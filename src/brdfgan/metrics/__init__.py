@@ -20,6 +20,7 @@ from brdfgan.metrics.svbrdf_metrics import (
     fixed_render_configs,
     hotspot_centres,
     hotspot_disk,
+    stored_photo_size,
 )
 
 __all__ = [
@@ -38,4 +39,5 @@ __all__ = [
     "fixed_render_configs",
     "hotspot_centres",
     "hotspot_disk",
+    "stored_photo_size",
 ]

@@ -390,19 +390,8 @@ def hotspot_centres(meta: Sequence[Mapping[str, Any]], height: int, width: int) 
         position = capture.get("hotspot_px") if isinstance(capture, Mapping) else None
         crop = sample.get("train_crop")
         if position is None:
-            size = sample.get("photo_size")
-            if crop is not None and size is None:
-                raise ValueError(
-                    f"sample {index}: a train crop without meta['capture']['hotspot_px'] or "
-                    "meta['photo_size'] has no known flash position"
-                )
-            x, y = (
-                (width / 2.0, height / 2.0)
-                if size is None
-                else _point(size, f"sample {index}: meta['photo_size']")
-            )
-            if size is not None:
-                x, y = x / 2.0, y / 2.0
+            stored_width, stored_height = stored_photo_size(sample, index, height, width)
+            x, y = stored_width / 2.0, stored_height / 2.0
         else:
             x, y = _point(position, f"sample {index}: meta['capture']['hotspot_px']")
         if crop is not None:
@@ -410,6 +399,21 @@ def hotspot_centres(meta: Sequence[Mapping[str, Any]], height: int, width: int) 
             x, y = x - x0, y - y0
         centres.append((x, y))
     return torch.tensor(centres, dtype=torch.float64).reshape(len(centres), 2)
+
+
+def stored_photo_size(sample: Mapping[str, Any], index: int, height: int, width: int) -> tuple[float, float]:
+    """``(width, height)`` of the photo a sample's shard stores: ``meta["photo_size"]`` when
+    recorded (a train crop records it), else the batch image's own size. A train crop without it
+    is an error: the stored photo, cropped, is no longer the batch image."""
+    size = sample.get("photo_size")
+    if size is not None:
+        return _point(size, f"sample {index}: meta['photo_size']")
+    if sample.get("train_crop") is not None:
+        raise ValueError(
+            f"sample {index}: a train crop without meta['photo_size'] (nor meta['capture']['hotspot_px']) "
+            "has no known photo size"
+        )
+    return float(width), float(height)
 
 
 def _point(values: Any, where: str) -> tuple[float, float]:
