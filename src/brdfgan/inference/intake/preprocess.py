@@ -37,6 +37,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from brdfgan.core.exposure import auto_expose, luminance
+from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.flash_geometry import pixel_scale
 from brdfgan.inference.intake.photo import Photo, PhotoError
 
@@ -215,7 +216,7 @@ def find_hotspot(linear: Tensor) -> tuple[float, float]:
     lum = torch.minimum(lum, cap)
 
     sigma = max(1.0, HOTSPOT_SIGMA_FRACTION * max(small_h, small_w))
-    blurred = _gaussian_blur(lum[None, None], sigma) / _gaussian_blur(torch.ones_like(lum)[None, None], sigma)
+    blurred = gaussian_blur(lum[None, None], sigma) / gaussian_blur(torch.ones_like(lum)[None, None], sigma)
     blurred = blurred[0, 0]
     top, bottom = float(blurred.max()), float(blurred.min())
     # Relative test: the normalised blur of a flat image differs from flat by rounding only.
@@ -450,16 +451,6 @@ def _check_image(linear: Tensor) -> None:
         raise ValueError(f"expected a linear RGB tensor of shape (3, H, W), got {shape}")
     if linear.shape[1] < 1 or linear.shape[2] < 1:
         raise ValueError(f"expected a non-empty image, got shape {tuple(linear.shape)}")
-
-
-def _gaussian_blur(image: Tensor, sigma: float) -> Tensor:
-    """Separable Gaussian blur with zero padding. Shape: ``(1, 1, H, W)`` → same."""
-    radius = max(1, math.ceil(3.0 * sigma))
-    taps = torch.arange(-radius, radius + 1, dtype=image.dtype)
-    kernel = torch.exp(-0.5 * (taps / sigma) ** 2)
-    kernel = kernel / kernel.sum()
-    image = F.conv2d(image, kernel.view(1, 1, 1, -1), padding=(0, radius))
-    return F.conv2d(image, kernel.view(1, 1, -1, 1), padding=(radius, 0))
 
 
 def _resize(region: Tensor, resolution: int) -> Tensor:

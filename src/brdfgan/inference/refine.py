@@ -1,0 +1,395 @@
+"""Test-time refinement: fit the network's maps to the photo with the differentiable renderer.
+
+A forward pass uses the photo only through what the network learnt; re-rendered under the
+capture's own flash, its maps often reproduce the photo poorly. :func:`refine_maps` optimises the
+maps so that their render matches the photo, starting from the prediction and held near it
+(MaterialGAN, Guo et al. 2020; Deschaintre et al. 2020; Gao et al. 2019).
+
+The capture model is the training captures' (:class:`~brdfgan.core.render.FlashCapture`): a
+camera above the centre of the square, framing it exactly with horizontal field of view
+``fov_deg`` (from the EXIF, :mod:`brdfgan.inference.intake.lens`), the flash at the lens. Fitted
+beside the maps:
+
+- a per-channel **gain** (log-parametrised): the photo's unknown exposure and white balance;
+- optionally a low-frequency **ambient irradiance** (a ``g × g`` grid per channel, bilinearly
+  upsampled, times the diffuse albedo): light the flash model cannot explain — a room or the sky —
+  which would otherwise be fitted into the base colour;
+- optionally a **flash offset** (a 2-vector in the plane, world units): a flash beside the lens.
+
+The objective, per term (weights in :class:`RefineConfig`):
+
+- *photo*: L1 between log(render + ε) and log(photo + ε) over the unclipped pixels; a clipped
+  pixel (any channel ≥ ``clip_level``) says only that the truth is at least that bright, so it
+  costs only where the render falls below it;
+- *prior*: L1 of every map to the network's prediction (base colour, roughness, metallic values
+  and the normals' slopes) — the photo shows one view and cannot tell everything apart;
+- *low-frequency prior*: L1 of the base colour blurred, to the prediction blurred — the
+  photo's large-scale shading (vignetting, falloff the model misjudges) belongs to light, not
+  to the albedo;
+- *total variation* of roughness and metallic: they change at edges, not per pixel.
+
+Parametrisation keeps every map valid: logits for base colour, roughness and metallic, slopes
+``(s_x, s_y)`` for the normal ``normalize(s_x, s_y, 1)`` (unit and facing up). Large maps are
+refined at ``working_size`` and the correction (in these parameters) is upsampled and added to the
+full-resolution prediction (:func:`transfer_correction`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from brdfgan.core.filtering import gaussian_blur
+from brdfgan.core.flash_geometry import DEFAULT_FOV_DEG
+from brdfgan.core.render import PointLights, capture_camera_height, render_point_lights
+from brdfgan.core.svbrdf import (
+    check_map_shape,
+    diffuse_albedo,
+    join_maps,
+    linear_to_srgb,
+    normalize_normal,
+    resize_maps,
+    split_maps,
+    srgb_to_linear,
+)
+from brdfgan.errors import UserError
+
+# Default step count (provisional, see RefineConfig): 100 steps at 256² took 12-20 s per photo on the
+# 2-core CPU, measured beside a training run (so roughly half of that alone).
+DEFAULT_STEPS = 100
+# Values kept away from 0 and 1 before the logit, so a saturated prediction stays movable.
+LOGIT_MARGIN = 1e-3
+# Normals are kept within ~84° of the vertical (slope 10).
+MAX_SLOPE = 10.0
+# ε of the log in the photo term: below ~1 % of the auto-exposed range, noise dominates.
+LOG_EPSILON = 1e-2
+# Parameter channels: base colour logits (3), normal slopes (2), roughness and metallic logits.
+PARAMETER_CHANNELS = 7
+_BASECOLOR, _SLOPES, _ROUGHNESS, _METALLIC = slice(0, 3), slice(3, 5), slice(5, 6), slice(6, 7)
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    """Everything a refinement chooses; see the module docstring for the terms.
+
+    The defaults are provisional (issue 17 is open): on 4 validation photos of the procedural data
+    they lowered the novel-light re-render error of the shipped model by ~3 % and the diffuse
+    albedo's RMSE by ~11 %, with the normals unchanged (a pull of 0.1 on the slopes let them fit
+    the photo and raised the normal angle by 58 %).
+    """
+
+    steps: int = DEFAULT_STEPS
+    learning_rate: float = 0.05
+    working_size: int = 256
+    prior_weight: float = 1.0
+    normal_prior_weight: float = 3.0
+    material_prior_weight: float = 1.0  # roughness and metallic
+    material_grid: int = 0  # their correction: a g × g grid of logits, upsampled; 0: per pixel
+    low_frequency_weight: float = 1.0
+    low_frequency_sigma: float = 8.0  # pixels at working_size
+    tv_weight: float = 0.01
+    ambient: bool = True
+    ambient_grid: int = 4
+    fit_flash_offset: bool = False
+    clip_level: float = 0.98
+
+    def __post_init__(self) -> None:
+        checks = {
+            "steps": self.steps >= 0,
+            "learning_rate": self.learning_rate > 0,
+            "working_size": self.working_size >= 16,
+            "prior_weight": self.prior_weight >= 0,
+            "normal_prior_weight": self.normal_prior_weight >= 0,
+            "material_prior_weight": self.material_prior_weight >= 0,
+            "low_frequency_weight": self.low_frequency_weight >= 0,
+            "low_frequency_sigma": self.low_frequency_sigma > 0,
+            "tv_weight": self.tv_weight >= 0,
+            "ambient_grid": self.ambient_grid >= 1,
+            "material_grid": self.material_grid >= 0,
+            "clip_level": 0 < self.clip_level <= 1,
+        }
+        for key, ok in checks.items():
+            if not ok:
+                raise UserError(f"refine.{key}={getattr(self, key)!r}: out of range")
+
+    def to_json(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+@dataclass(frozen=True)
+class RefineResult:
+    """The refined maps and what the fit found (``material.json``'s ``refinement`` entry)."""
+
+    maps: Tensor  # (8, H, W), the resolution of the maps given
+    steps: int
+    seconds: float
+    gain: tuple[float, float, float]
+    flash_offset: tuple[float, float] | None
+    ambient_mean: tuple[float, float, float] | None  # irradiance relative to the flash's at the centre
+    loss_start: float
+    loss_end: float
+    photo_rmse_start: float  # sRGB RMSE of the re-rendered input view, before and after
+    photo_rmse_end: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: v for k, v in self.__dict__.items() if k != "maps"}
+
+
+def maps_to_parameters(maps: Tensor) -> Tensor:
+    """The unconstrained parameters of :func:`parameters_to_maps` for ``maps``.
+
+    Shape: ``(B, 8, H, W)`` → ``(B, 7, H, W)``."""
+    check_map_shape(maps)
+    parts = split_maps(maps)
+    normal = normalize_normal(parts.normal)
+    z = normal[:, 2:3].clamp_min(1.0 / MAX_SLOPE)
+    return torch.cat(
+        [
+            torch.logit(parts.basecolor.clamp(LOGIT_MARGIN, 1 - LOGIT_MARGIN)),
+            (normal[:, 0:2] / z).clamp(-MAX_SLOPE, MAX_SLOPE),
+            torch.logit(parts.roughness.clamp(LOGIT_MARGIN, 1 - LOGIT_MARGIN)),
+            torch.logit(parts.metallic.clamp(LOGIT_MARGIN, 1 - LOGIT_MARGIN)),
+        ],
+        dim=1,
+    )
+
+
+def parameters_to_maps(parameters: Tensor) -> Tensor:
+    """Valid maps of unconstrained parameters: sigmoid of the logits, ``normalize(s_x, s_y, 1)``.
+
+    Shape: ``(B, 7, H, W)`` → ``(B, 8, H, W)``."""
+    slopes = parameters[:, _SLOPES].clamp(-MAX_SLOPE, MAX_SLOPE)
+    normal = normalize_normal(torch.cat([slopes, torch.ones_like(slopes[:, :1])], dim=1))
+    return join_maps(
+        torch.sigmoid(parameters[:, _BASECOLOR]),
+        normal,
+        torch.sigmoid(parameters[:, _ROUGHNESS]),
+        torch.sigmoid(parameters[:, _METALLIC]),
+    )
+
+
+def render_capture(
+    maps: Tensor, fov_deg: float, flash_offset: Tensor | None = None, plane_half_size: float = 1.0
+) -> Tensor:
+    """The flash photo of the capture model (camera above the centre, flash at the lens moved by
+    ``flash_offset`` in the plane), unit intensity, linear.
+
+    Shape:
+        - maps: ``(B, 8, N, N)``; flash_offset: ``(B, 2)`` or ``None``
+        - output: ``(B, 3, N, N)``
+    """
+    batch = maps.shape[0]
+    height = capture_camera_height(fov_deg, plane_half_size)
+    camera = maps.new_tensor([0.0, 0.0, height]).expand(batch, 1, 3)
+    flash = camera
+    if flash_offset is not None:
+        flash = camera + F.pad(flash_offset, (0, 1)).unsqueeze(1)
+    lights = PointLights(
+        position=flash.unsqueeze(2),
+        intensity=maps.new_ones(batch, 1, 1),
+        color=maps.new_ones(batch, 1, 1, 3),
+    )
+    return render_point_lights(maps, camera, lights, plane_half_size)[:, 0]
+
+
+def photo_loss(render: Tensor, photo: Tensor, clip_level: float) -> Tensor:
+    """L1 of log(x + ε) over unclipped pixels; clipped ones (any channel ≥ ``clip_level``) as
+    lower bounds. Mean over all pixels and channels.
+
+    Shape: render, photo ``(B, 3, H, W)`` → scalar."""
+    log_render = torch.log(render.clamp_min(0.0) + LOG_EPSILON)
+    log_photo = torch.log(photo + LOG_EPSILON)
+    clipped = (photo >= clip_level).any(dim=1, keepdim=True)
+    error = torch.where(clipped, (log_photo - log_render).clamp_min(0.0), (log_render - log_photo).abs())
+    return error.mean()
+
+
+def total_variation(image: Tensor) -> Tensor:
+    """Mean absolute difference of neighbouring pixels. Shape: ``(B, C, H, W)`` → scalar."""
+    return (image[..., 1:, :] - image[..., :-1, :]).abs().mean() + (
+        image[..., :, 1:] - image[..., :, :-1]
+    ).abs().mean()
+
+
+def transfer_correction(maps: Tensor, before: Tensor, after: Tensor) -> Tensor:
+    """Add the refinement's correction ``after − before`` (maps at the working size) to ``maps``
+    at their own size, in the parameters of :func:`maps_to_parameters` (bilinear upsampling).
+
+    Shape: maps ``(B, 8, H, W)``; before, after ``(B, 8, h, w)`` → ``(B, 8, H, W)``."""
+    delta = maps_to_parameters(after) - maps_to_parameters(before)
+    if delta.shape[-2:] != maps.shape[-2:]:
+        delta = F.interpolate(delta, size=maps.shape[-2:], mode="bilinear", align_corners=False)
+    return parameters_to_maps(maps_to_parameters(maps) + delta)
+
+
+def _ambient_irradiance(grid: Tensor, size: int) -> Tensor:
+    return F.interpolate(grid.exp(), size=(size, size), mode="bilinear", align_corners=False)
+
+
+def refine_maps(
+    photo: Tensor,
+    maps: Tensor,
+    fov_deg: float,
+    config: RefineConfig = RefineConfig(),
+    on_step: Callable[[int, float], None] | None = None,
+) -> RefineResult:
+    """Fit ``maps`` (the network's prediction) to ``photo`` (module docstring).
+
+    Args:
+        photo: the network's input, linear, auto-exposed (what :func:`preprocess
+            <brdfgan.inference.intake.preprocess.preprocess>` gives), at the maps' size or any
+            other square size (it is resized to the working size).
+        maps: the prediction.
+        fov_deg: the horizontal field of view across the photo.
+        config: the refinement's settings.
+        on_step: called after each step with ``(step, loss)`` (progress).
+
+    Shape:
+        - photo: ``(3, N, N)``; maps: ``(8, M, M)``
+        - output maps: ``(8, M, M)``
+    """
+    if photo.ndim != 3 or photo.shape[0] != 3 or photo.shape[1] != photo.shape[2]:
+        raise ValueError(f"refinement needs a square (3, N, N) photo, got {tuple(photo.shape)}")
+    check_map_shape(maps)
+    if maps.ndim != 3 or maps.shape[1] != maps.shape[2]:
+        raise ValueError(f"refinement needs square (8, M, M) maps, got {tuple(maps.shape)}")
+    started = time.perf_counter()
+    with torch.enable_grad():
+        maps_full = maps.detach().float().unsqueeze(0)
+        size = min(config.working_size, maps_full.shape[-1])
+        prior_maps = resize_maps(maps_full[0], size)[None] if maps_full.shape[-1] != size else maps_full
+        target = photo.detach().float().unsqueeze(0)
+        if target.shape[-1] != size:
+            target = F.interpolate(
+                target, size=(size, size), mode="area" if target.shape[-1] > size else "bilinear"
+            )
+        prior = maps_to_parameters(prior_maps)
+        prior_values = parameters_to_maps(prior)
+        prior_slopes = prior[:, _SLOPES]
+        prior_low = gaussian_blur(prior_values[:, 0:3], config.low_frequency_sigma, "reflect")
+
+        # Corrections of the prior's parameters: per pixel for base colour and slopes, and for
+        # roughness and metallic a coarse grid (the photo shows them only where it has a highlight)
+        pixel_delta = torch.zeros_like(prior[:, :5]).requires_grad_(True)
+        grid = config.material_grid or size
+        material_delta = torch.zeros(1, 2, grid, grid, requires_grad=True)
+
+        def current_parameters() -> Tensor:
+            upsampled = material_delta
+            if grid != size:
+                upsampled = F.interpolate(
+                    material_delta, size=(size, size), mode="bilinear", align_corners=False
+                )
+            return prior + torch.cat([pixel_delta, upsampled], dim=1)
+
+        with torch.no_grad():
+            start_render = render_capture(prior_values, fov_deg)
+            valid = (target < config.clip_level).all(dim=1, keepdim=True) & (start_render > 1e-4).all(
+                1, keepdim=True
+            )
+            ratio = (target / start_render.clamp_min(1e-6)).permute(1, 0, 2, 3)[:, valid[:, 0]]
+            gain0 = ratio.median(dim=1).values if ratio.shape[1] > 0 else torch.ones(3)
+        log_gain = gain0.clamp_min(1e-6).log().view(1, 3, 1, 1).clone().requires_grad_(True)
+        variables: list[Tensor] = [pixel_delta, material_delta, log_gain]
+        ambient = None
+        if config.ambient:
+            # Start at 1 % of the flash's irradiance at the centre: small but with a gradient.
+            ambient = torch.full(
+                (1, 3, config.ambient_grid, config.ambient_grid), math.log(1e-2), requires_grad=True
+            )
+            variables.append(ambient)
+        offset = None
+        if config.fit_flash_offset:
+            offset = torch.zeros(1, 2, requires_grad=True)
+            variables.append(offset)
+        optimizer = torch.optim.Adam(variables, lr=config.learning_rate)
+        schedule = torch.optim.lr_scheduler.LambdaLR(
+            optimizer,
+            lambda step: 0.5 * (1 + math.cos(math.pi * min(step, config.steps) / max(config.steps, 1))),
+        )
+
+        def objective() -> tuple[Tensor, Tensor]:
+            parameters = current_parameters()
+            current = parameters_to_maps(parameters)
+            render = render_capture(current, fov_deg, offset)
+            if ambient is not None:
+                parts = split_maps(current)
+                albedo = diffuse_albedo(srgb_to_linear(parts.basecolor), parts.metallic)
+                render = render + albedo * _ambient_irradiance(ambient, size)
+            render = render * log_gain.exp()
+            loss = photo_loss(render, target, config.clip_level)
+            loss = loss + config.prior_weight * (current[:, 0:3] - prior_values[:, 0:3]).abs().mean()
+            loss = loss + config.material_prior_weight * (current[:, 6:8] - prior_values[:, 6:8]).abs().mean()
+            loss = loss + config.normal_prior_weight * (parameters[:, _SLOPES] - prior_slopes).abs().mean()
+            if config.low_frequency_weight > 0:
+                low = gaussian_blur(current[:, 0:3], config.low_frequency_sigma, "reflect")
+                loss = loss + config.low_frequency_weight * (low - prior_low).abs().mean()
+            if config.tv_weight > 0:
+                loss = loss + config.tv_weight * total_variation(current[:, 6:8])
+            return loss, render
+
+        with torch.no_grad():
+            loss_start, render_start = objective()
+        for step in range(config.steps):
+            loss, _ = objective()
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            schedule.step()
+            if on_step is not None:
+                on_step(step + 1, float(loss))
+        with torch.no_grad():
+            loss_end, render_end = objective()
+            refined = parameters_to_maps(current_parameters())
+            out = (
+                refined
+                if maps_full.shape[-1] == size
+                else transfer_correction(maps_full, prior_values, refined)
+            )
+
+    def srgb_rmse(render: Tensor) -> float:
+        return float((linear_to_srgb(render.clamp(0, 1)) - linear_to_srgb(target)).square().mean().sqrt())
+
+    irradiance = None
+    if ambient is not None:
+        irradiance = tuple(float(v) for v in _ambient_irradiance(ambient.detach(), size).mean(dim=(0, 2, 3)))
+    return RefineResult(
+        maps=out[0].to(maps.dtype),
+        steps=config.steps,
+        seconds=time.perf_counter() - started,
+        gain=tuple(float(v) for v in log_gain.detach().exp().flatten()),  # type: ignore[arg-type]
+        flash_offset=None if offset is None else tuple(float(v) for v in offset.detach()[0]),  # type: ignore[arg-type]
+        ambient_mean=irradiance,  # type: ignore[arg-type]
+        loss_start=float(loss_start),
+        loss_end=float(loss_end),
+        photo_rmse_start=srgb_rmse(render_start),
+        photo_rmse_end=srgb_rmse(render_end),
+    )
+
+
+class RefinedGenerator(nn.Module):
+    """A generator followed by :func:`refine_maps` of each photo: what ``brdfgan predict --refine``
+    does, as a model the evaluator can score. The field of view comes from the flash frame's
+    scale (:mod:`brdfgan.core.flash_geometry`: ``s = 2 tan(fov/2) / width``), the default when none."""
+
+    def __init__(self, generator: nn.Module, config: RefineConfig) -> None:
+        super().__init__()
+        self.generator = generator
+        self.config = config
+
+    def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        maps = self.generator(photo, flash)
+        refined = []
+        for index in range(photo.shape[0]):
+            fov = DEFAULT_FOV_DEG
+            if flash is not None:
+                fov = math.degrees(2 * math.atan(float(flash[index, 2]) * photo.shape[-1] / 2))
+            refined.append(refine_maps(photo[index], maps[index], fov, self.config).maps)
+        return torch.stack(refined)

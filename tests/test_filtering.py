@@ -1,0 +1,31 @@
+"""brdfgan.core.filtering: the shared Gaussian blur."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from brdfgan.core.filtering import gaussian_blur
+
+
+def test_reflect_keeps_a_constant_and_zeros_darkens_the_border() -> None:
+    image = torch.full((1, 2, 12, 12), 0.7)
+    assert torch.allclose(gaussian_blur(image, 2.0, "reflect"), image, atol=1e-6)
+    zeros = gaussian_blur(image, 2.0, "zeros")
+    assert zeros[..., 0, 0].max() < 0.7 * 0.6
+    assert torch.allclose(zeros[..., 6, 6], torch.tensor(0.7), atol=0.02)
+
+
+def test_an_impulse_spreads_into_the_normal_density() -> None:
+    image = torch.zeros(1, 1, 41, 41)
+    image[..., 20, 20] = 1.0
+    sigma = 2.5
+    out = gaussian_blur(image, sigma)
+    assert float(out.sum()) == pytest.approx(1.0, abs=1e-5)
+    # Three pixels along one axis: the normal density ratio exp(-3²/2σ²).
+    ratio = float(out[0, 0, 20, 23] / out[0, 0, 20, 20])
+    assert ratio == pytest.approx(math.exp(-9 / (2 * sigma**2)), rel=1e-4)
+    with pytest.raises(ValueError, match="sigma"):
+        gaussian_blur(image, 0.0)

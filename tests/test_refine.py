@@ -1,0 +1,145 @@
+"""Test-time refinement (brdfgan.inference.refine): parametrisation, terms, and fits whose answer
+is known because the photo is rendered by the refinement's own capture model."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+from torch import nn
+
+from brdfgan.core.exposure import auto_expose
+from brdfgan.core.flash_geometry import centred_flash_frame
+from brdfgan.core.svbrdf import split_maps, srgb_to_linear, validate_maps
+from brdfgan.errors import UserError
+from brdfgan.inference.refine import (
+    RefineConfig,
+    RefinedGenerator,
+    maps_to_parameters,
+    parameters_to_maps,
+    photo_loss,
+    refine_maps,
+    render_capture,
+    transfer_correction,
+)
+from tests.conftest import random_maps
+
+FOV = 57.5
+
+
+def test_parameters_round_trip_and_always_valid() -> None:
+    maps = random_maps(16, 16, batch=(2,))
+    back = parameters_to_maps(maps_to_parameters(maps))
+    # Only the logit margin (1e-3) and nothing else separates the maps from their parameters' maps.
+    assert torch.allclose(back, maps, atol=2e-3)
+    wild = 20 * torch.randn(2, 7, 16, 16, generator=torch.Generator().manual_seed(1))
+    out = parameters_to_maps(wild)
+    validate_maps(out[0])
+    validate_maps(out[1])
+    assert (split_maps(out).normal[:, 2] > 0).all()
+
+
+def test_photo_loss_treats_clipped_pixels_as_lower_bounds() -> None:
+    photo = torch.full((1, 3, 4, 4), 0.5)
+    photo[..., 0, 0] = 1.0  # clipped
+    brighter = photo.clone()
+    brighter[..., 0, 0] = 3.0  # brighter than the clipped value: the truth may be that bright
+    assert float(photo_loss(brighter, photo, 0.98)) == pytest.approx(0.0, abs=1e-7)
+    darker = photo.clone()
+    darker[..., 0, 0] = 0.5
+    assert photo_loss(darker, photo, 0.98) > 0.01
+    # Unclipped pixels cost both ways, symmetric in log space.
+    up, down = photo.clone(), photo.clone()
+    up[..., 1, 1] = 0.5 * math.e
+    down[..., 1, 1] = 0.5 / math.e
+    assert float(photo_loss(up, photo, 0.98)) == pytest.approx(float(photo_loss(down, photo, 0.98)), rel=0.05)
+
+
+def test_transfer_correction_carries_a_constant_change_to_full_resolution() -> None:
+    full = random_maps(32, 32, batch=(1,))
+    full[:, 6] = full[:, 6].clamp(0.1, 0.9)
+    before = random_maps(8, 8, batch=(1,), seed=3)
+    before[:, 6] = 0.5
+    assert torch.allclose(
+        transfer_correction(full, before, before), parameters_to_maps(maps_to_parameters(full))
+    )
+    after_params = maps_to_parameters(before)
+    after_params[:, 5] += 1.0  # roughness logit +1 everywhere
+    moved = transfer_correction(full, before, parameters_to_maps(after_params))
+    expected = torch.sigmoid(maps_to_parameters(full)[:, 5] + 1.0)
+    assert torch.allclose(moved[:, 6], expected, atol=1e-4)
+
+
+def test_refinement_recovers_the_base_colour_of_an_exact_capture() -> None:
+    truth = random_maps(32, 32, seed=5)
+    truth[6] = 0.6  # rough: no clipped highlight
+    # An unknown exposure and white balance, as the photo's auto exposure leaves it.
+    photo, _ = auto_expose(render_capture(truth[None], FOV)[0] * torch.tensor([2.0, 1.5, 1.0]).view(3, 1, 1))
+    noise = 0.15 * torch.randn(3, 32, 32, generator=torch.Generator().manual_seed(6))
+    start = truth.clone()
+    start[0:3] = (truth[0:3] + noise).clamp(0, 1)
+    config = RefineConfig(steps=150, prior_weight=0.0, low_frequency_weight=0.0, ambient=False)
+    result = refine_maps(photo, start, FOV, config)
+    assert result.photo_rmse_end < 0.25 * result.photo_rmse_start
+    assert result.maps.shape == truth.shape
+    validate_maps(result.maps)
+
+    # One photo tells the base colour up to a gain per channel (a white balance): compare the
+    # linear base colours each divided by its channel means.
+    def relative(maps: torch.Tensor) -> torch.Tensor:
+        linear = srgb_to_linear(maps[0:3])
+        return linear / linear.mean(dim=(1, 2), keepdim=True)
+
+    before = (relative(start) - relative(truth)).abs().mean()
+    after = (relative(result.maps) - relative(truth)).abs().mean()
+    assert after < 0.3 * before
+    # The prior pulls toward the start: with it, the fit moves less.
+    held = refine_maps(photo, start, FOV, RefineConfig(steps=150, prior_weight=10.0, ambient=False))
+    assert (held.maps[0:3] - start[0:3]).abs().mean() < (result.maps[0:3] - start[0:3]).abs().mean()
+
+
+def test_refinement_at_a_working_size_keeps_the_output_size() -> None:
+    truth = random_maps(64, 64, seed=2)
+    photo = render_capture(truth[None], FOV)[0]
+    result = refine_maps(photo, truth, FOV, RefineConfig(steps=3, working_size=32))
+    assert result.maps.shape == (8, 64, 64)
+    validate_maps(result.maps)
+    assert set(result.to_json()) >= {"gain", "steps", "loss_start", "loss_end", "photo_rmse_end"}
+
+
+def test_bad_inputs_are_refused() -> None:
+    with pytest.raises(UserError, match=r"refine\.steps"):
+        RefineConfig(steps=-1)
+    with pytest.raises(UserError, match=r"refine\.clip_level"):
+        RefineConfig(clip_level=0.0)
+    with pytest.raises(ValueError, match="square"):
+        refine_maps(torch.rand(3, 8, 16), random_maps(8, 16), FOV)
+
+
+class _ConstantGenerator(nn.Module):
+    def __init__(self, maps: torch.Tensor) -> None:
+        super().__init__()
+        self.maps = maps
+
+    def forward(self, photo: torch.Tensor, flash: torch.Tensor | None = None) -> torch.Tensor:
+        return self.maps.expand(photo.shape[0], -1, -1, -1)
+
+
+def test_refined_generator_reads_the_field_of_view_from_the_flash_frame() -> None:
+    truth = random_maps(16, 16, seed=7)
+    wide = render_capture(truth[None], 75.0)
+    start = truth.clone()
+    start[0:3] *= 0.8
+    refined = RefinedGenerator(
+        _ConstantGenerator(start[None]), RefineConfig(steps=40, ambient=False, prior_weight=0.0)
+    )
+    told = refined(wide, centred_flash_frame(1, 16, 16, 75.0))
+    untold = refined(wide, None)  # assumes the 57.5° default
+    assert told.shape == (1, 8, 16, 16)
+
+    def error(maps: torch.Tensor) -> float:
+        render = render_capture(maps, 75.0)
+        return float((render / render.mean() - wide / wide.mean()).abs().mean())
+
+    assert error(told) < error(untold)
