@@ -281,3 +281,31 @@ def test_a_flash_aware_model_gets_the_detected_hotspot_and_the_field_of_view(tmp
     torch.testing.assert_close(written, expected[6], atol=0.6 / 255, rtol=0)
     centred = predict_direct(loaded, prepared.photo[None], centred_flash_frame(1, 64, 64))[0]
     assert (centred[6] - expected[6]).abs().max() > 2 / 255  # the frame matters: the check can tell
+
+
+def test_refine_fits_the_maps_to_the_photo_and_records_it(tmp_path: Path, weights: Path) -> None:
+    photo = flash_photo(tmp_path / "p.png", size=(80, 80), centre=(40, 40))
+    plain, refined = tmp_path / "plain", tmp_path / "refined"
+    common = [str(photo), "--weights", str(weights), "--quiet", "--resolution", "32"]
+    assert main(["predict", *common, "--out", str(plain)]) == 0
+    assert main(["predict", *common, "--out", str(refined), "--refine", "30"]) == 0
+    document = json.loads((refined / "p" / "material.json").read_text())
+    record = document["refinement"]
+    assert record["steps"] == 30 and record["settings"]["steps"] == 30
+    assert record["field_of_view"] == {"degrees": pytest.approx(57.5), "source": "training default"}
+    assert len(record["gain"]) == 3 and all(g > 0 for g in record["gain"])
+    # The fit reproduces the photo better than the network's maps did.
+    assert record["photo_rmse_end"] < record["photo_rmse_start"]
+    assert json.loads((plain / "p" / "material.json").read_text())["refinement"] is None
+    before, after = (read_rgb(folder / "p" / "basecolor.png") for folder in (plain, refined))
+    assert not np.array_equal(before, after)
+    assert (refined / "p" / "preview.png").exists()
+
+
+def test_refine_given_bare_uses_the_default_step_count(tmp_path: Path, weights: Path) -> None:
+    from brdfgan.cli import build_parser
+    from brdfgan.inference import DEFAULT_REFINE_STEPS
+
+    args = build_parser().parse_args(["predict", "x.jpg", "--out", str(tmp_path), "--refine"])
+    assert args.refine == DEFAULT_REFINE_STEPS
+    assert build_parser().parse_args(["predict", "x.jpg", "--out", str(tmp_path)]).refine is None

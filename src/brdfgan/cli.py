@@ -25,6 +25,7 @@ from brdfgan.errors import (
     one_line,
     run_reporting_errors,
 )
+from brdfgan.inference import DEFAULT_REFINE_STEPS
 
 if TYPE_CHECKING:  # imported lazily below: --help must not wait for torch
     from brdfgan.inference.intake.preprocess import Crop
@@ -140,6 +141,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     predict.add_argument("--no-preview", action="store_true", help="do not render preview.png")
     predict.add_argument(
+        "--refine",
+        nargs="?",
+        const=DEFAULT_REFINE_STEPS,
+        type=_positive,
+        metavar="STEPS",
+        help="experimental: fit the predicted maps to the photo with the differentiable renderer, "
+        f"STEPS Adam steps (default {DEFAULT_REFINE_STEPS} when given bare; 10-20 s per photo at 256² "
+        "on 2 CPU cores)",
+    )
+    predict.add_argument(
         "--tile",
         type=_positive,
         metavar="N",
@@ -251,6 +262,7 @@ def predict_command(args: argparse.Namespace) -> int:
         collect_photos,
         predict_batch,
     )
+    from brdfgan.inference.refine import RefineConfig
 
     options = PredictOptions(
         resolution=args.resolution,
@@ -260,6 +272,7 @@ def predict_command(args: argparse.Namespace) -> int:
         tiling=TilingConfig.for_tile(args.tile),
         preview=not args.no_preview,
         animate=args.animate,
+        refine=None if args.refine is None else RefineConfig(steps=args.refine),
     )
     predictor = Predictor.create(load_model(args.weights), options)
     # Before any photo is read or anything large allocated.
@@ -274,6 +287,15 @@ def predict_command(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     bar = tqdm(total=len(photos), unit="photo", disable=args.quiet or None, file=sys.stderr)
+    # The refinement's steps of the photo in progress, under the batch's bar.
+    quiet_steps = args.quiet or args.refine is None
+    steps_bar = tqdm(unit="step", leave=False, position=1, disable=quiet_steps or None, file=sys.stderr)
+
+    def refine_step(photo: Path, step: int, steps: int) -> None:
+        if step == 1:
+            steps_bar.reset(total=steps)
+            steps_bar.set_description(f"refining {photo.name}")
+        steps_bar.update(1)
 
     def report(result: PhotoResult | PhotoFailure) -> None:
         if isinstance(result, PhotoFailure):
@@ -286,8 +308,9 @@ def predict_command(args: argparse.Namespace) -> int:
     try:
         # SIGTERM too: the photo in progress then leaves no hidden staging folder behind.
         with interrupts_raise():
-            outcome = predict_batch(photos, args.out, predictor, on_result=report)
+            outcome = predict_batch(photos, args.out, predictor, on_result=report, on_refine_step=refine_step)
     finally:
+        steps_bar.close()
         bar.close()
     for result in outcome.succeeded:
         print(result.output)

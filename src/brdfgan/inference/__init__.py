@@ -7,5 +7,11 @@
   memory (:mod:`.model.tiling`) and checking that memory up front (:mod:`.model.memory`).
 - :mod:`~brdfgan.inference.outputs`: texture files, ``material.glb`` and ``material.json``
   (:mod:`.outputs.export`, :mod:`.outputs.gltf`) and the relit previews (:mod:`.outputs.preview`).
+- :mod:`~brdfgan.inference.refine`: test-time refinement, the maps fitted to the photo with the
+  differentiable renderer (``--refine``).
 - :mod:`~brdfgan.inference.pipeline`: the stages chained per photo and per batch.
 """
+
+# Adam steps of `brdfgan predict --refine` given bare (brdfgan.inference.refine.RefineConfig.steps).
+# Here, not in refine.py, so that the command line's --help can show it without importing torch.
+DEFAULT_REFINE_STEPS = 100

@@ -5,6 +5,7 @@ For each photo::
     read_photo (linear RGB, EXIF orientation, colour-space checks)       intake
       → preprocess (square crop on the flash hotspot, linear resize, the training auto exposure)
       → the generator, tiled with frozen normalisation statistics when large          model
+      [→ refine_maps: the maps fitted to the photo with the differentiable renderer (--refine)]
       → write_material (textures, material.glb, material.json, preview.png [, preview.gif/mp4])  outputs
 
 A batch keeps going when one photo fails: :func:`predict_batch` returns what succeeded and, for
@@ -35,6 +36,7 @@ from brdfgan.inference.model.tiling import TilingConfig, predict_direct, predict
 from brdfgan.inference.model.weights import Model
 from brdfgan.inference.outputs.export import ExportOptions, recover_outputs, write_material
 from brdfgan.inference.outputs.preview import write_animation, write_preview
+from brdfgan.inference.refine import RefineConfig, refine_maps
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +56,7 @@ class PredictOptions:
     tiling: TilingConfig = field(default_factory=TilingConfig)
     preview: bool = True
     animate: Literal["gif", "mp4"] | None = None
+    refine: RefineConfig | None = None  # None: the network's maps as they are
 
 
 @dataclass(frozen=True)
@@ -131,13 +134,29 @@ def output_names(photos: Sequence[Path]) -> list[str]:
     return names
 
 
-def predict_photo(path: Path, out_dir: Path, predictor: Predictor) -> PhotoResult:
+RefineProgress = Callable[[Path, int, int], None]  # (photo, step, of steps)
+
+
+def predict_photo(
+    path: Path, out_dir: Path, predictor: Predictor, on_refine_step: RefineProgress | None = None
+) -> PhotoResult:
     """Run the whole pipeline on one photo and write ``out_dir`` (replaced atomically)."""
     options = predictor.options
     photo = read_photo(path, options.colorspace)
     prepared = preprocess(photo, predictor.resolution, options.crop)
     fov_deg, fov_source = crop_field_of_view(photo.lens, photo.width, photo.height, prepared.crop.size)
     maps = predictor.maps(prepared.photo, prepared.flash_frame(fov_deg))
+    refinement: dict[str, Any] | None = None
+    if options.refine is not None:
+        steps = options.refine.steps
+        progress = None if on_refine_step is None else lambda step, _loss: on_refine_step(path, step, steps)
+        refined = refine_maps(prepared.photo, maps, fov_deg, options.refine, on_step=progress)
+        maps = refined.maps
+        refinement = {
+            **refined.to_json(),
+            "field_of_view": {"degrees": fov_deg, "source": fov_source},
+            "settings": options.refine.to_json(),
+        }
     warnings = photo.warnings + prepared.warnings
     metadata = {
         "name": out_dir.name,
@@ -148,6 +167,8 @@ def predict_photo(path: Path, out_dir: Path, predictor: Predictor) -> PhotoResul
         # geometry (brdfgan.core.flash_geometry), and the capture model of a refinement.
         "field_of_view": {"degrees": fov_deg, "source": fov_source},
         "inference": options.tiling.to_json(predictor.tiled),
+        # The test-time fit (brdfgan.inference.refine), None without --refine.
+        "refinement": refinement,
         "input_statistics": prepared.stats,
         "brdf": BRDF_DESCRIPTION,
         "warnings": list(warnings),
@@ -167,6 +188,7 @@ def predict_batch(
     predictor: Predictor,
     *,
     on_result: Callable[[PhotoResult | PhotoFailure], None] | None = None,
+    on_refine_step: RefineProgress | None = None,
 ) -> BatchResult:
     """Predict every photo into ``out_root/<name>/``; a failure is recorded and the batch goes on.
 
@@ -187,7 +209,7 @@ def predict_batch(
     for photo, name in zip(photos, output_names(photos), strict=True):
         result: PhotoResult | PhotoFailure
         try:
-            result = predict_photo(photo, out_root / name, predictor)
+            result = predict_photo(photo, out_root / name, predictor, on_refine_step)
             succeeded.append(result)
         except (UserError, OSError) as error:
             result = PhotoFailure(photo, _failure_message(photo, error))

@@ -60,10 +60,8 @@ from brdfgan.core.svbrdf import (
     srgb_to_linear,
 )
 from brdfgan.errors import UserError
+from brdfgan.inference import DEFAULT_REFINE_STEPS
 
-# Default step count (provisional, see RefineConfig): 100 steps at 256² took 12-20 s per photo on the
-# 2-core CPU, measured beside a training run (so roughly half of that alone).
-DEFAULT_STEPS = 100
 # Values kept away from 0 and 1 before the logit, so a saturated prediction stays movable.
 LOGIT_MARGIN = 1e-3
 # Normals are kept within ~84° of the vertical (slope 10).
@@ -85,7 +83,8 @@ class RefineConfig:
     the photo and raised the normal angle by 58 %).
     """
 
-    steps: int = DEFAULT_STEPS
+    # Provisional: 100 steps at 256² took 12-20 s per photo on the 2-core CPU beside a training run.
+    steps: int = DEFAULT_REFINE_STEPS
     learning_rate: float = 0.05
     working_size: int = 256
     prior_weight: float = 1.0
@@ -344,7 +343,7 @@ def refine_maps(
             optimizer.step()
             schedule.step()
             if on_step is not None:
-                on_step(step + 1, float(loss))
+                on_step(step + 1, float(loss.detach()))
         with torch.no_grad():
             loss_end, render_end = objective()
             refined = parameters_to_maps(current_parameters())
