@@ -143,3 +143,22 @@ def test_refined_generator_reads_the_field_of_view_from_the_flash_frame() -> Non
         return float((render / render.mean() - wide / wide.mean()).abs().mean())
 
     assert error(told) < error(untold)
+
+
+def test_the_evaluator_scores_refined_variants_beside_the_models() -> None:
+    from brdfgan.evaluation.evaluator import evaluate_models
+    from brdfgan.evaluation.run import refined_variants
+    from brdfgan.metrics import SVBRDFMetrics
+
+    truth = random_maps(16, 16, seed=8)
+    start = truth.clone()
+    noise = 0.2 * torch.randn(3, 16, 16, generator=torch.Generator().manual_seed(9))
+    start[0:3] = (truth[0:3] + noise).clamp(0, 1)
+    models = refined_variants({"net": _ConstantGenerator(start[None])}, [20])
+    assert set(models) == {"net", "net+refine20"} and isinstance(models["net+refine20"], RefinedGenerator)
+    photo, _ = auto_expose(render_capture(truth[None], FOV))
+    batch = {"photo": photo, "maps": truth[None], "flash": centred_flash_frame(1, 16, 16, FOV)}
+    results = evaluate_models(models, [batch], lambda: SVBRDFMetrics(downscale_to=None))
+    assert results["net+refine20"]["rmse/diffuse"] < results["net"]["rmse/diffuse"]
+    with pytest.raises(UserError, match="refine_steps"):
+        refined_variants(models, [0])

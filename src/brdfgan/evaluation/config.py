@@ -20,6 +20,7 @@ class EvaluateConfig:
     grid_samples: int = 6
     grid_keys: list[str] | None = None
     flash_frame: str = "recorded"  # recorded | centred (see conf/evaluate.yaml)
+    refine_steps: list[int] = field(default_factory=list)  # each model also after --refine N
     paths: dict[str, Any] = field(default_factory=dict)
     data: dict[str, Any] = field(default_factory=dict)
     logger: dict[str, Any] | None = None

@@ -10,12 +10,14 @@ from typing import Any
 import hydra
 import torch
 from omegaconf import DictConfig, OmegaConf
+from torch import nn
 
 from brdfgan.config_check import check_config
 from brdfgan.data.capture import sample_as_photographed
 from brdfgan.data.shards import Sample, iter_shard, list_shards
 from brdfgan.errors import UserError
 from brdfgan.evaluation.evaluator import evaluate_models, markdown_table, write_grid, write_results
+from brdfgan.inference.refine import RefineConfig, RefinedGenerator
 from brdfgan.runs import load_generator, model_name
 
 log = logging.getLogger(__name__)
@@ -55,6 +57,19 @@ def _models(ckpt: Any) -> dict[str, str]:
     return {model_name(p): p for p in paths}
 
 
+def refined_variants(models: Mapping[str, nn.Module], steps: Sequence[int]) -> dict[str, nn.Module]:
+    """The models, each followed by ``<name>+refine<N>``: the same model with ``brdfgan predict
+    --refine N``'s fit (:class:`~brdfgan.inference.refine.RefinedGenerator`; the field of view from
+    the batches' flash frames, as EXIF would give it)."""
+    out = dict(models)
+    for count in steps:
+        if not isinstance(count, int) or count < 1:
+            raise UserError(f"refine_steps: {count!r} is not a positive step count")
+        for name, model in models.items():
+            out[f"{name}+refine{count}"] = RefinedGenerator(model, RefineConfig(steps=count))
+    return out
+
+
 def log_to_loggers(
     logger_cfg: DictConfig | None, results: Mapping[str, Mapping[str, float]], images: list[Path]
 ) -> None:
@@ -82,7 +97,8 @@ def evaluate(cfg: DictConfig, out_dir: str | Path) -> dict[str, dict[str, float]
     device = torch.device("cuda" if cfg.device == "auto" and torch.cuda.is_available() else
                           ("cpu" if cfg.device == "auto" else cfg.device))  # fmt: skip
     ckpt = OmegaConf.to_container(cfg.ckpt, resolve=True) if OmegaConf.is_config(cfg.ckpt) else cfg.ckpt
-    models = {name: load_generator(path)[0] for name, path in _models(ckpt).items()}
+    models = refined_variants({name: load_generator(path)[0] for name, path in _models(ckpt).items()},
+                              cfg.refine_steps)  # fmt: skip
     datamodule = hydra.utils.instantiate(cfg.data, _convert_="all")
     datamodule.prepare_data()
     datamodule.splits["test"] = cfg.split  # the test loader streams each sample once, in order
