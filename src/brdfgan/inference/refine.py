@@ -264,7 +264,7 @@ def refine_maps(
         maps_full = maps.detach().float().unsqueeze(0)
         size = min(config.working_size, maps_full.shape[-1])
         prior_maps = resize_maps(maps_full[0], size)[None] if maps_full.shape[-1] != size else maps_full
-        target = photo.detach().float().unsqueeze(0)
+        target = photo.detach().float().unsqueeze(0).to(maps_full.device)
         if target.shape[-1] != size:
             target = F.interpolate(
                 target, size=(size, size), mode="area" if target.shape[-1] > size else "bilinear"
@@ -278,7 +278,7 @@ def refine_maps(
         # roughness and metallic a coarse grid (the photo shows them only where it has a highlight)
         pixel_delta = torch.zeros_like(prior[:, :5]).requires_grad_(True)
         grid = config.material_grid or size
-        material_delta = torch.zeros(1, 2, grid, grid, requires_grad=True)
+        material_delta = torch.zeros(1, 2, grid, grid, device=prior.device, requires_grad=True)
 
         def current_parameters() -> Tensor:
             upsampled = material_delta
@@ -294,19 +294,22 @@ def refine_maps(
                 1, keepdim=True
             )
             ratio = (target / start_render.clamp_min(1e-6)).permute(1, 0, 2, 3)[:, valid[:, 0]]
-            gain0 = ratio.median(dim=1).values if ratio.shape[1] > 0 else torch.ones(3)
+            gain0 = ratio.median(dim=1).values if ratio.shape[1] > 0 else prior.new_ones(3)
         log_gain = gain0.clamp_min(1e-6).log().view(1, 3, 1, 1).clone().requires_grad_(True)
         variables: list[Tensor] = [pixel_delta, material_delta, log_gain]
         ambient = None
         if config.ambient:
             # Start at 1 % of the flash's irradiance at the centre: small but with a gradient.
             ambient = torch.full(
-                (1, 3, config.ambient_grid, config.ambient_grid), math.log(1e-2), requires_grad=True
+                (1, 3, config.ambient_grid, config.ambient_grid),
+                math.log(1e-2),
+                device=prior.device,
+                requires_grad=True,
             )
             variables.append(ambient)
         offset = None
         if config.fit_flash_offset:
-            offset = torch.zeros(1, 2, requires_grad=True)
+            offset = torch.zeros(1, 2, device=prior.device, requires_grad=True)
             variables.append(offset)
         optimizer = torch.optim.Adam(variables, lr=config.learning_rate)
         schedule = torch.optim.lr_scheduler.LambdaLR(
