@@ -147,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=_positive,
         metavar="STEPS",
         help="experimental: fit the predicted maps to the photo with the differentiable renderer, "
-        f"STEPS Adam steps (default {DEFAULT_REFINE_STEPS} when given bare; 10-20 s per photo at 256² "
+        f"STEPS Adam steps (default {DEFAULT_REFINE_STEPS} when given bare; ~3 s per photo at 256² "
         "on 2 CPU cores)",
     )
     predict.add_argument(
