@@ -15,6 +15,7 @@ from brdfgan.core.flash_geometry import (
     DEFAULT_FOV_DEG,
     centred_flash_frame,
     crop_flash_frame,
+    field_of_view,
     flash_offset_channels,
     flash_side_channels,
     pixel_scale,
@@ -94,6 +95,16 @@ def test_bad_frames_are_refused() -> None:
         flash_offset_channels(torch.tensor([[math.nan, 1.0, 0.1]]), 4, 4)
     with pytest.raises(ValueError, match="fov_deg"):
         pixel_scale(180.0, 10)
+    with pytest.raises(ValueError, match="scale"):
+        field_of_view(0.0, 10)
+
+
+def test_field_of_view_inverts_pixel_scale() -> None:
+    assert field_of_view(pixel_scale(57.5, 256), 256) == pytest.approx(57.5, abs=1e-9)
+    # A centre crop of half the width sees tan(fov/2) halved.
+    assert math.tan(math.radians(field_of_view(pixel_scale(60.0, 200), 100)) / 2) == pytest.approx(
+        math.tan(math.radians(30.0)) / 2
+    )
 
 
 def test_one_default_field_of_view() -> None:

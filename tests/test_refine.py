@@ -11,6 +11,7 @@ from torch import nn
 
 from brdfgan.core.exposure import auto_expose
 from brdfgan.core.flash_geometry import centred_flash_frame
+from brdfgan.core.render import FlashCapture, render_flash
 from brdfgan.core.svbrdf import split_maps, srgb_to_linear, validate_maps
 from brdfgan.errors import UserError
 from brdfgan.inference.refine import (
@@ -20,7 +21,6 @@ from brdfgan.inference.refine import (
     parameters_to_maps,
     photo_loss,
     refine_maps,
-    render_capture,
     transfer_correction,
 )
 from tests.conftest import random_maps
@@ -75,7 +75,9 @@ def test_refinement_recovers_the_base_colour_of_an_exact_capture() -> None:
     truth = random_maps(32, 32, seed=5)
     truth[6] = 0.6  # rough: no clipped highlight
     # An unknown exposure and white balance, as the photo's auto exposure leaves it.
-    photo, _ = auto_expose(render_capture(truth[None], FOV)[0] * torch.tensor([2.0, 1.5, 1.0]).view(3, 1, 1))
+    photo, _ = auto_expose(
+        render_flash(truth[None], FlashCapture(fov_deg=FOV))[0] * torch.tensor([2.0, 1.5, 1.0]).view(3, 1, 1)
+    )
     noise = 0.15 * torch.randn(3, 32, 32, generator=torch.Generator().manual_seed(6))
     start = truth.clone()
     start[0:3] = (truth[0:3] + noise).clamp(0, 1)
@@ -101,7 +103,7 @@ def test_refinement_recovers_the_base_colour_of_an_exact_capture() -> None:
 
 def test_refinement_at_a_working_size_keeps_the_output_size() -> None:
     truth = random_maps(64, 64, seed=2)
-    photo = render_capture(truth[None], FOV)[0]
+    photo = render_flash(truth[None], FlashCapture(fov_deg=FOV))[0]
     result = refine_maps(photo, truth, FOV, RefineConfig(steps=3, working_size=32))
     assert result.maps.shape == (8, 64, 64)
     validate_maps(result.maps)
@@ -128,7 +130,7 @@ class _ConstantGenerator(nn.Module):
 
 def test_refined_generator_reads_the_field_of_view_from_the_flash_frame() -> None:
     truth = random_maps(16, 16, seed=7)
-    wide = render_capture(truth[None], 75.0)
+    wide = render_flash(truth[None], FlashCapture(fov_deg=75.0))
     start = truth.clone()
     start[0:3] *= 0.8
     refined = RefinedGenerator(
@@ -139,7 +141,7 @@ def test_refined_generator_reads_the_field_of_view_from_the_flash_frame() -> Non
     assert told.shape == (1, 8, 16, 16)
 
     def error(maps: torch.Tensor) -> float:
-        render = render_capture(maps, 75.0)
+        render = render_flash(maps, FlashCapture(fov_deg=75.0))
         return float((render / render.mean() - wide / wide.mean()).abs().mean())
 
     assert error(told) < error(untold)
@@ -156,7 +158,7 @@ def test_the_evaluator_scores_refined_variants_beside_the_models() -> None:
     start[0:3] = (truth[0:3] + noise).clamp(0, 1)
     models = refined_variants({"net": _ConstantGenerator(start[None])}, [20])
     assert set(models) == {"net", "net+refine20"} and isinstance(models["net+refine20"], RefinedGenerator)
-    photo, _ = auto_expose(render_capture(truth[None], FOV))
+    photo, _ = auto_expose(render_flash(truth[None], FlashCapture(fov_deg=FOV)))
     batch = {"photo": photo, "maps": truth[None], "flash": centred_flash_frame(1, 16, 16, FOV)}
     results = evaluate_models(models, [batch], lambda: SVBRDFMetrics(downscale_to=None))
     assert results["net+refine20"]["rmse/diffuse"] < results["net"]["rmse/diffuse"]

@@ -89,6 +89,17 @@ def test_flash_on_flat_sample_is_mirror_symmetric_and_peaks_in_the_centre() -> N
     assert lum[7:9, 7:9].min() == lum.max()
 
 
+def test_a_flash_beside_the_lens_moves_the_highlight_half_way() -> None:
+    # Camera and flash above the centre, the flash 0.4 to +X: the mirror point of a flat sample
+    # lies half way between them, at x = 0.2 — column 0.6 · 32 = 19.2 of 32 (columns start at x = −1).
+    maps = flat_maps(32, 32, roughness=0.15, metallic=1.0, batch=(1,))
+    offset = torch.tensor([[0.4, 0.0]])
+    image = render_flash(maps, flash_offset=offset)[0].sum(0)
+    assert image.amax(dim=0).argmax().item() == 19
+    assert image.amax(dim=1).argmax().item() in (15, 16)
+    torch.testing.assert_close(render_flash(maps, flash_offset=torch.zeros(1, 2)), render_flash(maps))
+
+
 def test_normal_tilt_moves_the_highlight() -> None:
     # A normal tilted towards +Y turns the mirror point of the flash towards −Y (lower rows).
     maps = flat_maps(32, 32, roughness=0.2, metallic=1.0, batch=(1,))

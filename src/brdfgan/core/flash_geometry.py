@@ -61,6 +61,14 @@ def pixel_scale(fov_deg: float, photo_width: float) -> float:
     return 2.0 * math.tan(math.radians(fov_deg) / 2.0) / photo_width
 
 
+def field_of_view(scale: float, photo_width: float) -> float:
+    """The horizontal field of view in degrees of a photo ``photo_width`` pixels wide whose frame has
+    scale ``s``: the inverse of :func:`pixel_scale`."""
+    if not scale > 0 or not photo_width > 0:
+        raise ValueError(f"need scale > 0 and photo_width > 0, got {scale=}, {photo_width=}")
+    return math.degrees(2.0 * math.atan(scale * photo_width / 2.0))
+
+
 def centred_flash_frame(
     batch: int,
     height: int,

@@ -482,7 +482,12 @@ class FlashCapture:
         return (self.intensity * r, self.intensity * g, self.intensity * b)
 
 
-def render_flash(maps: Tensor, capture: FlashCapture = FlashCapture(), supersample: int = 1) -> Tensor:
+def render_flash(
+    maps: Tensor,
+    capture: FlashCapture = FlashCapture(),
+    supersample: int = 1,
+    flash_offset: Tensor | None = None,
+) -> Tensor:
     """Render the flash photograph of the capture set-up.
 
     Args:
@@ -491,15 +496,18 @@ def render_flash(maps: Tensor, capture: FlashCapture = FlashCapture(), supersamp
         supersample: shade ``supersample²`` points per pixel (maps repeated nearest-neighbour, as a
             texture lookup does) and average them: a box-filtered pixel footprint, like a
             camera's, instead of the texel centre. Matters for highlights a few pixels wide.
+        flash_offset: the flash moved from the lens, parallel to the sample (world units; a
+            phone's flash beside its lens); ``None``: at the lens.
 
     Shape:
-        - maps: ``(B, 8, H, W)``
+        - maps: ``(B, 8, H, W)``; flash_offset: ``(B, 2)``
         - output: ``(B, 3, H, W)``
     """
     batch = maps.shape[0]
     camera = maps.new_tensor([0.0, 0.0, capture.camera_height]).expand(batch, 1, 3)
+    flash = camera if flash_offset is None else camera + F.pad(flash_offset, (0, 1)).unsqueeze(1)
     lights = PointLights(
-        position=camera.unsqueeze(2),
+        position=flash.unsqueeze(2),
         intensity=maps.new_full((batch, 1, 1), capture.intensity),
         color=maps.new_tensor(capture.color).expand(batch, 1, 1, 3),
     )

@@ -47,8 +47,8 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from brdfgan.core.filtering import gaussian_blur
-from brdfgan.core.flash_geometry import DEFAULT_FOV_DEG
-from brdfgan.core.render import PointLights, capture_camera_height, render_point_lights
+from brdfgan.core.flash_geometry import DEFAULT_FOV_DEG, field_of_view
+from brdfgan.core.render import FlashCapture, render_flash
 from brdfgan.core.svbrdf import (
     check_map_shape,
     diffuse_albedo,
@@ -69,7 +69,6 @@ MAX_SLOPE = 10.0
 # ε of the log in the photo term: below ~1 % of the auto-exposed range, noise dominates.
 LOG_EPSILON = 1e-2
 # Parameter channels: base colour logits (3), normal slopes (2), roughness and metallic logits.
-PARAMETER_CHANNELS = 7
 _BASECOLOR, _SLOPES, _ROUGHNESS, _METALLIC = slice(0, 3), slice(3, 5), slice(5, 6), slice(6, 7)
 
 
@@ -174,30 +173,6 @@ def parameters_to_maps(parameters: Tensor) -> Tensor:
     )
 
 
-def render_capture(
-    maps: Tensor, fov_deg: float, flash_offset: Tensor | None = None, plane_half_size: float = 1.0
-) -> Tensor:
-    """The flash photo of the capture model (camera above the centre, flash at the lens moved by
-    ``flash_offset`` in the plane), unit intensity, linear.
-
-    Shape:
-        - maps: ``(B, 8, N, N)``; flash_offset: ``(B, 2)`` or ``None``
-        - output: ``(B, 3, N, N)``
-    """
-    batch = maps.shape[0]
-    height = capture_camera_height(fov_deg, plane_half_size)
-    camera = maps.new_tensor([0.0, 0.0, height]).expand(batch, 1, 3)
-    flash = camera
-    if flash_offset is not None:
-        flash = camera + F.pad(flash_offset, (0, 1)).unsqueeze(1)
-    lights = PointLights(
-        position=flash.unsqueeze(2),
-        intensity=maps.new_ones(batch, 1, 1),
-        color=maps.new_ones(batch, 1, 1, 3),
-    )
-    return render_point_lights(maps, camera, lights, plane_half_size)[:, 0]
-
-
 def photo_loss(render: Tensor, photo: Tensor, clip_level: float) -> Tensor:
     """L1 of log(x + ε) over unclipped pixels; clipped ones (any channel ≥ ``clip_level``) as
     lower bounds. Mean over all pixels and channels.
@@ -260,6 +235,7 @@ def refine_maps(
     if maps.ndim != 3 or maps.shape[1] != maps.shape[2]:
         raise ValueError(f"refinement needs square (8, M, M) maps, got {tuple(maps.shape)}")
     started = time.perf_counter()
+    capture = FlashCapture(fov_deg=fov_deg)
     with torch.enable_grad():
         maps_full = maps.detach().float().unsqueeze(0)
         size = min(config.working_size, maps_full.shape[-1])
@@ -289,7 +265,7 @@ def refine_maps(
             return prior + torch.cat([pixel_delta, upsampled], dim=1)
 
         with torch.no_grad():
-            start_render = render_capture(prior_values, fov_deg)
+            start_render = render_flash(prior_values, capture)
             valid = (target < config.clip_level).all(dim=1, keepdim=True) & (start_render > 1e-4).all(
                 1, keepdim=True
             )
@@ -320,7 +296,7 @@ def refine_maps(
         def objective() -> tuple[Tensor, Tensor]:
             parameters = current_parameters()
             current = parameters_to_maps(parameters)
-            render = render_capture(current, fov_deg, offset)
+            render = render_flash(current, capture, flash_offset=offset)
             if ambient is not None:
                 parts = split_maps(current)
                 albedo = diffuse_albedo(srgb_to_linear(parts.basecolor), parts.metallic)
@@ -379,7 +355,7 @@ def refine_maps(
 class RefinedGenerator(nn.Module):
     """A generator followed by :func:`refine_maps` of each photo: what ``brdfgan predict --refine``
     does, as a model the evaluator can score. The field of view comes from the flash frame's
-    scale (:mod:`brdfgan.core.flash_geometry`: ``s = 2 tan(fov/2) / width``), the default when none."""
+    scale (:func:`~brdfgan.core.flash_geometry.field_of_view`), the default when none."""
 
     def __init__(self, generator: nn.Module, config: RefineConfig) -> None:
         super().__init__()
@@ -390,8 +366,6 @@ class RefinedGenerator(nn.Module):
         maps = self.generator(photo, flash)
         refined = []
         for index in range(photo.shape[0]):
-            fov = DEFAULT_FOV_DEG
-            if flash is not None:
-                fov = math.degrees(2 * math.atan(float(flash[index, 2]) * photo.shape[-1] / 2))
+            fov = DEFAULT_FOV_DEG if flash is None else field_of_view(float(flash[index, 2]), photo.shape[-1])
             refined.append(refine_maps(photo[index], maps[index], fov, self.config).maps)
         return torch.stack(refined)
