@@ -82,7 +82,7 @@ def test_refinement_recovers_the_base_colour_of_an_exact_capture() -> None:
     start = truth.clone()
     start[0:3] = (truth[0:3] + noise).clamp(0, 1)
     config = RefineConfig(steps=150, prior_weight=0.0, low_frequency_weight=0.0, ambient=False)
-    result = refine_maps(photo, start, FOV, config)
+    result = refine_maps(photo, start, centred_flash_frame(1, 32, 32, FOV), config)
     assert result.photo_rmse_end < 0.25 * result.photo_rmse_start
     assert result.maps.shape == truth.shape
     validate_maps(result.maps)
@@ -97,14 +97,16 @@ def test_refinement_recovers_the_base_colour_of_an_exact_capture() -> None:
     after = (relative(result.maps) - relative(truth)).abs().mean()
     assert after < 0.3 * before
     # The prior pulls toward the start: with it, the fit moves less.
-    held = refine_maps(photo, start, FOV, RefineConfig(steps=150, prior_weight=10.0, ambient=False))
+    frame = centred_flash_frame(1, 32, 32, FOV)
+    held = refine_maps(photo, start, frame, RefineConfig(steps=150, prior_weight=10.0, ambient=False))
     assert (held.maps[0:3] - start[0:3]).abs().mean() < (result.maps[0:3] - start[0:3]).abs().mean()
 
 
 def test_refinement_at_a_working_size_keeps_the_output_size() -> None:
     truth = random_maps(64, 64, seed=2)
     photo = render_flash(truth[None], FlashCapture(fov_deg=FOV))[0]
-    result = refine_maps(photo, truth, FOV, RefineConfig(steps=3, working_size=32))
+    frame = centred_flash_frame(1, 64, 64, FOV)
+    result = refine_maps(photo, truth, frame, RefineConfig(steps=3, working_size=32))
     assert result.maps.shape == (8, 64, 64)
     validate_maps(result.maps)
     assert set(result.to_json()) >= {"gain", "steps", "loss_start", "loss_end", "photo_rmse_end"}
@@ -116,7 +118,7 @@ def test_bad_inputs_are_refused() -> None:
     with pytest.raises(UserError, match=r"refine\.clip_level"):
         RefineConfig(clip_level=0.0)
     with pytest.raises(ValueError, match="square"):
-        refine_maps(torch.rand(3, 8, 16), random_maps(8, 16), FOV)
+        refine_maps(torch.rand(3, 8, 16), random_maps(8, 16), centred_flash_frame(1, 8, 16, FOV))
 
 
 class _ConstantGenerator(nn.Module):

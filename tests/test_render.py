@@ -3,6 +3,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from brdfgan.core.flash_geometry import centred_flash_frame, crop_flash_frame, field_of_view, hotspot_position
 from brdfgan.core.render import (
     FlashCapture,
     PointLightRenderer,
@@ -98,6 +99,25 @@ def test_a_flash_beside_the_lens_moves_the_highlight_half_way() -> None:
     assert image.amax(dim=0).argmax().item() == 19
     assert image.amax(dim=1).argmax().item() in (15, 16)
     torch.testing.assert_close(render_flash(maps, flash_offset=torch.zeros(1, 2)), render_flash(maps))
+
+
+def test_a_moved_camera_renders_an_off_centre_crop_of_the_centred_view() -> None:
+    # A 64² sample photographed from above its centre; the 32² window whose top-left texel is
+    # (row 8, column 24) is the photo of that window's maps with the camera moved above the
+    # window's hotspot — the frame's hotspot, found by hotspot_position — at the same height.
+    maps = random_maps(64, 64, seed=11, batch=(1,))
+    maps[:, CHANNELS["roughness"]] = maps[:, CHANNELS["roughness"]].clamp(0.2, 1.0)
+    wide = FlashCapture(fov_deg=60.0)
+    whole = render_flash(maps, wide)
+    window = (slice(8, 40), slice(24, 56))
+    frame = crop_flash_frame(centred_flash_frame(1, 64, 64, 60.0), 24, 8)
+    narrow = FlashCapture(fov_deg=field_of_view(float(frame[0, 2]), 32), plane_half_size=0.5)
+    camera_xy = hotspot_position(frame, 32, 32, plane_half_size=0.5)
+    torch.testing.assert_close(camera_xy, torch.tensor([[-0.25, -0.25]]))  # window centre at (+0.25, +0.25)
+    crop = render_flash(maps[..., window[0], window[1]], narrow, camera_xy=camera_xy)
+    torch.testing.assert_close(crop, whole[..., window[0], window[1]], rtol=1e-4, atol=1e-6)
+    centred = render_flash(maps[..., window[0], window[1]], narrow)
+    assert (centred - whole[..., window[0], window[1]]).abs().max() > 0.1 * whole.max()
 
 
 def test_normal_tilt_moves_the_highlight() -> None:

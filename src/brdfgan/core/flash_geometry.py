@@ -69,6 +69,21 @@ def field_of_view(scale: float, photo_width: float) -> float:
     return math.degrees(2.0 * math.atan(scale * photo_width / 2.0))
 
 
+def hotspot_position(frame: Tensor, height: int, width: int, plane_half_size: float = 1.0) -> Tensor:
+    """Where the hotspot of each frame lies on the sample square the photo shows (world x, y; the
+    square's centre at 0, +Y at row 0): the point below the camera and flash when the photo is
+    a crop whose hotspot is off its centre (``render_flash(..., camera_xy=)``).
+
+    Shape:
+        - frame: ``(B, 3)``
+        - output: ``(B, 2)``
+    """
+    check_flash_frame(frame)
+    x = plane_half_size * (2.0 * frame[:, 0] / width - 1.0)
+    y = plane_half_size * (1.0 - 2.0 * frame[:, 1] / height)
+    return torch.stack([x, y], dim=1)
+
+
 def centred_flash_frame(
     batch: int,
     height: int,

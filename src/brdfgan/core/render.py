@@ -487,6 +487,7 @@ def render_flash(
     capture: FlashCapture = FlashCapture(),
     supersample: int = 1,
     flash_offset: Tensor | None = None,
+    camera_xy: Tensor | None = None,
 ) -> Tensor:
     """Render the flash photograph of the capture set-up.
 
@@ -498,13 +499,19 @@ def render_flash(
             camera's, instead of the texel centre. Matters for highlights a few pixels wide.
         flash_offset: the flash moved from the lens, parallel to the sample (world units; a
             phone's flash beside its lens); ``None``: at the lens.
+        camera_xy: the camera (and the flash with it) moved parallel to the sample from above its
+            centre, still looking straight down and at the same height (world units): the photo
+            is then a window of a wider view centred elsewhere — a crop whose hotspot is off its
+            centre (:func:`~brdfgan.core.flash_geometry.hotspot_position`); ``None``: centred.
 
     Shape:
-        - maps: ``(B, 8, H, W)``; flash_offset: ``(B, 2)``
+        - maps: ``(B, 8, H, W)``; flash_offset, camera_xy: ``(B, 2)``
         - output: ``(B, 3, H, W)``
     """
     batch = maps.shape[0]
     camera = maps.new_tensor([0.0, 0.0, capture.camera_height]).expand(batch, 1, 3)
+    if camera_xy is not None:
+        camera = camera + F.pad(camera_xy, (0, 1)).unsqueeze(1)
     flash = camera if flash_offset is None else camera + F.pad(flash_offset, (0, 1)).unsqueeze(1)
     lights = PointLights(
         position=flash.unsqueeze(2),

@@ -145,12 +145,13 @@ def predict_photo(
     photo = read_photo(path, options.colorspace)
     prepared = preprocess(photo, predictor.resolution, options.crop)
     fov_deg, fov_source = crop_field_of_view(photo.lens, photo.width, photo.height, prepared.crop.size)
-    maps = predictor.maps(prepared.photo, prepared.flash_frame(fov_deg))
+    flash_frame = prepared.flash_frame(fov_deg)
+    maps = predictor.maps(prepared.photo, flash_frame)
     refinement: dict[str, Any] | None = None
     if options.refine is not None:
         steps = options.refine.steps
         progress = None if on_refine_step is None else lambda step, _loss: on_refine_step(path, step, steps)
-        refined = refine_maps(prepared.photo, maps, fov_deg, options.refine, on_step=progress)
+        refined = refine_maps(prepared.photo, maps, flash_frame, options.refine, on_step=progress)
         maps = refined.maps
         refinement = {
             **refined.to_json(),

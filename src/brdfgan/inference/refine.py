@@ -47,7 +47,12 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from brdfgan.core.filtering import gaussian_blur
-from brdfgan.core.flash_geometry import DEFAULT_FOV_DEG, field_of_view
+from brdfgan.core.flash_geometry import (
+    centred_flash_frame,
+    check_flash_frame,
+    field_of_view,
+    hotspot_position,
+)
 from brdfgan.core.render import FlashCapture, render_flash
 from brdfgan.core.svbrdf import (
     check_map_shape,
@@ -210,7 +215,7 @@ def _ambient_irradiance(grid: Tensor, size: int) -> Tensor:
 def refine_maps(
     photo: Tensor,
     maps: Tensor,
-    fov_deg: float,
+    flash_frame: Tensor,
     config: RefineConfig = RefineConfig(),
     on_step: Callable[[int, float], None] | None = None,
 ) -> RefineResult:
@@ -221,12 +226,14 @@ def refine_maps(
             <brdfgan.inference.intake.preprocess.preprocess>` gives), at the maps' size or any
             other square size (it is resized to the working size).
         maps: the prediction.
-        fov_deg: the horizontal field of view across the photo.
+        flash_frame: the photo's :mod:`flash frame <brdfgan.core.flash_geometry>` (what the
+            network read): the field of view across the photo and the hotspot, below the
+            camera and flash of the capture model (the photo is a crop, its hotspot anywhere).
         config: the refinement's settings.
         on_step: called after each step with ``(step, loss)`` (progress).
 
     Shape:
-        - photo: ``(3, N, N)``; maps: ``(8, M, M)``
+        - photo: ``(3, N, N)``; maps: ``(8, M, M)``; flash_frame: ``(1, 3)`` or ``(3,)``
         - output maps: ``(8, M, M)``
     """
     if photo.ndim != 3 or photo.shape[0] != 3 or photo.shape[1] != photo.shape[2]:
@@ -234,8 +241,10 @@ def refine_maps(
     check_map_shape(maps)
     if maps.ndim != 3 or maps.shape[1] != maps.shape[2]:
         raise ValueError(f"refinement needs square (8, M, M) maps, got {tuple(maps.shape)}")
+    frame = flash_frame.detach().float().reshape(1, -1)
+    check_flash_frame(frame, 1)
     started = time.perf_counter()
-    capture = FlashCapture(fov_deg=fov_deg)
+    capture = FlashCapture(fov_deg=field_of_view(float(frame[0, 2]), photo.shape[-1]))
     with torch.enable_grad():
         maps_full = maps.detach().float().unsqueeze(0)
         size = min(config.working_size, maps_full.shape[-1])
@@ -245,6 +254,7 @@ def refine_maps(
             target = F.interpolate(
                 target, size=(size, size), mode="area" if target.shape[-1] > size else "bilinear"
             )
+        camera_xy = hotspot_position(frame, photo.shape[-2], photo.shape[-1]).to(maps_full.device)
         prior = maps_to_parameters(prior_maps)
         prior_values = parameters_to_maps(prior)
         prior_slopes = prior[:, _SLOPES]
@@ -265,7 +275,7 @@ def refine_maps(
             return prior + torch.cat([pixel_delta, upsampled], dim=1)
 
         with torch.no_grad():
-            start_render = render_flash(prior_values, capture)
+            start_render = render_flash(prior_values, capture, camera_xy=camera_xy)
             valid = (target < config.clip_level).all(dim=1, keepdim=True) & (start_render > 1e-4).all(
                 1, keepdim=True
             )
@@ -296,7 +306,7 @@ def refine_maps(
         def objective() -> tuple[Tensor, Tensor]:
             parameters = current_parameters()
             current = parameters_to_maps(parameters)
-            render = render_flash(current, capture, flash_offset=offset)
+            render = render_flash(current, capture, flash_offset=offset, camera_xy=camera_xy)
             if ambient is not None:
                 parts = split_maps(current)
                 albedo = diffuse_albedo(srgb_to_linear(parts.basecolor), parts.metallic)
@@ -354,8 +364,8 @@ def refine_maps(
 
 class RefinedGenerator(nn.Module):
     """A generator followed by :func:`refine_maps` of each photo: what ``brdfgan predict --refine``
-    does, as a model the evaluator can score. The field of view comes from the flash frame's
-    scale (:func:`~brdfgan.core.flash_geometry.field_of_view`), the default when none."""
+    does, as a model the evaluator can score. The capture geometry comes from the flash frames
+    (field of view and hotspot); without frames, centred hotspots and the default field of view."""
 
     def __init__(self, generator: nn.Module, config: RefineConfig) -> None:
         super().__init__()
@@ -364,8 +374,10 @@ class RefinedGenerator(nn.Module):
 
     def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
         maps = self.generator(photo, flash)
-        refined = []
-        for index in range(photo.shape[0]):
-            fov = DEFAULT_FOV_DEG if flash is None else field_of_view(float(flash[index, 2]), photo.shape[-1])
-            refined.append(refine_maps(photo[index], maps[index], fov, self.config).maps)
+        if flash is None:
+            flash = centred_flash_frame(photo.shape[0], photo.shape[-2], photo.shape[-1], device=photo.device)
+        refined = [
+            refine_maps(photo[index], maps[index], flash[index], self.config).maps
+            for index in range(photo.shape[0])
+        ]
         return torch.stack(refined)
