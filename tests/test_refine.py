@@ -112,6 +112,26 @@ def test_refinement_at_a_working_size_keeps_the_output_size() -> None:
     assert set(result.to_json()) >= {"gain", "steps", "loss_start", "loss_end", "photo_rmse_end"}
 
 
+def test_a_global_material_correction_moves_roughness_by_one_logit_and_keeps_the_rest() -> None:
+    # pixel_maps=False with material_grid=1: base colour and normals stay as predicted, roughness
+    # and metallic move by one logit offset each, everywhere — toward the truth of the photo.
+    truth = random_maps(32, 32, seed=12)
+    truth[6] = 0.3
+    truth[7] = 0.0
+    photo = render_flash(truth[None], FlashCapture(fov_deg=FOV))[0]
+    start = truth.clone()
+    start[6] = 0.55
+    config = RefineConfig(
+        steps=60, pixel_maps=False, material_grid=1, ambient=False, material_prior_weight=0.0
+    )
+    result = refine_maps(photo, start, centred_flash_frame(1, 32, 32, FOV), config)
+    kept = parameters_to_maps(maps_to_parameters(start[None]))[0]
+    torch.testing.assert_close(result.maps[0:6], kept[0:6])
+    delta = torch.logit(result.maps[6]) - torch.logit(kept[6])
+    assert float(delta.std()) < 1e-4
+    assert abs(float(result.maps[6].mean()) - 0.3) < abs(0.55 - 0.3) / 4
+
+
 def test_bad_inputs_are_refused() -> None:
     with pytest.raises(UserError, match=r"refine\.steps"):
         RefineConfig(steps=-1)
@@ -166,3 +186,10 @@ def test_the_evaluator_scores_refined_variants_beside_the_models() -> None:
     assert results["net+refine20"]["rmse/diffuse"] < results["net"]["rmse/diffuse"]
     with pytest.raises(UserError, match="refine_steps"):
         refined_variants(models, [0])
+    # evaluate.py's refine.<key>: settings besides the steps, checked by name and type.
+    tuned = refined_variants({"net": models["net"]}, [5], {"material_grid": 1, "pixel_maps": False})
+    assert tuned["net+refine5"].config == RefineConfig(steps=5, material_grid=1, pixel_maps=False)
+    with pytest.raises(UserError, match=r"refine\.bogus: not a refinement setting"):
+        refined_variants(models, [5], {"bogus": 1})
+    with pytest.raises(UserError, match=r"refine\.pixel_maps=1: expected bool"):
+        refined_variants(models, [5], {"pixel_maps": 1})

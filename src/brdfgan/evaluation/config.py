@@ -21,6 +21,7 @@ class EvaluateConfig:
     grid_keys: list[str] | None = None
     flash_frame: str = "recorded"  # recorded | centred (see conf/evaluate.yaml)
     refine_steps: list[int] = field(default_factory=list)  # each model also after --refine N
+    refine: dict[str, Any] = field(default_factory=dict)  # RefineConfig settings besides steps
     paths: dict[str, Any] = field(default_factory=dict)
     data: dict[str, Any] = field(default_factory=dict)
     logger: dict[str, Any] | None = None

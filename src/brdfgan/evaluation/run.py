@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -57,16 +58,25 @@ def _models(ckpt: Any) -> dict[str, str]:
     return {model_name(p): p for p in paths}
 
 
-def refined_variants(models: Mapping[str, nn.Module], steps: Sequence[int]) -> dict[str, nn.Module]:
+def refined_variants(
+    models: Mapping[str, nn.Module], steps: Sequence[int], settings: Mapping[str, Any] | None = None
+) -> dict[str, nn.Module]:
     """The models, each followed by ``<name>+refine<N>``: the same model with ``brdfgan predict
-    --refine N``'s fit (:class:`~brdfgan.inference.refine.RefinedGenerator`; the field of view from
-    the batches' flash frames, as EXIF would give it)."""
+    --refine N``'s fit (:class:`~brdfgan.inference.refine.RefinedGenerator`; the capture geometry
+    from the batches' flash frames, as EXIF and the hotspot would give it), with ``settings``
+    (``RefineConfig`` fields other than ``steps``, evaluate's ``refine.<key>``) changed from
+    their defaults."""
+    settings = dict(settings or {})
+    known = {f.name for f in dataclasses.fields(RefineConfig)} - {"steps"}
+    for key in settings:
+        if key not in known:
+            raise UserError(f"refine.{key}: not a refinement setting (one of {', '.join(sorted(known))})")
     out = dict(models)
     for count in steps:
         if not isinstance(count, int) or count < 1:
             raise UserError(f"refine_steps: {count!r} is not a positive step count")
         for name, model in models.items():
-            out[f"{name}+refine{count}"] = RefinedGenerator(model, RefineConfig(steps=count))
+            out[f"{name}+refine{count}"] = RefinedGenerator(model, RefineConfig(**settings, steps=count))
     return out
 
 
@@ -98,7 +108,7 @@ def evaluate(cfg: DictConfig, out_dir: str | Path) -> dict[str, dict[str, float]
                           ("cpu" if cfg.device == "auto" else cfg.device))  # fmt: skip
     ckpt = OmegaConf.to_container(cfg.ckpt, resolve=True) if OmegaConf.is_config(cfg.ckpt) else cfg.ckpt
     models = refined_variants({name: load_generator(path)[0] for name, path in _models(ckpt).items()},
-                              cfg.refine_steps)  # fmt: skip
+                              cfg.refine_steps, cfg.refine)  # fmt: skip
     datamodule = hydra.utils.instantiate(cfg.data, _convert_="all")
     datamodule.prepare_data()
     datamodule.splits["test"] = cfg.split  # the test loader streams each sample once, in order

@@ -156,7 +156,7 @@ def predict_photo(
         refinement = {
             **refined.to_json(),
             "field_of_view": {"degrees": fov_deg, "source": fov_source},
-            "settings": options.refine.to_json(),
+            "settings": {k: v for k, v in options.refine.to_json().items() if k != "steps"},
         }
     warnings = photo.warnings + prepared.warnings
     metadata = {

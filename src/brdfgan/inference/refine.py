@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import torch
@@ -95,6 +95,7 @@ class RefineConfig:
     normal_prior_weight: float = 3.0
     material_prior_weight: float = 1.0  # roughness and metallic
     material_grid: int = 0  # their correction: a g × g grid of logits, upsampled; 0: per pixel
+    pixel_maps: bool = True  # base colour and normals corrected per pixel; False: kept as predicted
     low_frequency_weight: float = 1.0
     low_frequency_sigma: float = 8.0  # pixels at working_size
     tv_weight: float = 0.01
@@ -104,6 +105,13 @@ class RefineConfig:
     clip_level: float = 0.98
 
     def __post_init__(self) -> None:
+        for setting in fields(self):
+            value, default = getattr(self, setting.name), setting.default
+            number = isinstance(value, int | float) and not isinstance(value, bool)
+            kind = type(default)
+            typed = isinstance(value, bool) if kind is bool else number and isinstance(value, kind | int)
+            if not typed:
+                raise UserError(f"refine.{setting.name}={value!r}: expected {kind.__name__}")
         checks = {
             "steps": self.steps >= 0,
             "learning_rate": self.learning_rate > 0,
@@ -262,7 +270,7 @@ def refine_maps(
 
         # Corrections of the prior's parameters: per pixel for base colour and slopes, and for
         # roughness and metallic a coarse grid (the photo shows them only where it has a highlight)
-        pixel_delta = torch.zeros_like(prior[:, :5]).requires_grad_(True)
+        pixel_delta = torch.zeros_like(prior[:, :5]).requires_grad_(config.pixel_maps)
         grid = config.material_grid or size
         material_delta = torch.zeros(1, 2, grid, grid, device=prior.device, requires_grad=True)
 
@@ -282,7 +290,9 @@ def refine_maps(
             ratio = (target / start_render.clamp_min(1e-6)).permute(1, 0, 2, 3)[:, valid[:, 0]]
             gain0 = ratio.median(dim=1).values if ratio.shape[1] > 0 else prior.new_ones(3)
         log_gain = gain0.clamp_min(1e-6).log().view(1, 3, 1, 1).clone().requires_grad_(True)
-        variables: list[Tensor] = [pixel_delta, material_delta, log_gain]
+        variables: list[Tensor] = (
+            [pixel_delta, material_delta, log_gain] if config.pixel_maps else [material_delta, log_gain]
+        )
         ambient = None
         if config.ambient:
             # Start at 1 % of the flash's irradiance at the centre: small but with a gradient.
