@@ -4,11 +4,20 @@ against their signatures by :func:`brdfgan.config_check.check_config` before any
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, make_dataclass
 from typing import Any
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
+
+from brdfgan.inference.refine_config import RefineConfig
+
+# evaluate.py's refine.<key>: every refinement setting but the steps (refine_steps gives those),
+# typed like RefineConfig's defaults, so a wrong key or type fails when the config is composed.
+RefineSettings = make_dataclass(
+    "RefineSettings",
+    [(f.name, type(f.default), field(default=f.default)) for f in fields(RefineConfig) if f.name != "steps"],
+)
 
 
 @dataclass
@@ -21,7 +30,7 @@ class EvaluateConfig:
     grid_keys: list[str] | None = None
     flash_frame: str = "recorded"  # recorded | centred (see conf/evaluate.yaml)
     refine_steps: list[int] = field(default_factory=list)  # each model also after --refine N
-    refine: dict[str, Any] = field(default_factory=dict)  # RefineConfig settings besides steps
+    refine: Any = field(default_factory=RefineSettings)  # RefineConfig settings besides steps
     paths: dict[str, Any] = field(default_factory=dict)
     data: dict[str, Any] = field(default_factory=dict)
     logger: dict[str, Any] | None = None

@@ -107,8 +107,9 @@ def evaluate(cfg: DictConfig, out_dir: str | Path) -> dict[str, dict[str, float]
     device = torch.device("cuda" if cfg.device == "auto" and torch.cuda.is_available() else
                           ("cpu" if cfg.device == "auto" else cfg.device))  # fmt: skip
     ckpt = OmegaConf.to_container(cfg.ckpt, resolve=True) if OmegaConf.is_config(cfg.ckpt) else cfg.ckpt
+    settings = {str(k): v for k, v in dict(cfg.refine).items()}
     models = refined_variants({name: load_generator(path)[0] for name, path in _models(ckpt).items()},
-                              cfg.refine_steps, cfg.refine)  # fmt: skip
+                              cfg.refine_steps, settings)  # fmt: skip
     datamodule = hydra.utils.instantiate(cfg.data, _convert_="all")
     datamodule.prepare_data()
     datamodule.splits["test"] = cfg.split  # the test loader streams each sample once, in order

@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 import torch
@@ -64,8 +64,7 @@ from brdfgan.core.svbrdf import (
     split_maps,
     srgb_to_linear,
 )
-from brdfgan.errors import UserError
-from brdfgan.inference import DEFAULT_REFINE_STEPS
+from brdfgan.inference.refine_config import RefineConfig
 
 # Values kept away from 0 and 1 before the logit, so a saturated prediction stays movable.
 LOGIT_MARGIN = 1e-3
@@ -75,63 +74,6 @@ MAX_SLOPE = 10.0
 LOG_EPSILON = 1e-2
 # Parameter channels: base colour logits (3), normal slopes (2), roughness and metallic logits.
 _BASECOLOR, _SLOPES, _ROUGHNESS, _METALLIC = slice(0, 3), slice(3, 5), slice(5, 6), slice(6, 7)
-
-
-@dataclass(frozen=True)
-class RefineConfig:
-    """Everything a refinement chooses; see the module docstring for the terms.
-
-    The defaults are provisional (issue 17 is open): on 4 validation photos of the procedural data
-    they lowered the novel-light re-render error of the shipped model by ~3 % and the diffuse
-    albedo's RMSE by ~11 %, with the normals unchanged (a pull of 0.1 on the slopes let them fit
-    the photo and raised the normal angle by 58 %).
-    """
-
-    # Provisional: 100 steps at 256² take ~3 s per photo on the 2-core CPU (evaluate.py over 112 photos).
-    steps: int = DEFAULT_REFINE_STEPS
-    learning_rate: float = 0.05
-    working_size: int = 256
-    prior_weight: float = 1.0
-    normal_prior_weight: float = 3.0
-    material_prior_weight: float = 1.0  # roughness and metallic
-    material_grid: int = 0  # their correction: a g × g grid of logits, upsampled; 0: per pixel
-    pixel_maps: bool = True  # base colour and normals corrected per pixel; False: kept as predicted
-    low_frequency_weight: float = 1.0
-    low_frequency_sigma: float = 8.0  # pixels at working_size
-    tv_weight: float = 0.01
-    ambient: bool = True
-    ambient_grid: int = 4
-    fit_flash_offset: bool = False
-    clip_level: float = 0.98
-
-    def __post_init__(self) -> None:
-        for setting in fields(self):
-            value, default = getattr(self, setting.name), setting.default
-            number = isinstance(value, int | float) and not isinstance(value, bool)
-            kind = type(default)
-            typed = isinstance(value, bool) if kind is bool else number and isinstance(value, kind | int)
-            if not typed:
-                raise UserError(f"refine.{setting.name}={value!r}: expected {kind.__name__}")
-        checks = {
-            "steps": self.steps >= 0,
-            "learning_rate": self.learning_rate > 0,
-            "working_size": self.working_size >= 16,
-            "prior_weight": self.prior_weight >= 0,
-            "normal_prior_weight": self.normal_prior_weight >= 0,
-            "material_prior_weight": self.material_prior_weight >= 0,
-            "low_frequency_weight": self.low_frequency_weight >= 0,
-            "low_frequency_sigma": self.low_frequency_sigma > 0,
-            "tv_weight": self.tv_weight >= 0,
-            "ambient_grid": self.ambient_grid >= 1,
-            "material_grid": self.material_grid >= 0,
-            "clip_level": 0 < self.clip_level <= 1,
-        }
-        for key, ok in checks.items():
-            if not ok:
-                raise UserError(f"refine.{key}={getattr(self, key)!r}: out of range")
-
-    def to_json(self) -> dict[str, Any]:
-        return dict(self.__dict__)
 
 
 @dataclass(frozen=True)
@@ -224,7 +166,7 @@ def refine_maps(
     photo: Tensor,
     maps: Tensor,
     flash_frame: Tensor,
-    config: RefineConfig = RefineConfig(),
+    config: RefineConfig | None = None,
     on_step: Callable[[int, float], None] | None = None,
 ) -> RefineResult:
     """Fit ``maps`` (the network's prediction) to ``photo`` (module docstring).
@@ -237,7 +179,7 @@ def refine_maps(
         flash_frame: the photo's :mod:`flash frame <brdfgan.core.flash_geometry>` (what the
             network read): the field of view across the photo and the hotspot, below the
             camera and flash of the capture model (the photo is a crop, its hotspot anywhere).
-        config: the refinement's settings.
+        config: the refinement's settings (default: ``RefineConfig()``).
         on_step: called after each step with ``(step, loss)`` (progress).
 
     Shape:
@@ -249,6 +191,7 @@ def refine_maps(
     check_map_shape(maps)
     if maps.ndim != 3 or maps.shape[1] != maps.shape[2]:
         raise ValueError(f"refinement needs square (8, M, M) maps, got {tuple(maps.shape)}")
+    config = config or RefineConfig()
     frame = flash_frame.detach().float().reshape(1, -1)
     check_flash_frame(frame, 1)
     started = time.perf_counter()
@@ -272,7 +215,10 @@ def refine_maps(
         # roughness and metallic a coarse grid (the photo shows them only where it has a highlight)
         pixel_delta = torch.zeros_like(prior[:, :5]).requires_grad_(config.pixel_maps)
         grid = config.material_grid or size
-        material_delta = torch.zeros(1, 2, grid, grid, device=prior.device, requires_grad=True)
+        # Without per-pixel maps, the grid also shifts the base colour's logits (all channels
+        # alike): the albedo's level against the specular highlight, which the gain cannot set.
+        material_delta = torch.zeros(1, 2 if config.pixel_maps else 3, grid, grid, device=prior.device)
+        material_delta.requires_grad_(True)
 
         def current_parameters() -> Tensor:
             upsampled = material_delta
@@ -280,7 +226,10 @@ def refine_maps(
                 upsampled = F.interpolate(
                     material_delta, size=(size, size), mode="bilinear", align_corners=False
                 )
-            return prior + torch.cat([pixel_delta, upsampled], dim=1)
+            base_shift = upsampled[:, 2:3] if not config.pixel_maps else 0.0
+            return prior + torch.cat(
+                [pixel_delta[:, _BASECOLOR] + base_shift, pixel_delta[:, _SLOPES], upsampled[:, :2]], dim=1
+            )
 
         with torch.no_grad():
             start_render = render_flash(prior_values, capture, camera_xy=camera_xy)
