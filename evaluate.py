@@ -12,8 +12,10 @@ from omegaconf import DictConfig
 
 from brdfgan.errors import exit_on_user_error, run_hydra_app
 from brdfgan.evaluation.config import register_configs
+from brdfgan.sweep_folders import register_resolvers
 
 register_configs()
+register_resolvers()
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="evaluate")

@@ -17,8 +17,10 @@ from omegaconf import DictConfig, OmegaConf
 from brdfgan.config_check import check_config
 from brdfgan.data.generate_config import register_configs
 from brdfgan.errors import exit_on_user_error, interrupts_raise, run_hydra_app
+from brdfgan.sweep_folders import register_resolvers
 
 register_configs()
+register_resolvers()
 log = logging.getLogger("generate")
 
 

@@ -11,9 +11,11 @@ import hydra
 from omegaconf import DictConfig
 
 from brdfgan.errors import exit_on_user_error, run_hydra_app
+from brdfgan.sweep_folders import register_resolvers
 from brdfgan.training.config import register_configs
 
 register_configs()
+register_resolvers()
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 import subprocess
 import sys
@@ -16,7 +17,16 @@ from safetensors import safe_open
 from brdfgan.inference.model.export_weights import tested_checkpoint as checkpoint_tested_by_train
 from brdfgan.inference.model.weights import load_model
 from brdfgan.models.generator import Generator
-from brdfgan.report import ReportError, ablation_rows, collect, write_report
+from brdfgan.report import (
+    ReportError,
+    ablation_rows,
+    by_loss_and_seed,
+    collect,
+    is_loss_ablation,
+    runs_rows,
+    varying_keys,
+    write_report,
+)
 from brdfgan.runs import WeightsError, load_generator, load_weights, save_weights
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -60,13 +70,25 @@ def test_bad_weights_are_clear_errors(tmp_path: Path) -> None:
         load_generator(tmp_path / "model.pt")
 
 
-def _fake_run(root: Path, loss: str, seed: int, metrics: dict[str, float]) -> None:
-    run = root / f"loss={loss},seed={seed}"
+def _fake_run(
+    root: Path,
+    loss: str,
+    seed: int,
+    metrics: dict[str, float],
+    overrides: tuple[str, ...] = (),
+    name: str = "",
+) -> Path:
+    """A run folder as train.py leaves it: config, Hydra's choices and overrides, metrics."""
+    run = root / (name or f"loss-{loss}_seed-{seed}")
     (run / ".hydra").mkdir(parents=True)
     (run / ".hydra" / "config.yaml").write_text(yaml.safe_dump({"seed": seed}))
-    choices = {"hydra": {"runtime": {"choices": {"loss": loss}}}}
+    choices = {
+        "hydra": {"runtime": {"choices": {"loss": loss, "model": "default", "hydra/launcher": "basic"}}}
+    }
     (run / ".hydra" / "hydra.yaml").write_text(yaml.safe_dump(choices))
+    (run / ".hydra" / "overrides.yaml").write_text(yaml.safe_dump([f"seed={seed}", *overrides]))
     (run / "metrics.json").write_text(json.dumps({"model": metrics}))
+    return run
 
 
 def test_ablation_report_has_the_paper_layout_and_percentages(tmp_path: Path) -> None:
@@ -75,18 +97,50 @@ def test_ablation_report_has_the_paper_layout_and_percentages(tmp_path: Path) ->
     _fake_run(tmp_path, "no_adv", 0, {"rmse/diffuse": 0.121, "rmse/normal": 0.19})
     _fake_run(tmp_path, "no_render", 0, {"rmse/diffuse": 0.143, "rmse/normal": 0.25})
     runs = collect([tmp_path])
-    assert set(runs) == {"full", "no_adv", "no_render"} and set(runs["full"]) == {0, 1}
-    rows = ablation_rows(runs)
+    assert is_loss_ablation(runs)
+    losses = by_loss_and_seed(runs)
+    assert set(losses) == {"full", "no_adv", "no_render"} and len(losses["full"]) == 2
+    rows = ablation_rows(losses)
     assert rows[0] == ["metric", "proposed", "−L_r", "−L_a"]
     diffuse = rows[1]
     assert diffuse[1].startswith("0.1100 ± 0.0141")
     assert diffuse[2] == "0.1430 (+30.0%)" and diffuse[3] == "0.1210 (+10.0%)"
     assert rows[3][3] == "0.1900 (-5.0%)"  # normal: better than proposed
-    markdown, table = write_report([tmp_path], tmp_path / "out")
-    assert "| diffuse | 0.1100 ± 0.0141 | 0.1430 (+30.0%) | 0.1210 (+10.0%) |" in markdown.read_text()
-    assert table.read_text().startswith("metric,proposed")
+    runs_md, ablation_md = write_report([tmp_path], tmp_path / "out")
+    assert "| diffuse | 0.1100 ± 0.0141 | 0.1430 (+30.0%) | 0.1210 (+10.0%) |" in ablation_md.read_text()
+    assert (tmp_path / "out" / "ablation.csv").read_text().startswith("metric,proposed")
+    assert "| full | 2 | 0.1100 ± 0.0141 |" in runs_md.read_text()
     with pytest.raises(ReportError, match="no training runs"):
         collect([tmp_path / "out"])
+
+
+def test_runs_are_grouped_by_every_key_that_varies_and_duplicates_are_kept(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    # Three loss=full seed=0 runs (two duplicates of one setting), one no_adv, and a width sweep:
+    # nothing is dropped, the duplicates are named in a warning.
+    a = _fake_run(tmp_path, "full", 0, {"rmse/diffuse": 0.10}, name="a")
+    b = _fake_run(tmp_path, "full", 0, {"rmse/diffuse": 0.14}, name="b")
+    _fake_run(tmp_path, "full", 0, {"rmse/diffuse": 0.20}, ("model.generator.width=32",), name="c")
+    _fake_run(tmp_path, "no_adv", 1, {"rmse/diffuse": 0.30}, ("data.seed=1",), name="d")
+    runs = collect([tmp_path])
+    assert varying_keys(runs) == ["loss", "model.generator.width"]  # seeds are averaged, not keys
+    assert not is_loss_ablation(runs)
+    with caplog.at_level(logging.WARNING, logger="brdfgan.report"):
+        rows = runs_rows(runs)
+    assert rows[0] == ["loss", "model.generator.width", "n", "diffuse"]
+    assert rows[1:] == [
+        ["full", "32", "1", "0.2000"],
+        ["full", "–", "2", "0.1200 ± 0.0283"],
+        ["no_adv", "–", "1", "0.3000"],
+    ]
+    assert f"duplicate runs of loss=full model.generator.width=– seed=0: {a} and {b}" in caplog.text
+    written = write_report([tmp_path], tmp_path / "out")
+    assert [p.name for p in written] == ["runs.md"] and not (tmp_path / "out" / "ablation.md").exists()
+    assert "4 runs grouped by loss, model.generator.width" in written[0].read_text()
+    assert (tmp_path / "out" / "runs.csv").read_text().splitlines()[
+        0
+    ] == "loss,model.generator.width,n,diffuse"
 
 
 def _cli(script: str, *args: str, cwd: Path) -> subprocess.CompletedProcess[str]:

@@ -261,6 +261,19 @@ def test_train_py_runs_the_loop_and_returns_the_metric(tiny_data: Path) -> None:
     assert (runs[-1] / "csv").exists()
 
 
+@pytest.mark.mitsuba
+def test_train_py_prints_each_log_line_once_and_not_the_whole_config(tiny_data: Path) -> None:
+    # Lightning's own stderr handler used to print every line a second time beside Hydra's console.
+    result = _train_cli("debug=fdr", "task_name=once", "seed=3", cwd=tiny_data)
+    assert result.returncode == 0, result.stderr[-3000:]
+    console = result.stdout + result.stderr
+    assert console.count("Seed set to 3") == 1
+    assert console.count("Total params") == 1  # the model summary
+    assert "run folder: " in console and "_target_:" not in console
+    run = sorted((tiny_data / "logs" / "once" / "runs").iterdir())[-1]
+    assert "_target_:" in (run / ".hydra" / "config.yaml").read_text()
+
+
 @pytest.mark.parametrize(
     ("overrides", "error", "message"),
     [
@@ -310,3 +323,13 @@ def test_ddp_on_two_cpu_processes_trains_and_tests(tiny_data: Path) -> None:
     runs = sorted((tiny_data / "logs" / "ddp" / "runs").iterdir())
     assert (runs[-1] / "checkpoints" / "last.ckpt").is_file()
     assert "test/loss" in result.stdout + result.stderr
+
+
+def test_seed_reaches_the_data_order_and_trainer_switches_need_no_plus(tmp_path: Path) -> None:
+    overrides = ["debug=default", "seed=2", "trainer.limit_train_batches=3", "trainer.fast_dev_run=true"]
+    cfg = compose_train(overrides, tmp_path)
+    assert cfg.data.seed == 2 and cfg.loss.seed == 2
+    assert cfg.trainer.limit_train_batches == 3 and cfg.trainer.fast_dev_run is True
+    assert compose_train(["debug=default"], tmp_path).data.seed == 0
+    trainer = hydra.utils.instantiate(cfg.trainer)  # every listed key is a real Trainer argument
+    assert trainer.fast_dev_run is True

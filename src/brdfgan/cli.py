@@ -213,9 +213,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     report = commands.add_parser(
         "report",
-        help="training runs → the paper's ablation table (ablation.md, ablation.csv)",
-        description="Group the runs below RUN_DIR… by loss and seed and write the ablation table "
-        "next to the first directory (or --out).",
+        help="training runs compared by what varies across them (runs.md/.csv; ablation.md/.csv)",
+        description="Group the runs below RUN_DIR… by every setting that varies across them (seeds "
+        "averaged: mean ± std, n), warn about duplicates, and write runs.md/.csv — and the paper's "
+        "ablation table when only the loss varies — next to the first directory (or --out).",
     )
     report.add_argument("directories", type=Path, nargs="+", metavar="RUN_DIR")
     report.add_argument("--out", type=Path, default=None, help="default: the first RUN_DIR")
@@ -377,8 +378,8 @@ def convert_deschaintre_command(args: argparse.Namespace) -> int:
 def report_command(args: argparse.Namespace) -> int:
     from brdfgan.report import write_report
 
-    markdown, _ = write_report(args.directories, args.out)
-    print(markdown.read_text())
+    for markdown in write_report(args.directories, args.out):
+        print(markdown.read_text())
     return 0
 
 

@@ -135,6 +135,22 @@ def exit_on_user_error(
     return decorate if function is None else decorate(function)
 
 
+def single_console_logging() -> None:
+    """Print each log line once in a Hydra app that uses Lightning.
+
+    Importing ``lightning`` gives its package logger a stderr handler of its own, and its records
+    also propagate to the root logger, which Hydra's job logging sends to stdout and the run's log
+    file: every Lightning line (and the model summary) appeared twice. Its own handler goes; the
+    root's handlers keep each line once, in the console and in the log file."""
+    import logging
+
+    import lightning  # noqa: F401  (the import adds the handler removed here)
+
+    package_logger = logging.getLogger("lightning")
+    for handler in list(package_logger.handlers):
+        package_logger.removeHandler(handler)
+
+
 def run_hydra_app(app: Callable[[], object]) -> None:
     """Run a ``@hydra.main`` entry point so that composition errors are one line too.
 

@@ -58,7 +58,8 @@ across models) go through the simulated phone capture and ``predict``'s decoding
 on the whole sample and before the train crop: the vignetting is centred on the frame and the
 auto exposure sees the whole photo, as in ``predict``. Each sample's noise comes from a generator
 seeded by ``(seed, epoch, repeat, key)`` in training (``repeat``: its pass over the shards within
-the epoch) and ``(seed, key)`` in val/test, so a rerun and a resumed run draw the same values; what
+the epoch) and ``key`` alone in val/test, so a rerun and a resumed run draw the same values and runs
+of any seed are validated on the same photos; what
 was drawn is in ``meta["sensor"]``. The crop draws are separate, so switching the sensor on or
 off leaves every crop where it was. ``eval_sensor`` is applied to the other splits instead,
 typically the intake alone (no effects, 8-bit sRGB and ``predict``'s auto exposure: a photo with
@@ -353,7 +354,8 @@ class ShardStream(IterableDataset):
             mine = rank * num_workers + worker
             samples = islice(samples, quotas[mine])
         if self.sensor is not None:  # the same draws every epoch: comparable metrics
-            samples = (self._sensed(sample, _mix(self.seed, "sensor", sample.key)) for sample in samples)
+            # Seeded by the key alone: runs of every seed are measured on the same photos.
+            samples = (self._sensed(sample, _mix("sensor", sample.key)) for sample in samples)
         return _batches(samples, self.batch_size, partial=True)
 
     # -- shared ---------------------------------------------------------------------------

@@ -16,7 +16,7 @@ from torch import nn
 from brdfgan.config_check import check_config
 from brdfgan.data.capture import sample_as_photographed
 from brdfgan.data.shards import Sample, iter_shard, list_shards
-from brdfgan.errors import UserError
+from brdfgan.errors import UserError, single_console_logging
 from brdfgan.evaluation.evaluator import evaluate_models, markdown_table, write_grid, write_results
 from brdfgan.inference.refine import RefineConfig, RefinedGenerator
 from brdfgan.runs import load_generator, model_name
@@ -103,6 +103,7 @@ def log_to_loggers(
 
 def evaluate(cfg: DictConfig, out_dir: str | Path) -> dict[str, dict[str, float]]:
     """Run every model of ``cfg.ckpt`` over ``cfg.split`` of ``cfg.data`` and write the results."""
+    single_console_logging()
     check_config(cfg, ("data", "metrics", "logger"))
     device = torch.device("cuda" if cfg.device == "auto" and torch.cuda.is_available() else
                           ("cpu" if cfg.device == "auto" else cfg.device))  # fmt: skip

@@ -21,7 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 from torch import nn
 
 from brdfgan.config_check import check_config
-from brdfgan.errors import UserError
+from brdfgan.errors import UserError, single_console_logging
 from brdfgan.evaluation.evaluator import evaluate_models, write_results
 from brdfgan.io.atomic import stale_temp_files
 from brdfgan.runs import LAST_CHECKPOINT, WeightsError, check_resume_checkpoint, network_weights
@@ -128,6 +128,7 @@ def train(cfg: DictConfig) -> float | None:
     """Fit (optionally resuming from ``ckpt_path`` or starting from ``init_from``'s weights), test
     the best checkpoint, and return the monitored metric (for sweeps), or ``None`` when it was
     not logged."""
+    single_console_logging()
     check_config(cfg, CHECKED_GROUPS)
     if cfg.ckpt_path is not None and not Path(cfg.ckpt_path).is_file():
         raise TrainConfigError(f"ckpt_path: checkpoint {cfg.ckpt_path} does not exist")
@@ -147,7 +148,10 @@ def train(cfg: DictConfig) -> float | None:
     if init_from is not None:
         loaded = warm_start(module, init_from)
         log.info("init_from: %s from %s (new optimizers and schedule)", " and ".join(loaded), init_from)
-    log.info("run config:\n%s", OmegaConf.to_yaml(cfg, resolve=True))
+    # The whole config is in the run folder (.hydra/config.yaml) and in the tracker; the console
+    # gets it only at DEBUG level (hydra.verbose=true).
+    log.info("run folder: %s", cfg.paths.output_dir)
+    log.debug("run config:\n%s", OmegaConf.to_yaml(cfg, resolve=True))
     if cfg.train:
         _run_interruptible(trainer, trainer.fit, model=module, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
     metric = trainer.callback_metrics.get(cfg.monitor)
