@@ -81,7 +81,8 @@ def test_refinement_recovers_the_base_colour_of_an_exact_capture() -> None:
     noise = 0.15 * torch.randn(3, 32, 32, generator=torch.Generator().manual_seed(6))
     start = truth.clone()
     start[0:3] = (truth[0:3] + noise).clamp(0, 1)
-    config = RefineConfig(steps=150, prior_weight=0.0, low_frequency_weight=0.0, ambient=False)
+    # Per pixel, no pulls: the photo alone decides (the default fits one offset per map instead).
+    config = RefineConfig(steps=150, learning_rate=0.05, pixel_maps=True, material_grid=0, ambient=False)
     result = refine_maps(photo, start, centred_flash_frame(1, 32, 32, FOV), config)
     assert result.photo_rmse_end < 0.25 * result.photo_rmse_start
     assert result.maps.shape == truth.shape
@@ -98,7 +99,10 @@ def test_refinement_recovers_the_base_colour_of_an_exact_capture() -> None:
     assert after < 0.3 * before
     # The prior pulls toward the start: with it, the fit moves less.
     frame = centred_flash_frame(1, 32, 32, FOV)
-    held = refine_maps(photo, start, frame, RefineConfig(steps=150, prior_weight=10.0, ambient=False))
+    held_config = RefineConfig(
+        steps=150, learning_rate=0.05, pixel_maps=True, prior_weight=10.0, ambient=False
+    )
+    held = refine_maps(photo, start, frame, held_config)
     assert (held.maps[0:3] - start[0:3]).abs().mean() < (result.maps[0:3] - start[0:3]).abs().mean()
 
 
@@ -117,13 +121,11 @@ def test_a_global_correction_moves_each_map_by_one_logit_and_keeps_the_normals()
     # and metallic move by one logit offset each, everywhere — the roughness toward the truth.
     truth = random_maps(32, 32, seed=12)
     truth[6] = 0.3
-    truth[7] = 0.0
+    truth[7] = 0.2
     photo = render_flash(truth[None], FlashCapture(fov_deg=FOV))[0]
     start = truth.clone()
     start[6] = 0.55
-    config = RefineConfig(
-        steps=60, pixel_maps=False, material_grid=1, ambient=False, material_prior_weight=0.0
-    )
+    config = RefineConfig(steps=60, learning_rate=0.05, ambient=False)  # the default: one offset per map
     result = refine_maps(photo, start, centred_flash_frame(1, 32, 32, FOV), config)
     kept = parameters_to_maps(maps_to_parameters(start[None]))[0]
     torch.testing.assert_close(result.maps[3:6], kept[3:6])
@@ -181,7 +183,8 @@ def test_the_evaluator_scores_refined_variants_beside_the_models() -> None:
     start = truth.clone()
     noise = 0.2 * torch.randn(3, 16, 16, generator=torch.Generator().manual_seed(9))
     start[0:3] = (truth[0:3] + noise).clamp(0, 1)
-    models = refined_variants({"net": _ConstantGenerator(start[None])}, [20])
+    per_pixel = {"pixel_maps": True, "material_grid": 0, "prior_weight": 1.0, "learning_rate": 0.05}
+    models = refined_variants({"net": _ConstantGenerator(start[None])}, [20], per_pixel)
     assert set(models) == {"net", "net+refine20"} and isinstance(models["net+refine20"], RefinedGenerator)
     photo, _ = auto_expose(render_flash(truth[None], FlashCapture(fov_deg=FOV)))
     batch = {"photo": photo, "maps": truth[None], "flash": centred_flash_frame(1, 16, 16, FOV)}

@@ -14,4 +14,4 @@
 
 # Adam steps of `brdfgan predict --refine` given bare (brdfgan.inference.refine.RefineConfig.steps).
 # Here, not in refine.py, so that the command line's --help can show it without importing torch.
-DEFAULT_REFINE_STEPS = 100
+DEFAULT_REFINE_STEPS = 60

@@ -6,9 +6,12 @@ maps so that their render matches the photo, starting from the prediction and he
 (MaterialGAN, Guo et al. 2020; Deschaintre et al. 2020; Gao et al. 2019).
 
 The capture model is the training captures' (:class:`~brdfgan.core.render.FlashCapture`): a
-camera above the centre of the square, framing it exactly with horizontal field of view
-``fov_deg`` (from the EXIF, :mod:`brdfgan.inference.intake.lens`), the flash at the lens. Fitted
-beside the maps:
+camera looking straight down from above the photo's flash hotspot (the flash frame the network
+read; a crop is a window of a view centred on its hotspot), at the height the frame's field of
+view gives (from the EXIF, :mod:`brdfgan.inference.intake.lens`), the flash at the lens. What is
+corrected (:class:`~brdfgan.inference.refine_config.RefineConfig`): by default one logit offset per
+map — base colour, roughness, metallic — keeping the network's normals and spatial detail;
+optionally per-pixel corrections (``pixel_maps``). Fitted beside the maps:
 
 - a per-channel **gain** (log-parametrised): the photo's unknown exposure and white balance;
 - optionally a low-frequency **ambient irradiance** (a ``g × g`` grid per channel, bilinearly
@@ -22,7 +25,8 @@ The objective, per term (weights in :class:`RefineConfig`):
   pixel (any channel ≥ ``clip_level``) says only that the truth is at least that bright, so it
   costs only where the render falls below it;
 - *prior*: L1 of every map to the network's prediction (base colour, roughness, metallic values
-  and the normals' slopes) — the photo shows one view and cannot tell everything apart;
+  and the normals' slopes) — the photo shows one view and cannot tell everything apart; needed
+  by per-pixel corrections, off by default (on one offset per map it is a dead zone);
 - *low-frequency prior*: L1 of the base colour blurred, to the prediction blurred — the
   photo's large-scale shading (vignetting, falloff the model misjudges) belongs to light, not
   to the albedo;
