@@ -66,6 +66,7 @@ bench: setup
 	$(PY) -m benchmarks.bench_train
 	$(PY) -m benchmarks.bench_capture
 	$(PY) -m benchmarks.bench_generate
+	$(PY) -m benchmarks.bench_refine
 	$(PY) -m benchmarks.bench_datamodule
 	$(PY) -m benchmarks.bench_evaluate
 	$(PY) -m benchmarks.bench_predict
