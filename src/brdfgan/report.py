@@ -33,6 +33,7 @@ import yaml
 from brdfgan.errors import UserError
 from brdfgan.io.atomic import write_text_atomic
 from brdfgan.runs import RunFolder
+from brdfgan.sweep_folders import override_key_value
 
 log = logging.getLogger(__name__)
 
@@ -69,12 +70,11 @@ def _settings(run: RunFolder) -> dict[str, str]:
     try:
         config = yaml.safe_load(run.config_path.read_text()) or {}
         hydra_cfg = yaml.safe_load(run.hydra_path.read_text()) if run.hydra_path.is_file() else {}
-        overrides_path = run.path / ".hydra" / "overrides.yaml"
-        overrides = yaml.safe_load(overrides_path.read_text()) if overrides_path.is_file() else []
+        overrides = yaml.safe_load(run.overrides_path.read_text()) if run.overrides_path.is_file() else []
         choices = ((hydra_cfg or {}).get("hydra") or {}).get("runtime", {}).get("choices") or {}
         settings = {str(k): str(v) for k, v in choices.items() if not str(k).startswith("hydra")}
         for override in overrides or []:
-            key, _, value = str(override).lstrip("+~").partition("=")
+            key, value = override_key_value(override)
             settings[key] = value
         settings["seed"] = str(config.get("seed", 0))
         return settings

@@ -53,6 +53,7 @@ MAX_NETWORK_PARAMETERS = 2_000_000_000
 
 RUN_CONFIG = Path(".hydra") / "config.yaml"
 RUN_HYDRA = Path(".hydra") / "hydra.yaml"
+RUN_OVERRIDES = Path(".hydra") / "overrides.yaml"
 CHECKPOINT_DIR = "checkpoints"
 LAST_CHECKPOINT = "last.ckpt"
 
@@ -104,6 +105,10 @@ class RunFolder:
     @property
     def hydra_path(self) -> Path:
         return self.path / RUN_HYDRA
+
+    @property
+    def overrides_path(self) -> Path:
+        return self.path / RUN_OVERRIDES
 
     @property
     def checkpoint_dir(self) -> Path:

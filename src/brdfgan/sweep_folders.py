@@ -35,6 +35,13 @@ def _named(key: str) -> bool:
     return True
 
 
+def override_key_value(override: str) -> tuple[str, str]:
+    """``key`` and ``value`` of a command-line override (``key=value``, ``+key=value``,
+    ``++key=value``, ``~key``); the value is empty for a deletion."""
+    key, _, value = str(override).lstrip("+~").partition("=")
+    return key, value
+
+
 def job_folder_name(number: int, overrides: Sequence[str]) -> str:
     """The folder of one multirun job: its number, then ``key-value`` of each override that says
     what the run is (not :data:`UNNAMED_OVERRIDE_KEYS`), joined by ``_``, with every character
@@ -47,7 +54,7 @@ def job_folder_name(number: int, overrides: Sequence[str]) -> str:
     """
     parts = [str(number)]
     for override in overrides:
-        key, _, value = str(override).lstrip("+~").partition("=")
+        key, value = override_key_value(override)
         if _named(key):
             parts.append(f"{key}-{value}" if value else key)
     name = re.sub(r"[^A-Za-z0-9._-]+", "_", "_".join(parts)).strip(".")

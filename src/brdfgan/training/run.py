@@ -151,7 +151,8 @@ def train(cfg: DictConfig) -> float | None:
     # The whole config is in the run folder (.hydra/config.yaml) and in the tracker; the console
     # gets it only at DEBUG level (hydra.verbose=true).
     log.info("run folder: %s", cfg.paths.output_dir)
-    log.debug("run config:\n%s", OmegaConf.to_yaml(cfg, resolve=True))
+    if log.isEnabledFor(logging.DEBUG):  # resolving and printing the whole config is not free
+        log.debug("run config:\n%s", OmegaConf.to_yaml(cfg, resolve=True))
     if cfg.train:
         _run_interruptible(trainer, trainer.fit, model=module, datamodule=datamodule, ckpt_path=cfg.ckpt_path)
     metric = trainer.callback_metrics.get(cfg.monitor)
