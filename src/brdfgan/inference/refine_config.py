@@ -36,7 +36,8 @@ class RefineConfig:
     The roughness the photo asks for is rougher than the truth: with the network's nearly flat
     normals a rougher lobe reproduces the highlight that the real relief spreads (as normal-map
     filtering does), which helps every novel view and raises the roughness RMSE — so the step
-    count bounds how far it goes. 60 steps at 256² take ~2–3 s per photo on the 2-core CPU.
+    count bounds how far it goes. 60 steps at 256² take 3.6 s per photo on the 2-core CPU
+    (``make bench``: ``benchmarks/bench_refine.py``).
     """
 
     steps: int = DEFAULT_REFINE_STEPS
