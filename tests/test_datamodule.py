@@ -278,10 +278,14 @@ def test_lightning_fit_consumes_the_datamodule(dataset: tuple[Path, dict[str, li
     )
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*does not have many workers.*")
+        warnings.filterwarnings("ignore", message=".*`IterableDataset` has `__len__` defined.*")
         trainer.fit(model, datamodule=dm)
     assert len(model.train_keys) == 2 * 16 and set(model.train_keys) == set(keys["train"])
     assert sorted(model.val_keys) == sorted(keys["val"] * 2)
     assert trainer.global_step == 2 * dm.train_batches_per_epoch
+    # The progress bars' totals: 16 samples in 4 full batches; 8 val samples in 2 (no workers).
+    assert trainer.num_training_batches == dm.train_batches_per_epoch == 4
+    assert trainer.num_val_batches == [2]
 
 
 def rank_module(
@@ -352,3 +356,81 @@ def test_train_crop_takes_matching_windows_and_eval_stays_whole(
     too_big.setup("fit")
     with pytest.raises(ShardError, match="larger than sample"):
         next(iter(too_big.train_dataloader()))
+
+
+# -- len(loader): the progress bars' totals ----------------------------------------------------
+
+
+def counted_batches(loader: Any) -> list[list[str]]:
+    """The keys of every batch of one pass, checking that ``len(loader)`` announced that many."""
+    announced = len(loader)  # asked first, as Lightning does (torch then warns on an overrun)
+    batches = [batch["key"] for batch in loader]
+    assert announced == len(batches)
+    return batches
+
+
+@pytest.mark.parametrize("val_samples", [None, 5])
+@pytest.mark.parametrize("num_workers", [0, 2])
+def test_loader_len_is_the_number_of_batches(
+    dataset: tuple[Path, dict[str, list[str]]], num_workers: int, val_samples: int | None
+) -> None:
+    root, keys = dataset
+    dm = ShardDataModule(str(root), batch_size=2, num_workers=num_workers, val_samples=val_samples)
+    dm.setup("fit")
+    dm.setup("test")
+    train = dm.train_dataloader()
+    for _ in range(2):  # the persistent workers' second epoch too
+        assert len(counted_batches(train)) == dm.train_batches_per_epoch == 8
+    dm.teardown()
+    val = counted_batches(dm.val_dataloader())
+    assert sum(len(b) for b in val) == (val_samples or len(keys["val"]))
+    test = counted_batches(dm.test_dataloader())
+    assert sum(len(b) for b in test) == len(keys["test"])
+
+
+def test_loader_len_with_more_workers_than_shards(tmp_path: Path) -> None:
+    make_split(tmp_path, "train", [6])
+    make_split(tmp_path, "val", [3])
+    make_split(tmp_path, "test", [5])
+    dm = ShardDataModule(str(tmp_path), batch_size=2, num_workers=2)
+    dm.setup("fit")
+    dm.setup("test")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ShardWarning)  # every train worker streams everything; idle workers
+        train = counted_batches(dm.train_dataloader())
+        dm.teardown()
+        val = counted_batches(dm.val_dataloader())
+        test = counted_batches(dm.test_dataloader())
+    # One shard per split: every train worker streams it, one val/test worker reads it, one idles.
+    assert len(train) == 3 and [len(b) for b in val] == [2, 1] and [len(b) for b in test] == [2, 2, 1]
+
+
+@pytest.mark.parametrize(("world_size", "val_samples"), [(2, None), (2, 5), (3, None), (4, 3)])
+def test_loader_len_on_every_rank(
+    dataset: tuple[Path, dict[str, list[str]]],
+    monkeypatch: pytest.MonkeyPatch,
+    world_size: int,
+    val_samples: int | None,
+) -> None:
+    root, keys = dataset
+    totals = Counter[str]()
+    for rank in range(world_size):
+        dm = rank_module(
+            root, rank, world_size, monkeypatch, batch_size=2, num_workers=2, val_samples=val_samples
+        )
+        dm.setup("test")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ShardWarning)  # too few shards for some of these worlds
+            train = counted_batches(dm.train_dataloader())
+            dm.teardown()
+            val = counted_batches(dm.val_dataloader())
+            test = counted_batches(dm.test_dataloader())
+        assert len(train) == dm.train_batches_per_epoch
+        totals["val"] += sum(len(b) for b in val)
+        totals["test"] += sum(len(b) for b in test)
+    # With fewer shards than ranks (3 val, 2 test shards) every rank evaluates the whole split,
+    # val_samples capping each rank's pass.
+    val_ranks = 1 if world_size <= 3 else world_size
+    test_ranks = 1 if world_size <= 2 else world_size
+    assert totals["val"] == val_ranks * (val_samples or len(keys["val"]))
+    assert totals["test"] == test_ranks * len(keys["test"])

@@ -229,6 +229,11 @@ class ShardStream(IterableDataset):
     epoch (summed over the DataLoader workers). ``"val"``/``"test"``: one pass in shard order,
     the last batch of each worker may be partial, at most ``max_samples`` samples over all ranks.
 
+    ``len()`` is the number of batches the DataLoader yields per epoch (so progress bars show a
+    total); ``num_workers`` must be the DataLoader's (``max(1, DataLoader num_workers)``). For
+    val/test it comes from the per-shard counts taken in ``setup``: samples skipped while
+    streaming (corrupt or unreadable) make the real count smaller, so it is then an upper bound.
+
     Shape:
         - each item: the dict of :func:`collate_samples` with ``B <= batch_size``
     """
@@ -249,6 +254,7 @@ class ShardStream(IterableDataset):
         crop: int | None = None,
         sensor: SensorEffects | None = None,
         align_maps: bool = True,
+        num_workers: int = 1,
     ) -> None:
         super().__init__()
         if kind not in _KINDS:
@@ -268,11 +274,23 @@ class ShardStream(IterableDataset):
         self.crop = crop
         self.sensor = sensor if sensor is not None and sensor.enabled else None
         self.align_maps = align_maps
+        # Only for __len__: the iteration reads the worker count from the DataLoader's workers.
+        self.num_workers = num_workers
         # Counts the iterations of this copy of the dataset: in the main process (no workers)
         # or in a persistent worker, which keeps its copy between epochs.
         self.epoch = 0
         # Batches of the first epoch iterated that were already trained on (a resumed run).
         self.skip_batches = 0
+
+    def __len__(self) -> int:
+        if self.kind == "train":
+            # Exact for every epoch but the first after a resume, which skips the batches already
+            # trained on; Lightning's bar then starts at the restored batch index, so the total
+            # it shows stays right.
+            assert self.batches_per_epoch is not None
+            return self.batches_per_epoch
+        # Each worker batches its own samples, so each may end with a partial batch.
+        return sum(-(-samples // self.batch_size) for samples in self._eval_samples(self.num_workers))
 
     def __iter__(self) -> Iterator[dict[str, Any]]:
         info = get_worker_info()
@@ -338,21 +356,30 @@ class ShardStream(IterableDataset):
 
     # -- val / test -----------------------------------------------------------------------
 
+    @property
+    def _eval_split_ranks(self) -> bool:
+        """Whether the ranks split the shards (else every rank evaluates all of them)."""
+        return len(self.index.urls) >= self.world_size
+
+    def _eval_samples(self, num_workers: int) -> list[int]:
+        """The samples each of this rank's ``num_workers`` workers streams in one val/test pass,
+        from the per-shard counts of ``setup`` (fewer if some fail to decode)."""
+        rank, world_size = (self.rank, self.world_size) if self._eval_split_ranks else (0, 1)
+        held = [
+            sum(_take(self.index.counts, r, world_size, w, num_workers))
+            for r in range(world_size)
+            for w in range(num_workers)
+        ]
+        if self.max_samples is not None:
+            # Quotas over all ranks' workers, computed the same way everywhere: a fixed subset.
+            held = _fill(self.max_samples, held)
+        return held[rank * num_workers : (rank + 1) * num_workers]
+
     def _eval_batches(self, worker: int, num_workers: int) -> Iterator[dict[str, Any]]:
-        split_ranks = len(self.index.urls) >= self.world_size
-        records = self._records(self.index.urls, split_ranks=split_ranks, split_workers=True)
+        records = self._records(self.index.urls, split_ranks=self._eval_split_ranks, split_workers=True)
         samples = self._decode(records)
         if self.max_samples is not None:
-            # Every worker computes all quotas the same way and takes its own.
-            rank, world_size = (self.rank, self.world_size) if split_ranks else (0, 1)
-            held = [
-                sum(_take(self.index.counts, r, world_size, w, num_workers))
-                for r in range(world_size)
-                for w in range(num_workers)
-            ]
-            quotas = _fill(self.max_samples, held)
-            mine = rank * num_workers + worker
-            samples = islice(samples, quotas[mine])
+            samples = islice(samples, self._eval_samples(num_workers)[worker])
         if self.sensor is not None:  # the same draws every epoch: comparable metrics
             # Seeded by the key alone: runs of every seed are measured on the same photos.
             samples = (self._sensed(sample, _mix("sensor", sample.key)) for sample in samples)
@@ -572,7 +599,8 @@ class ShardDataModule(L.LightningDataModule):
             raise DatasetConfigError(
                 f"data.sensor_splits={sensor_splits!r}: must be a list of {', '.join(_KINDS)}"
             )
-        self.save_hyperparameters(ignore=["prepare", "sensor", "eval_sensor"])
+        # In the checkpoint only: the trackers get the whole run config once (brdfgan.tracking).
+        self.save_hyperparameters(ignore=["prepare", "sensor", "eval_sensor"], logger=False)
         # As plain values: checkpoints are read with torch.load(weights_only=True).
         self.hparams["sensor"] = None if sensor is None else asdict(sensor)
         self.hparams["eval_sensor"] = None if eval_sensor is None else asdict(eval_sensor)
@@ -756,6 +784,7 @@ class ShardDataModule(L.LightningDataModule):
             batches_per_epoch=self.train_batches_per_epoch if kind == "train" else None,
             sensor=self.sensor if kind in self.sensor_splits else self.eval_sensor,
             align_maps=self.align_maps,
+            num_workers=max(1, self.num_workers),  # a loader without workers iterates as one
             **options,
         )
 
