@@ -15,7 +15,7 @@ endif
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml Makefile scripts/install_gltf_validator.sh
+$(STAMP): pyproject.toml Makefile scripts/install_gltf_validator.sh scripts/install_chromium.sh
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || { echo "error: $(PYTHON) must be Python >= 3.11" >&2; exit 1; }
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
@@ -29,6 +29,8 @@ $(STAMP): pyproject.toml Makefile scripts/install_gltf_validator.sh
 	fi
 	@# The Khronos glTF validator (npm) for the .glb export test; optional, never fails setup.
 	@bash scripts/install_gltf_validator.sh
+	@# Debian's Chromium (headless) for the browser tests and screenshots; optional, never fails setup.
+	@bash scripts/install_chromium.sh
 	@touch $(STAMP)
 
 test: setup

@@ -15,6 +15,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from brdfgan.figures import HEADER_HEIGHT
+
 PANEL = 256  # side of one panel in evaluate.py's grids
 # Panel columns of a grid: input, then (truth, prediction) for four maps and the re-render.
 PAIRS = ((1, 2), (3, 4), (5, 6), (7, 8), (9, 10))
@@ -27,10 +29,11 @@ def main() -> None:
     parser.add_argument("--models", nargs="+", default=["gan", "baseline"])
     parser.add_argument("--panel", type=int, default=96)
     args = parser.parse_args()
-    grids = {m: cv2.imread(str(args.eval_dir / f"grid_{m}.png"), cv2.IMREAD_COLOR) for m in args.models}
-    first = grids[args.models[0]]
-    if any(g is None for g in grids.values()):
+    read = {m: cv2.imread(str(args.eval_dir / f"grid_{m}.png"), cv2.IMREAD_COLOR) for m in args.models}
+    if any(g is None for g in read.values()):
         raise SystemExit(f"error: missing grid_<model>.png in {args.eval_dir}")
+    grids = {m: g[HEADER_HEIGHT:] for m, g in read.items()}  # panels only, below the column labels
+    first = grids[args.models[0]]
 
     def panel(image: np.ndarray, column: int) -> np.ndarray:
         return image[:, column * PANEL : (column + 1) * PANEL]

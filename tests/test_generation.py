@@ -400,6 +400,7 @@ def test_cli_plan_lists_every_shard(tmp_path: Path) -> None:
 def test_contact_sheet_shows_every_panel_of_random_samples(tmp_path: Path) -> None:
     from brdfgan.cli import main
     from brdfgan.data.contact_sheet import COLUMNS, pick_samples
+    from brdfgan.figures import HEADER_HEIGHT
     from brdfgan.io.images import read_image
 
     spec = tiny_spec()
@@ -422,7 +423,7 @@ def test_contact_sheet_shows_every_panel_of_random_samples(tmp_path: Path) -> No
         == 0
     )
     small = read_image(tmp_path / "s.png")
-    assert small.shape[:2] == (22 + 3 * 16, len(COLUMNS) * 16)
+    assert small.shape[:2] == (HEADER_HEIGHT + 3 * 16, len(COLUMNS) * 16)
     assert main(["contact-sheet", str(tmp_path), "--tile", "4"]) == 2
     from brdfgan.data.contact_sheet import row_label
 

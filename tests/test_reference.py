@@ -10,7 +10,7 @@ import torch
 from brdfgan.core.svbrdf import linear_to_srgb, validate_maps
 from brdfgan.data.shards import Sample, shard_path, write_shard
 from brdfgan.errors import UserError
-from brdfgan.evaluation.run import fixed_samples
+from brdfgan.evaluation.evaluator import fixed_samples
 from brdfgan.models.reference import ConstantMaps, PhotoAsBasecolor, mean_maps, reference_models
 from brdfgan.runs import load_weights, save_weights
 from tests.conftest import random_maps

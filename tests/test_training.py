@@ -333,3 +333,11 @@ def test_seed_reaches_the_data_order_and_trainer_switches_need_no_plus(tmp_path:
     assert compose_train(["debug=default"], tmp_path).data.seed == 0
     trainer = hydra.utils.instantiate(cfg.trainer)  # every listed key is a real Trainer argument
     assert trainer.fast_dev_run is True
+    # The switches users type, each without `+`; a misspelt one still fails at composition.
+    typed = {"limit_val_batches": 2, "limit_test_batches": 1, "max_steps": 7, "val_check_interval": 0.5,
+             "check_val_every_n_epoch": 2, "log_every_n_steps": 3, "precision": "bf16-mixed", "devices": 1,
+             "accelerator": "cpu"}  # fmt: skip
+    switched = compose_train(["debug=default", *(f"trainer.{k}={v}" for k, v in typed.items())], tmp_path)
+    assert {key: switched.trainer[key] for key in typed} == typed
+    with pytest.raises(ConfigCompositionException):
+        compose_train(["debug=default", "trainer.limit_train_batchs=3"], tmp_path)

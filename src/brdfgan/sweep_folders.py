@@ -21,6 +21,9 @@ UNNAMED_OVERRIDE_KEYS = (
     "paths", "hydra", "ckpt_path", "init_from", "task_name", "train", "test", "logger", "callbacks",
     "debug", "trainer.max_", "trainer.min_", "trainer.limit_", "trainer.val_check_interval",
     "trainer.log_every_n_steps", "trainer.enable_", "trainer.fast_dev_run", "trainer.profiler",
+    "trainer.num_sanity_val_steps", "trainer.check_val_every_n_epoch", "trainer.accelerator",
+    "trainer.devices", "trainer.num_nodes", "trainer.strategy", "trainer.detect_anomaly",
+    "trainer.default_root_dir", "grid_samples",
     "data.data_dir", "data.num_workers", "data.epoch_samples", "data.val_samples", "data.prepare",
 )  # fmt: skip
 # Longer names are cut and end in a hash of the whole: a folder name stays far below the 255
@@ -29,6 +32,7 @@ JOB_FOLDER_MAX_LENGTH = 80
 
 
 def _named(key: str) -> bool:
+    key = key.split("@", 1)[0]  # a group chosen into another package (+logger@logger=wandb)
     for entry in UNNAMED_OVERRIDE_KEYS:
         if key == entry or key.startswith(entry + ".") or (entry.endswith("_") and key.startswith(entry)):
             return False
@@ -42,6 +46,13 @@ def override_key_value(override: str) -> tuple[str, str]:
     return key, value
 
 
+def named_overrides(overrides: Sequence[str]) -> list[tuple[str, str]]:
+    """``(key, value)`` of the overrides that say what a run is (not :data:`UNNAMED_OVERRIDE_KEYS`),
+    in their order: the parts of a job folder's name and of the run's name in the trackers."""
+    pairs = [override_key_value(override) for override in overrides]
+    return [(key, value) for key, value in pairs if _named(key)]
+
+
 def job_folder_name(number: int, overrides: Sequence[str]) -> str:
     """The folder of one multirun job: its number, then ``key-value`` of each override that says
     what the run is (not :data:`UNNAMED_OVERRIDE_KEYS`), joined by ``_``, with every character
@@ -52,11 +63,7 @@ def job_folder_name(number: int, overrides: Sequence[str]) -> str:
     ``hydra.sweep.subdir`` (conf/hydra/default.yaml) calls it through the ``brdfgan.job_folder``
     resolver with the job's overrides; e.g. ``3_loss-no_adv_seed-1``.
     """
-    parts = [str(number)]
-    for override in overrides:
-        key, value = override_key_value(override)
-        if _named(key):
-            parts.append(f"{key}-{value}" if value else key)
+    parts = [str(number)] + [f"{key}-{value}" if value else key for key, value in named_overrides(overrides)]
     name = re.sub(r"[^A-Za-z0-9._-]+", "_", "_".join(parts)).strip(".")
     if len(name) > JOB_FOLDER_MAX_LENGTH:
         digest = hashlib.sha1(name.encode()).hexdigest()[:8]

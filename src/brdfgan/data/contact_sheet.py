@@ -14,17 +14,16 @@ from __future__ import annotations
 import random
 from pathlib import Path
 
-import cv2
 import numpy as np
 import torch
 
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, resize_image, split_maps
 from brdfgan.data.shards import Sample, iter_shard, list_shards
 from brdfgan.errors import UserError
+from brdfgan.figures import caption, with_column_header
 from brdfgan.io.images import write_image
 
 COLUMNS = ("input", "basecolor", "normal", "roughness", "metallic")
-_LABEL_HEIGHT = 22
 
 
 def pick_samples(data_dir: str | Path, split: str, rows: int, seed: int = 0) -> list[Sample]:
@@ -84,16 +83,10 @@ def contact_sheet(samples: list[Sample], tile: int | None = None) -> np.ndarray:
         raise UserError("no samples to show")
     rows = torch.cat([sample_row(s, tile) for s in samples], dim=-2).permute(1, 2, 0).numpy()
     height = rows.shape[0] // len(samples)
-    width = rows.shape[1] // len(COLUMNS)
     canvas = np.ascontiguousarray((rows * 255.0 + 0.5).astype(np.uint8))  # putText draws on 8-bit
     for index, sample in enumerate(samples):
-        origin = (3, index * height + 12)
-        for colour, thickness in (((0, 0, 0), 3), ((255, 255, 255), 1)):  # outlined: legible on any photo
-            cv2.putText(canvas, row_label(sample), origin, cv2.FONT_HERSHEY_SIMPLEX, 0.35, colour, thickness)
-    header = np.full((_LABEL_HEIGHT, rows.shape[1], 3), 255, dtype=np.uint8)
-    for index, name in enumerate(COLUMNS):
-        cv2.putText(header, name, (index * width + 4, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)
-    return np.concatenate([header, canvas], axis=0).astype(np.float32) / 255.0
+        caption(canvas, row_label(sample), (3, index * height + 12))
+    return with_column_header(canvas.astype(np.float32) / 255.0, COLUMNS)
 
 
 def write_contact_sheet(

@@ -4,7 +4,8 @@
 (:mod:`brdfgan.metrics`); ``write_results`` writes ``metrics.json``, ``metrics.csv``,
 ``metrics.md`` and ``rmse.png`` (models × maps, full vs downscaled, like the paper's comparison
 figure); ``comparison_grid`` shows input | ground truth | prediction per map | re-render for a
-fixed list of samples.
+fixed list of samples (``fixed_samples``), with labelled columns; training logs the same grid
+every validation epoch (:class:`~brdfgan.training.prediction_grid.PredictionGrid`).
 """
 
 from __future__ import annotations
@@ -24,9 +25,11 @@ from torchmetrics import MetricCollection
 
 from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
+from brdfgan.data.capture import sample_as_photographed
 from brdfgan.data.datamodule import flash_frames
-from brdfgan.data.shards import Sample
+from brdfgan.data.shards import Sample, iter_shard, list_shards
 from brdfgan.errors import UserError
+from brdfgan.figures import with_column_header
 from brdfgan.io.atomic import atomic_replace, write_text_atomic
 from brdfgan.io.images import write_image
 from brdfgan.metrics import hotspot_centres
@@ -149,16 +152,55 @@ def _panels(maps: Tensor) -> list[Tensor]:
             parts.metallic.expand(3, -1, -1)]  # fmt: skip
 
 
+# The grids' columns: the input, then ground truth and prediction of each map and of a re-render
+# under a light the network never saw (a fixed point light off to the side).
+GRID_COLUMNS = (
+    "input",
+    *(f"{name}\n{side}" for name in ("basecolor", "normal", "roughness", "metallic", "relit")
+      for side in ("GT", "pred")),
+)  # fmt: skip
+
+
+def fixed_samples(
+    data_dir: Path, split: str, count: int, keys: Sequence[str] | None = None, *, align_maps: bool = True
+) -> list[Sample]:
+    """The first ``count`` samples of a split in shard and key order, or the samples named by
+    ``keys`` (in that order) — a list fixed before training, not cherry-picked afterwards. With
+    ``align_maps`` their maps are resampled into the photos' pixels, as the DataModule reads them
+    (:func:`~brdfgan.data.capture.sample_as_photographed`)."""
+    wanted = list(keys) if keys else None
+    found: dict[str, Sample] = {}
+    samples: list[Sample] = []
+    for shard in list_shards(data_dir, split):
+        for stored in iter_shard(shard):
+            sample = sample_as_photographed(stored) if align_maps else stored
+            if wanted is None:
+                if len(samples) == count:
+                    return samples
+                samples.append(sample)
+            elif sample.key in wanted:
+                found[sample.key] = sample
+    if wanted is None:
+        return samples
+    missing = [key for key in wanted if key not in found]
+    if missing:
+        raise UserError(f"grid_keys: no sample {missing[0]!r} in the {split} split of {data_dir}")
+    return [found[key] for key in wanted]
+
+
 @torch.no_grad()
 def comparison_grid(generator: nn.Module, samples: Sequence[Sample]) -> np.ndarray:
-    """One row per sample: input | (GT, prediction) per map | (GT, prediction) re-render.
+    """One row per sample under a header naming the columns (:data:`GRID_COLUMNS`): input |
+    (GT, prediction) per map | (GT, prediction) re-render. The generator runs on the device of
+    its parameters.
 
-    Shape: output ``(N·H, 11·W, 3)`` display-ready in [0, 1].
+    Shape: output ``(HEADER_HEIGHT + N·H, 11·W, 3)`` display-ready in [0, 1].
     """
+    device = next(generator.parameters()).device
     photos = torch.stack([s.photo for s in samples])
     truth = torch.stack([s.maps for s in samples])
     flash = flash_frames([s.meta for s in samples], *photos.shape[-2:])
-    pred = generator.eval()(photos, flash)
+    pred = generator.eval()(photos.to(device), flash.to(device)).float().cpu()
     capture = FlashCapture()
     renders = _novel_light_render(torch.cat([truth, pred]), capture)
     rows = []
@@ -168,7 +210,8 @@ def comparison_grid(generator: nn.Module, samples: Sequence[Sample]) -> np.ndarr
             panels += [t, p]
         panels += [renders[i], renders[len(samples) + i]]
         rows.append(torch.cat(panels, dim=-1))
-    return torch.cat(rows, dim=-2).permute(1, 2, 0).numpy()
+    grid = torch.cat(rows, dim=-2).permute(1, 2, 0).numpy()
+    return with_column_header(grid, GRID_COLUMNS)
 
 
 def write_grid(generator: nn.Module, samples: Sequence[Sample], path: str | os.PathLike[str]) -> Path:

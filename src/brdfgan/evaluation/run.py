@@ -14,41 +14,18 @@ from omegaconf import DictConfig, OmegaConf
 from torch import nn
 
 from brdfgan.config_check import check_config
-from brdfgan.data.capture import sample_as_photographed
-from brdfgan.data.shards import Sample, iter_shard, list_shards
 from brdfgan.errors import UserError, single_console_logging
-from brdfgan.evaluation.evaluator import evaluate_models, markdown_table, write_grid, write_results
+from brdfgan.evaluation.evaluator import (
+    evaluate_models,
+    fixed_samples,
+    markdown_table,
+    write_grid,
+    write_results,
+)
 from brdfgan.inference.refine import RefineConfig, RefinedGenerator
 from brdfgan.runs import load_generator, model_name
 
 log = logging.getLogger(__name__)
-
-
-def fixed_samples(
-    data_dir: Path, split: str, count: int, keys: Sequence[str] | None = None, *, align_maps: bool = True
-) -> list[Sample]:
-    """The first ``count`` samples of a split in shard and key order, or the samples named by
-    ``keys`` (in that order) — a list fixed before training, not cherry-picked afterwards. With
-    ``align_maps`` their maps are resampled into the photos' pixels, as the DataModule reads them
-    (:func:`~brdfgan.data.capture.sample_as_photographed`)."""
-    wanted = list(keys) if keys else None
-    found: dict[str, Sample] = {}
-    samples: list[Sample] = []
-    for shard in list_shards(data_dir, split):
-        for stored in iter_shard(shard):
-            sample = sample_as_photographed(stored) if align_maps else stored
-            if wanted is None:
-                if len(samples) == count:
-                    return samples
-                samples.append(sample)
-            elif sample.key in wanted:
-                found[sample.key] = sample
-    if wanted is None:
-        return samples
-    missing = [key for key in wanted if key not in found]
-    if missing:
-        raise UserError(f"grid_keys: no sample {missing[0]!r} in the {split} split of {data_dir}")
-    return [found[key] for key in wanted]
 
 
 def _models(ckpt: Any) -> dict[str, str]:
@@ -85,19 +62,15 @@ def log_to_loggers(
 ) -> None:
     """Send the metrics (``<model>/<metric>``) and the PNGs to the configured Lightning loggers:
     every logger takes the metrics; TensorBoard and W&B also take the chart and the grids."""
-    from lightning.pytorch.loggers import TensorBoardLogger, WandbLogger
-
     from brdfgan.io.images import read_image
+    from brdfgan.tracking import log_image
 
     flat = {f"{model}/{k}": v for model, values in results.items() for k, v in values.items()}
     for node in (logger_cfg or {}).values():
         logger = hydra.utils.instantiate(node)
         logger.log_metrics(flat)
         for path in images:
-            if isinstance(logger, TensorBoardLogger):
-                logger.experiment.add_image(path.stem, read_image(path)[..., :3], dataformats="HWC")
-            elif isinstance(logger, WandbLogger):
-                logger.log_image(key=path.stem, images=[str(path)])
+            log_image([logger], path.stem, read_image(path)[..., :3], step=0)
         logger.finalize("success")
 
 

@@ -19,6 +19,7 @@ class TrainConfig:
     ckpt_path: str | None = None
     init_from: str | None = None
     monitor: str = "val/loss"
+    grid_samples: int = 4
     paths: dict[str, Any] = field(default_factory=dict)
     data: dict[str, Any] = field(default_factory=dict)
     model: dict[str, Any] = field(default_factory=dict)

@@ -87,6 +87,9 @@ class SVBRDFGAN(L.LightningModule):
     ) -> None:
         super().__init__()
         self.automatic_optimization = False
+        # A rank may get no validation batch when val_samples is below the number of ranks
+        # (ShardStream's exact lengths); Lightning refuses such a rank unless allowed.
+        self.allow_zero_length_dataloader_with_multiple_devices = True
         self.generator = generator
         self.loss = loss
         self.uses_discriminator = loss.switches.needs_discriminator
@@ -104,7 +107,10 @@ class SVBRDFGAN(L.LightningModule):
                 self.discriminator.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
         self.val_metrics: MetricCollection | None = metrics() if metrics is not None else None
         self.test_metrics: MetricCollection | None = metrics() if metrics is not None else None
-        self.save_hyperparameters(ignore=["generator", "discriminator", "loss", "optimizer", "metrics"])
+        # In the checkpoint only: the trackers get the whole run config once (brdfgan.tracking).
+        self.save_hyperparameters(
+            ignore=["generator", "discriminator", "loss", "optimizer", "metrics"], logger=False
+        )
 
     def setup(self, stage: str) -> None:
         # Each DDP rank draws its own rendering-loss configurations.
