@@ -7,6 +7,9 @@ source  decoder                      default       notes
 ======  ===========================  ============  ===================================================
 jpeg    Pillow                       ``"srgb"``    8-bit; EXIF orientation applied; CMYK rejected
 png     OpenCV (pixels), own header  ``"srgb"``    8/16-bit; EXIF (``eXIf`` chunk) orientation applied
+heif    pillow-heif (libheif)        ``"srgb"``    8/10/12-bit (``.heic``/``.heif``, phones); turned
+                                                   by libheif (the container's ``irot``/``imir``)
+tiff    OpenCV (pixels), Pillow      ``"srgb"``    8/16-bit; TIFF/EXIF orientation applied
 exr     OpenEXR (``read_image``)     ``"linear"``  half/float; may exceed 1; NaN/Inf rejected,
                                                    negative values clamped to 0 with a warning
 raw     rawpy (LibRaw)               ``"linear"``  linear demosaic, camera white balance, sRGB
@@ -21,6 +24,24 @@ orientation: the orientation is applied exactly once, here, with :func:`apply_or
 Pillow still identifies every file first: its detected format (not the extension) and mode decide
 what happens, so a text file renamed ``.jpg``, a CMYK JPEG or a grayscale PNG are reported before
 any pixel is decoded.
+
+TIFF is read like PNG, for the same reason (Pillow reduces 16-bit RGB TIFFs to 8 bits): Pillow
+identifies it and reads its tags, OpenCV (libtiff) decodes the pixels. OpenCV 5 turns some TIFFs by
+their orientation tag even with ``IMREAD_UNCHANGED`` and fails on others, so the bytes it gets have
+the tag set to 1 (:func:`_tiff_without_orientation`) and the orientation is applied here, once.
+
+HEIF (``.heic``, what iPhones and many Android phones save) is recognised by its ``ftyp`` brand
+before Pillow sees it and decoded with pillow-heif's own API rather than its Pillow plugin: the
+plugin reduces 10/12-bit images to 8 bits and registering it would change Pillow for the whole
+process. HEIF states its orientation in the container (``irot``/``imir``, which phones write to
+match the EXIF tag) and libheif applies it while decoding; :attr:`Photo.orientation` reports the
+EXIF tag and nothing is turned a second time.
+
+Colour profiles are not applied, for any format: the stored values are decoded with the sRGB curve
+(or taken as linear with ``colorspace="linear"``). An ICC profile (JPEG, PNG, TIFF, HEIF) is
+ignored; Display P3, which iPhones embed, has the sRGB curve, so only its wider primaries go
+unconverted (colours read slightly less saturated than they are). A HEIF whose ``nclx`` colour
+information states an HDR transfer curve (PQ, HLG) gets a warning: its values are not sRGB-encoded.
 
 Alpha: an alpha channel with any transparent pixel is an error (a cut-out, not a photo); a fully
 opaque one (many tools always write RGBA) is dropped with a warning. Truncation detection relies on
@@ -40,6 +61,7 @@ import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
+from warnings import catch_warnings, filterwarnings
 
 import cv2
 import numpy as np
@@ -54,6 +76,7 @@ from brdfgan.io.images import ImageIOError, read_image
 
 __all__ = [
     "EXR_PHOTO_EXTENSIONS",
+    "HEIF_PHOTO_EXTENSIONS",
     "JPEG_PHOTO_EXTENSIONS",
     "LOOKS_LINEAR_MAX_MEDIAN",
     "LOOKS_LINEAR_MIN_P99",
@@ -62,6 +85,7 @@ __all__ = [
     "PHOTO_EXTENSIONS",
     "PNG_PHOTO_EXTENSIONS",
     "RAW_PHOTO_EXTENSIONS",
+    "TIFF_PHOTO_EXTENSIONS",
     "Colorspace",
     "Photo",
     "PhotoError",
@@ -71,15 +95,31 @@ __all__ = [
 ]
 
 Colorspace = Literal["srgb", "linear"]
-Source = Literal["jpeg", "png", "exr", "raw"]
+Source = Literal["jpeg", "png", "heif", "tiff", "exr", "raw"]
 
 JPEG_PHOTO_EXTENSIONS = frozenset({".jpg", ".jpeg"})
 PNG_PHOTO_EXTENSIONS = frozenset({".png"})
+HEIF_PHOTO_EXTENSIONS = frozenset({".heic", ".heif"})
+TIFF_PHOTO_EXTENSIONS = frozenset({".tif", ".tiff"})
 EXR_PHOTO_EXTENSIONS = frozenset({".exr"})
 RAW_PHOTO_EXTENSIONS = frozenset(
     {".dng", ".cr2", ".cr3", ".nef", ".arw", ".orf", ".rw2", ".raf", ".pef", ".srw"}
 )
-PHOTO_EXTENSIONS = JPEG_PHOTO_EXTENSIONS | PNG_PHOTO_EXTENSIONS | EXR_PHOTO_EXTENSIONS | RAW_PHOTO_EXTENSIONS
+PHOTO_EXTENSIONS = (
+    JPEG_PHOTO_EXTENSIONS
+    | PNG_PHOTO_EXTENSIONS
+    | HEIF_PHOTO_EXTENSIONS
+    | TIFF_PHOTO_EXTENSIONS
+    | EXR_PHOTO_EXTENSIONS
+    | RAW_PHOTO_EXTENSIONS
+)
+# The extensions expected for each format read by _read_ldr_photo (others get a warning).
+_LDR_EXTENSIONS: dict[str, frozenset[str]] = {
+    "jpeg": JPEG_PHOTO_EXTENSIONS,
+    "png": PNG_PHOTO_EXTENSIONS,
+    "heif": HEIF_PHOTO_EXTENSIONS,
+    "tiff": TIFF_PHOTO_EXTENSIONS,
+}
 
 MIN_PHOTO_SIZE = 32
 
@@ -98,6 +138,8 @@ _GRAY_ALPHA_MODES = frozenset({"LA", "La"})
 # LibRaw's ``flip`` (applied by postprocess) → the equivalent EXIF orientation tag.
 _LIBRAW_FLIP_TO_EXIF = {0: 1, 3: 3, 5: 8, 6: 6}
 _EXR_PIXEL_BITS = {0: 32, 1: 16, 2: 32}  # UINT, HALF, FLOAT
+# nclx transfer characteristics (ITU-T H.273) whose values are HDR signals, not sRGB-encoded.
+_HDR_TRANSFERS = {16: "PQ (SMPTE ST 2084)", 18: "HLG (ARIB STD-B67)"}
 
 
 class PhotoError(UserError):
@@ -114,16 +156,16 @@ class Photo:
 
     Attributes:
         path: the file read.
-        linear: ``(3, H, W)`` float32 linear RGB, EXIF orientation applied. JPEG/PNG lie in
-            ``[0, 1]``; EXR may exceed 1; RAW is in ``[0, 1]`` relative to the white level.
-        source: ``"jpeg"``, ``"png"``, ``"exr"`` or ``"raw"`` (from the file's content for
-            JPEG/PNG, not its extension).
-        bit_depth: 8/16 for JPEG/PNG, 16/32 for half/float EXR, the sensor's bits for RAW when
-            LibRaw reports a white level, else ``None``.
+        linear: ``(3, H, W)`` float32 linear RGB, EXIF orientation applied. JPEG/PNG/HEIF/TIFF
+            lie in ``[0, 1]``; EXR may exceed 1; RAW is in ``[0, 1]`` relative to the white level.
+        source: ``"jpeg"``, ``"png"``, ``"heif"``, ``"tiff"``, ``"exr"`` or ``"raw"`` (from the
+            file's content for JPEG/PNG/HEIF/TIFF, not its extension).
+        bit_depth: 8/16 for JPEG/PNG/TIFF, 8/10/12 for HEIF, 16/32 for half/float EXR, the
+            sensor's bits for RAW when LibRaw reports a white level, else ``None``.
         colorspace: ``"srgb"`` (the stored values were decoded with the sRGB curve) or ``"linear"``.
         orientation: the EXIF orientation tag that was applied (1 = none).
         warnings: human-readable warnings for the user.
-        lens: the focal length the EXIF states (JPEG/PNG), for the refinement's field of view
+        lens: the focal length the EXIF states (JPEG/PNG/HEIF/TIFF), for the refinement's field of view
             (:mod:`brdfgan.inference.intake.lens`); ``None`` when there is none.
     """
 
@@ -158,12 +200,12 @@ class Photo:
 
 
 def read_photo(path: str | os.PathLike[str], colorspace: Colorspace | None = None) -> Photo:
-    """Read a JPEG, PNG, EXR or camera RAW photo into linear RGB.
+    """Read a JPEG, PNG, HEIC/HEIF, TIFF, EXR or camera RAW photo into linear RGB.
 
     Args:
         path: the photo file; its extension must be one of :data:`PHOTO_EXTENSIONS`.
         colorspace: how to interpret the stored values. ``None``: the format's default (sRGB for
-            JPEG/PNG, linear for EXR and RAW). ``"srgb"``: decode with the sRGB curve.
+            JPEG/PNG/HEIF/TIFF, linear for EXR and RAW). ``"srgb"``: decode with the sRGB curve.
             ``"linear"``: take the values as they are. RAW files are always decoded linearly;
             asking for ``"srgb"`` there is an error.
 
@@ -314,59 +356,26 @@ def _identical_channels_warning(sample: np.ndarray) -> str | None:
     return None
 
 
-# ------------------------------------------------------------------------------------------ JPEG/PNG
+# ------------------------------------------------------------------------------- JPEG/PNG/HEIF/TIFF
 
 
 def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
     data = _read_bytes(path)
     warnings: list[str] = []
-    try:
-        with Image.open(io.BytesIO(data)) as image:
-            pil_format, mode, (width, height) = image.format, image.mode, image.size
-            if pil_format in ("JPEG", "MPO"):  # MPO: multi-picture JPEG written by many cameras
-                source: Source = "jpeg"
-                exif = image.getexif()
-                orientation = _orientation_tag(exif.get(_EXIF_ORIENTATION_TAG, 1), warnings)
-                lens = lens_from_exif(exif, width)
-                _check_mode(path, mode)
-                if mode != "RGB":
-                    raise PhotoError(path, f"unsupported JPEG mode {mode!r}, expected RGB")
-                _check_size(path, width, height)
-                image.load()  # raises "image file is truncated" instead of decoding grey
-                stored = np.asarray(image)
-            elif pil_format == "PNG":
-                source = "png"
-                _check_mode(path, mode)
-                _check_size(path, width, height)
-                png_exif = _png_exif(data)
-                stated = 1 if png_exif is None else png_exif.get(_EXIF_ORIENTATION_TAG, 1)
-                orientation = _orientation_tag(stated, warnings)
-                lens = None if png_exif is None else lens_from_exif(png_exif, width)
-                stored = None
-            else:
-                raise PhotoError(
-                    path, f"file content is {pil_format or 'an unknown'} image, expected JPEG or PNG"
-                )
-    except PhotoError:
-        raise
-    except UnidentifiedImageError as error:
-        raise PhotoError(path, "not an image file (or an unsupported or corrupt image format)") from error
-    except Image.DecompressionBombError as error:
-        raise PhotoError(path, f"image is too large to decode safely ({error})") from error
-    except (OSError, SyntaxError, ValueError, EOFError, struct.error) as error:
-        raise PhotoError(path, f"truncated or corrupt image data ({error})") from error
-
-    if source == "png":
-        stored = _decode_png(path, data)
-    assert stored is not None
-    stored = _drop_opaque_alpha(path, stored, warnings)
+    if _is_heif(data):
+        source: Source = "heif"
+        stored, bit_depth, orientation, lens = _decode_heif(path, data, warnings)
+        pending = 1  # libheif has turned the pixels already
+    else:
+        source, stored, orientation, lens = _decode_identified(path, data, warnings)
+        bit_depth = 16 if stored.dtype == np.uint16 else 8
+        pending = orientation
+    levels = (1 << bit_depth) - 1
+    stored = _drop_opaque_alpha(path, stored, warnings, opaque=levels)
     _check_not_black(path, stored)
-    expected_ext = JPEG_PHOTO_EXTENSIONS if source == "jpeg" else PNG_PHOTO_EXTENSIONS
-    if path.suffix.lower() not in expected_ext:
+    if path.suffix.lower() not in _LDR_EXTENSIONS[source]:
         warnings.append(f"the file holds a {source.upper()} image although its extension is {path.suffix!r}")
 
-    bit_depth = 16 if stored.dtype == np.uint16 else 8
-    levels = 65535 if bit_depth == 16 else 255
     colorspace = colorspace or "srgb"
     sample = _subsample(stored)
     for warning in (
@@ -383,7 +392,7 @@ def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
         table = srgb_decoding_table(levels)
     else:
         table = (torch.arange(levels + 1, dtype=torch.float64) / levels).to(torch.float32)
-    oriented = apply_orientation(stored, orientation)
+    oriented = apply_orientation(stored, pending)
     # Indexing with the (C, H, W) view writes the result directly in channel-first order.
     linear = table.numpy()[oriented.transpose(2, 0, 1)]
     return Photo(
@@ -396,6 +405,61 @@ def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
         warnings=tuple(warnings),
         lens=lens,
     )
+
+
+def _decode_identified(
+    path: Path, data: bytes, warnings: list[str]
+) -> tuple[Source, np.ndarray, int, Lens | None]:
+    """A JPEG, PNG or TIFF, identified by Pillow: its format, stored pixels ``(H, W, C)`` (uint8
+    or uint16, not yet turned), the EXIF orientation and the lens the EXIF states."""
+    try:
+        # Pillow warns (a UserWarning, printed with a line of its source) about the corrupt or
+        # truncated TIFF tags it tolerates; the checks here report what matters, in one line.
+        with catch_warnings():
+            filterwarnings("ignore", category=UserWarning, module=r"PIL\.TiffImagePlugin")
+            with Image.open(io.BytesIO(data)) as image:
+                pil_format, mode, (width, height) = image.format, image.mode, image.size
+                if pil_format in ("JPEG", "MPO"):  # MPO: multi-picture JPEG written by many cameras
+                    source: Source = "jpeg"
+                    exif = image.getexif()
+                    orientation = _orientation_tag(exif.get(_EXIF_ORIENTATION_TAG, 1), warnings)
+                    lens = lens_from_exif(exif, width)
+                    _check_mode(path, mode)
+                    if mode != "RGB":
+                        raise PhotoError(path, f"unsupported JPEG mode {mode!r}, expected RGB")
+                    _check_size(path, width, height)
+                    image.load()  # raises "image file is truncated" instead of decoding grey
+                    return source, np.asarray(image), orientation, lens
+                if pil_format == "PNG":
+                    _check_mode(path, mode)
+                    _check_size(path, width, height)
+                    png_exif = _png_exif(data)
+                    stated = 1 if png_exif is None else png_exif.get(_EXIF_ORIENTATION_TAG, 1)
+                    orientation = _orientation_tag(stated, warnings)
+                    lens = None if png_exif is None else lens_from_exif(png_exif, width)
+                    return "png", _decode_opencv(path, data, "PNG"), orientation, lens
+                if pil_format == "TIFF":
+                    _check_mode(path, mode)  # 16-bit RGB reads as mode "RGB" here
+                    _check_size(path, width, height)
+                    exif = image.getexif()  # a TIFF's own tags (orientation) and its EXIF IFD
+                    orientation = _orientation_tag(exif.get(_EXIF_ORIENTATION_TAG, 1), warnings)
+                    lens = lens_from_exif(exif, width)
+                    stored = _decode_opencv(path, _tiff_without_orientation(data), "TIFF")
+                    return "tiff", stored, orientation, lens
+                raise PhotoError(
+                    path,
+                    f"file content is {pil_format or 'an unknown'} image, expected JPEG, PNG, HEIF or TIFF",
+                )
+    except PhotoError:
+        raise
+    except UnidentifiedImageError as error:
+        if data[:4] in (b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"):  # a TIFF header, unreadable tags
+            raise PhotoError(path, "truncated or corrupt TIFF data") from error
+        raise PhotoError(path, "not an image file (or an unsupported or corrupt image format)") from error
+    except Image.DecompressionBombError as error:
+        raise PhotoError(path, f"image is too large to decode safely ({error})") from error
+    except (OSError, SyntaxError, ValueError, EOFError, struct.error) as error:
+        raise PhotoError(path, f"truncated or corrupt image data ({error})") from error
 
 
 def _check_mode(path: Path, mode: str) -> None:
@@ -439,20 +503,22 @@ def _png_exif(data: bytes) -> Image.Exif | None:
     return None
 
 
-def _decode_png(path: Path, data: bytes) -> np.ndarray:
+def _decode_opencv(path: Path, data: bytes, kind: str) -> np.ndarray:
+    """The stored pixels of a PNG or TIFF as RGB(A), 8 or 16 bits, not turned by any orientation."""
     # IMREAD_UNCHANGED keeps 16 bits and, unlike IMREAD_COLOR, ignores EXIF orientation.
-    # OpenCV logs its own "PNG input buffer is incomplete" warning to stderr; the PhotoError below
-    # already says it in one line, so its log is quietened for this call.
+    # OpenCV logs its own messages ("PNG input buffer is incomplete", libtiff's read errors, over
+    # several lines) to stderr; the PhotoError below already says it in one line, so its log is
+    # silenced for this call.
     level = cv2.utils.logging.getLogLevel()
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     try:
         image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
     except cv2.error as error:
-        raise PhotoError(path, "truncated or corrupt PNG data") from error
+        raise PhotoError(path, f"truncated or corrupt {kind} data") from error
     finally:
         cv2.utils.logging.setLogLevel(level)
     if image is None:
-        raise PhotoError(path, "truncated or corrupt PNG data")
+        raise PhotoError(path, f"truncated or corrupt {kind} data")
     if image.dtype not in (np.uint8, np.uint16):
         raise PhotoError(path, f"unsupported sample type {image.dtype}, expected 8- or 16-bit")
     if image.ndim == 2 or image.shape[2] < 3:
@@ -462,17 +528,125 @@ def _decode_png(path: Path, data: bytes) -> np.ndarray:
     return cv2.cvtColor(image, cv2.COLOR_BGRA2RGBA)
 
 
-def _drop_opaque_alpha(path: Path, image: np.ndarray, warnings: list[str]) -> np.ndarray:
+def _tiff_without_orientation(data: bytes) -> bytes:
+    """The TIFF with its first IFD's Orientation tag set to 1 (the input itself when it has none).
+
+    OpenCV 5 turns some TIFFs by that tag even with ``IMREAD_UNCHANGED`` and fails on others
+    ("Internal imread issue" on an uncompressed strip image with orientation 6); at 1 it decodes
+    the stored pixels, and read_photo applies the orientation once, like for every format. Pillow
+    has read the tag already; a header this cannot walk is left to OpenCV to report.
+    """
+    order = {b"II": "<", b"MM": ">"}.get(data[:2])
+    if order is None:
+        return data
+    try:
+        (magic,) = struct.unpack_from(order + "H", data, 2)
+        if magic == 42:  # classic TIFF: 4-byte offsets, 12-byte entries
+            (ifd,) = struct.unpack_from(order + "I", data, 4)
+            (count,) = struct.unpack_from(order + "H", data, ifd)
+            first, entry_size, value_at = ifd + 2, 12, 8
+        elif magic == 43:  # BigTIFF: 8-byte offsets and counts, 20-byte entries
+            (ifd,) = struct.unpack_from(order + "Q", data, 8)
+            (count,) = struct.unpack_from(order + "Q", data, ifd)
+            first, entry_size, value_at = ifd + 8, 20, 12
+        else:
+            return data
+        for index in range(count):
+            entry = first + index * entry_size
+            tag, kind = struct.unpack_from(order + "HH", data, entry)
+            if tag == _EXIF_ORIENTATION_TAG and kind == 3:  # SHORT: the value sits in the entry
+                if struct.unpack_from(order + "H", data, entry + value_at)[0] == 1:
+                    return data
+                patched = bytearray(data)
+                struct.pack_into(order + "H", patched, entry + value_at, 1)
+                return bytes(patched)
+    except struct.error:
+        pass
+    return data
+
+
+def _drop_opaque_alpha(
+    path: Path, image: np.ndarray, warnings: list[str], *, opaque: float | None = None
+) -> np.ndarray:
     """RGBA → RGB when every pixel is fully opaque (many tools always write alpha), else an error:
-    transparent pixels have no meaningful colour and mark a cut-out, not a photo."""
+    transparent pixels have no meaningful colour and mark a cut-out, not a photo.
+
+    ``opaque`` is the alpha of an opaque pixel: by default the integer type's maximum, or 1.0;
+    a 10-bit HEIF's codes sit in uint16 with 1023 as their maximum."""
     if image.shape[-1] != 4:
         return image
     alpha = image[..., 3]
-    opaque = np.iinfo(image.dtype).max if np.issubdtype(image.dtype, np.integer) else 1.0
+    if opaque is None:
+        opaque = np.iinfo(image.dtype).max if np.issubdtype(image.dtype, np.integer) else 1.0
     if not (alpha == opaque).all():
         raise PhotoError(path, "has an alpha channel with transparent pixels; save the photo as RGB")
     warnings.append("the alpha channel is fully opaque and was ignored")
     return image[..., :3]
+
+
+# ---------------------------------------------------------------------------------------------- HEIF
+
+
+def _is_heif(data: bytes) -> bool:
+    # ISO base media files start with an ``ftyp`` box; MP4/MOV videos do too, so the brand decides
+    # (pillow-heif's own check). The import waits until a file looks like one.
+    if data[4:8] != b"ftyp":
+        return False
+    import pillow_heif
+
+    return bool(pillow_heif.is_supported(data[:64]))
+
+
+def _decode_heif(path: Path, data: bytes, warnings: list[str]) -> tuple[np.ndarray, int, int, Lens | None]:
+    """A HEIF's primary image: its codes ``(H, W, C)`` as displayed (libheif applied the container's
+    rotation and mirroring), their bit depth, the EXIF orientation and the lens the EXIF states."""
+    import pillow_heif  # imported lazily: libheif is only needed for HEIF photos
+
+    try:
+        # 10/12-bit images (HDR-capable phones) open as 16-bit instead of being reduced to 8 bits.
+        heif = pillow_heif.open_heif(data, convert_hdr_to_8bit=False)
+        image = heif[heif.primary_index]
+        info: dict[str, Any] = image.info  # values of many types (pillow-heif types them as a union)
+        mode, (width, height) = image.mode, image.size
+        _check_mode(path, mode.split(";")[0])  # "RGB;16" → "RGB", monochrome "L" → rejected
+        _check_size(path, width, height)
+        bit_depth = int(info.get("bit_depth", 8))
+        stored = np.asarray(image)  # decodes; a truncated or damaged file raises here
+    except PhotoError:
+        raise
+    except (OSError, SyntaxError, ValueError, EOFError, RuntimeError) as error:
+        raise PhotoError(path, f"truncated or corrupt HEIF data ({str(error).strip()})") from error
+    if stored.dtype == np.uint16 and bit_depth < 16:
+        # pillow-heif moves 10/12-bit codes to the top of 16 bits with a shift (1023 → 65472, not
+        # 65535); dividing by 65535 would be 0.1 % short at white. The file's own codes are exact.
+        stored = stored >> (16 - bit_depth)
+    else:
+        bit_depth = 8 * stored.dtype.itemsize
+    exif = _exif_from_bytes(info.get("exif"), warnings)
+    orientation = _orientation_tag(exif.get(_EXIF_ORIENTATION_TAG, 1), warnings)
+    # The EXIF's pixel dimensions describe the image before it was turned.
+    lens = lens_from_exif(exif, stored.shape[1] if orientation <= 4 else stored.shape[0])
+    transfer = (info.get("nclx_profile") or {}).get("transfer_characteristics")
+    if transfer in _HDR_TRANSFERS:
+        warnings.append(
+            f"the photo states the HDR transfer curve {_HDR_TRANSFERS[transfer]}: its values are not "
+            "sRGB-encoded and its tones will be misread; export an SDR (sRGB or Display P3) copy"
+        )
+    return stored, bit_depth, orientation, lens
+
+
+def _exif_from_bytes(raw: bytes | None, warnings: list[str]) -> Image.Exif:
+    """The EXIF block of a HEIF (an empty one when it has none or it cannot be parsed)."""
+    exif = Image.Exif()
+    if raw:
+        try:
+            with catch_warnings():
+                filterwarnings("ignore", category=UserWarning, module=r"PIL\.TiffImagePlugin")
+                exif.load(raw)
+        except (SyntaxError, ValueError, EOFError, struct.error) as error:
+            warnings.append(f"ignored unreadable EXIF data ({error})")
+            return Image.Exif()
+    return exif
 
 
 # ----------------------------------------------------------------------------------------------- EXR
