@@ -47,7 +47,7 @@ faults: setup
 # The artist's path on the photos the package ships (held-out procedural materials): textures,
 # material.glb, material.json, preview.png and a turntable preview.gif per photo.
 demo: setup
-	$(VENV)/bin/brdfgan predict src/brdfgan/samples --out outputs/demo --animate
+	$(VENV)/bin/brdfgan predict src/brdfgan/samples --out outputs/demo --animate --tileable
 	@echo "results: outputs/demo/<photo>/ (open preview.png, preview.gif, or material.glb in any glTF viewer)"
 
 # The foundation demo: our renderer against Mitsuba 3 on the same maps.

@@ -24,6 +24,7 @@ from brdfgan.runs import WeightsError, save_weights
 from tests.conftest import random_maps
 
 TEXTURES = ("basecolor", "normal", "roughness", "metallic", "metallicRoughness", "diffuse", "specular")
+TEXTURES += ("height", "ao")
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +80,13 @@ def test_every_texture_is_written_with_its_documented_encoding(
     assert torch.allclose(chw["roughness"][:1], roughness, atol=tolerance)
     assert torch.allclose(chw["metallic"][:1], metallic, atol=tolerance)
     packed = chw["metallicRoughness"]
-    assert torch.all(packed[0] == 1.0)
+    # R: the ambient occlusion of the normals' relief, the same values as ao.<fmt>.
+    occlusion = torch.from_numpy(read_rgb(out / f"ao.{fmt}")).permute(2, 0, 1)[:1]
+    assert (
+        torch.allclose(packed[0:1], occlusion, atol=tolerance)
+        and occlusion.min() >= 0
+        and occlusion.max() <= 1
+    )
     assert torch.allclose(packed[1:2], roughness, atol=tolerance) and torch.allclose(
         packed[2:3], metallic, atol=tolerance
     )
@@ -91,6 +98,17 @@ def test_every_texture_is_written_with_its_documented_encoding(
         assert cv2.imread(str(out / "basecolor.png"), cv2.IMREAD_UNCHANGED).dtype == (
             np.uint8 if bit_depth == 8 else np.uint16
         )
+        assert cv2.imread(str(out / "height.png"), cv2.IMREAD_UNCHANGED).dtype == np.uint16  # always 16-bit
+    # height: value = 0.5 + scale · h (PNG) or h itself (EXR), h the relief of the normals.
+    relief = document["relief"]
+    from brdfgan.core.height import height_from_normals
+
+    height = height_from_normals(normal.float()).double()
+    stored = chw["height"][0]
+    expected_height = height if fmt == "exr" else 0.5 + relief["height_scale"] * height
+    assert torch.allclose(stored, expected_height, atol=max(tolerance, 1e-4))
+    if fmt == "png":  # by default the scale fills the range
+        assert stored.max() == pytest.approx(1.0, abs=1e-3) or stored.min() == pytest.approx(0.0, abs=1e-3)
 
 
 def test_directx_convention_flips_only_green(tmp_path: Path) -> None:
@@ -105,6 +123,33 @@ def test_directx_convention_flips_only_green(tmp_path: Path) -> None:
     glb = (a / "material.glb").read_bytes(), (b / "material.glb").read_bytes()
     assert glb[0].count(PNG_SIGNATURE) == 3
     assert glb[0].split(b"BIN\x00", 1)[1] == glb[1].split(b"BIN\x00", 1)[1]
+
+
+def test_normal_strength_is_baked_into_the_loose_map_and_a_scale_in_the_glb(tmp_path: Path) -> None:
+    from brdfgan.core.svbrdf import scale_normal_strength
+    from tests.test_gltf import Glb
+
+    maps = random_maps(16, 16, seed=4)
+    out = write_material(tmp_path / "m", maps, ExportOptions(normal_strength=2.0, height_scale=10.0), {})
+    stored = decode_normal(torch.from_numpy(read_rgb(out / "normal.png")).permute(2, 0, 1))
+    assert torch.allclose(stored, scale_normal_strength(maps[3:6], 2.0).double(), atol=1e-2)
+    document = json.loads((out / "material.json").read_text())
+    assert document["files"]["normal.png"]["strength"] == 2.0 and document["relief"]["height_scale"] == 10.0
+    gltf = Glb((out / "material.glb").read_bytes()).json
+    material = gltf["materials"][0]
+    assert material["normalTexture"]["scale"] == 2.0
+    # The ORM texture is also the occlusion texture; the glb's normals are strength 1 (scaled there).
+    assert (
+        material["occlusionTexture"]["index"]
+        == material["pbrMetallicRoughness"]["metallicRoughnessTexture"]["index"]
+    )
+    plain = write_material(tmp_path / "p", maps, ExportOptions(), {})
+    glb = Glb((plain / "material.glb").read_bytes())
+    strong = Glb((out / "material.glb").read_bytes())
+    normal_png = strong.json["materials"][0]["normalTexture"]["index"]
+    assert strong.view(strong.json["images"][normal_png]["bufferView"]) == glb.view(
+        glb.json["images"][normal_png]["bufferView"]
+    )
 
 
 def test_output_directory_is_replaced_atomically(tmp_path: Path) -> None:
@@ -205,12 +250,36 @@ def test_cli_options_reach_the_files(tmp_path: Path, weights: Path) -> None:
     assert not (out / "preview.png").exists()
 
 
+def test_cli_artist_options_quiet_verbose_prefix_and_device(
+    tmp_path: Path, weights: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    photo = flash_photo(tmp_path / "oak.png", size=(80, 80))
+    common = ["predict", str(photo), "--weights", str(weights), "--no-preview", "--device", "cpu"]
+    assert main([*common, "--out", str(tmp_path / "q"), "--quiet", "--tileable", "--normal-strength", "1.5",
+                 "--height-scale", "20"]) == 0  # fmt: skip
+    quiet = capsys.readouterr()
+    assert quiet.err == ""  # errors only, and there were none; stdout lists the result
+    assert quiet.out.split() == [str(tmp_path / "q" / "oak")]
+    document = json.loads((tmp_path / "q" / "oak" / "material.json").read_text())
+    assert document["files"]["normal.png"]["strength"] == 1.5 and document["relief"]["height_scale"] == 20.0
+    assert max(document["tileable"]["wrap_ratio_after"]) < 1.2
+    assert main([*common, "--out", str(tmp_path / "v"), "--verbose", "--prefix"]) == 0
+    verbose = capsys.readouterr()
+    assert "oak.png: read " in verbose.err and " network " in verbose.err and " export " in verbose.err
+    names = {p.name for p in (tmp_path / "v" / "oak").iterdir()}
+    assert {"oak_basecolor.png", "oak_height.png", "oak_ao.png", "material.glb", "material.json"} <= names
+    assert "basecolor.png" not in names
+
+
 @pytest.mark.parametrize(
     ("arguments", "message"),
     [
         (["--weights", "nowhere.safetensors"], "weights file not found"),
         (["--crop", "1,2"], "--crop"),
         (["--resolution", "0"], "--resolution"),
+        (["--normal-strength", "-1"], "--normal-strength: expected a number >= 0"),
+        (["--height-scale", "0"], "--height-scale: expected a number > 0"),
+        (["--quiet", "--verbose"], "not allowed with argument"),
     ],
 )
 def test_cli_usage_errors_are_one_line(

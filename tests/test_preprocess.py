@@ -364,13 +364,15 @@ def test_no_nan_in_the_highlight_message_of_a_mostly_black_photo() -> None:
     assert not any("nan" in w.lower() for w in result.warnings), result.warnings
     # The only light there is counts as the flash: the crop follows it, not the black centre.
     assert not any("no distinct flash highlight" in w for w in result.warnings)
-    assert result.crop == Crop(0, 0, 64)
+    assert result.crop == Crop(0, 0, 64) and result.to_json()["crop"]["chosen"] == "flash hotspot"
     # A lit centre with a dark spot elsewhere gives a finite ratio in the message, never NaN.
     dim = torch.full((3, 120, 160), 0.2)
     dim[:, 5:25, 120:150] = 0.3
     result = preprocess(make_photo(dim), 64)
     message = next(w for w in result.warnings if "no distinct flash highlight" in w)
     assert "1.50× as bright" in message and "nan" not in message
+    # material.json says where the crop really came from: the centre, not the hotspot.
+    assert result.to_json()["crop"]["chosen"] == "image centre"
 
 
 @pytest.mark.parametrize("resolution", [0, -4, 2.5, True])

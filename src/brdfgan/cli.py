@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -28,6 +29,8 @@ from brdfgan.errors import (
 from brdfgan.inference import DEFAULT_REFINE_STEPS
 
 if TYPE_CHECKING:  # imported lazily below: --help must not wait for torch
+    import torch
+
     from brdfgan.inference.intake.preprocess import Crop
 
 # Exit status when the command ran but at least one photo of the batch failed.
@@ -67,6 +70,35 @@ def _positive(text: str) -> int:
     return value
 
 
+def _number(text: str, *, minimum: float, inclusive: bool) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    bound = "a number >= " if inclusive else "a number > "
+    if not math.isfinite(value) or value < minimum or (value == minimum and not inclusive):
+        raise argparse.ArgumentTypeError(f"expected {bound}{minimum:g}, got {text!r}")
+    return value
+
+
+def _non_negative(text: str) -> float:
+    return _number(text, minimum=0.0, inclusive=True)
+
+
+def _positive_float(text: str) -> float:
+    return _number(text, minimum=0.0, inclusive=False)
+
+
+def _predict_device(choice: str) -> torch.device:
+    """``--device``: ``auto`` takes CUDA when there is a device; ``cuda`` without one is an error."""
+    import torch
+
+    available = torch.cuda.is_available()
+    if choice == "cuda" and not available:
+        raise UserError("--device cuda: no CUDA device is available here (use --device cpu or auto)")
+    return torch.device("cuda" if choice == "cuda" or (choice == "auto" and available) else "cpu")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="brdfgan", description="SVBRDF estimation from a single flash photo (Boss & Lensch 2019)."
@@ -88,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
         "inputs",
         nargs="+",
         metavar="PHOTO|DIR",
-        help="JPEG, PNG, EXR or camera RAW/DNG files, or folders of them",
+        help="JPEG, PNG, HEIC/HEIF, TIFF (8/16-bit), EXR or camera RAW/DNG files, or folders of them",
     )
     predict.add_argument(
         "--out", required=True, type=Path, metavar="DIR", help="output folder (one subfolder per photo)"
@@ -115,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
     predict.add_argument(
         "--input-colorspace",
         choices=("srgb", "linear"),
-        help="how JPEG/PNG values are encoded (default srgb; EXR and RAW are always linear)",
+        help="how JPEG/PNG/HEIC/TIFF values are encoded (default srgb; EXR and RAW are always linear)",
     )
     predict.add_argument(
         "--format",
@@ -139,6 +171,27 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("gif", "mp4"),
         help="also write a turntable-light preview animation (default gif)",
     )
+    predict.add_argument(
+        "--tileable",
+        action="store_true",
+        help="make every map wrap seamlessly (blended with its own half-shifted copies, the same way for "
+        "all maps); height and occlusion are then periodic too",
+    )
+    predict.add_argument(
+        "--normal-strength",
+        type=_non_negative,
+        default=1.0,
+        metavar="S",
+        help="scale the normals' tilt by S (0 flat, 1 as predicted, 2 twice the slope; default 1); "
+        "baked into normal.png, normalTexture.scale in material.glb",
+    )
+    predict.add_argument(
+        "--height-scale",
+        type=_positive_float,
+        metavar="S",
+        help="height.png value = 0.5 + S·h, h in units of the sample side (default: fill the 16-bit range; "
+        "S is recorded in material.json)",
+    )
     predict.add_argument("--no-preview", action="store_true", help="do not render preview.png")
     predict.add_argument(
         "--refine",
@@ -157,7 +210,26 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="photos above N² run as N² tiles (default 1024: memory of one 1024² pass, any resolution)",
     )
-    predict.add_argument("--quiet", action="store_true", help="no progress bar")
+    predict.add_argument(
+        "--prefix",
+        action="store_true",
+        help="name the textures <material>_basecolor.png, <material>_normal.png, … (engines' importers "
+        "match materials by file name); material.glb/.json keep their names",
+    )
+    predict.add_argument(
+        "--device",
+        choices=("auto", "cpu", "cuda"),
+        default="auto",
+        help="where the network runs (default auto: a CUDA GPU when there is one, else the CPU)",
+    )
+    chatter = predict.add_mutually_exclusive_group()
+    chatter.add_argument(
+        "--quiet",
+        action="store_true",
+        help="stderr: errors only (no model line, progress, warnings or summary); "
+        "stdout still lists the outputs",
+    )
+    chatter.add_argument("--verbose", action="store_true", help="also print each photo's time per stage")
     predict.set_defaults(run=predict_command, interrupted=PREDICT_INTERRUPTED)
 
     export = commands.add_parser(
@@ -266,28 +338,42 @@ def predict_command(args: argparse.Namespace) -> int:
     )
     from brdfgan.inference.refine import RefineConfig
 
+    device = _predict_device(args.device)
+    if args.quiet:  # errors only: library warnings (logging) are not errors
+        logging.getLogger("brdfgan").setLevel(logging.ERROR)
     options = PredictOptions(
         resolution=args.resolution,
         crop=args.crop,
         colorspace=args.input_colorspace,
-        export=ExportOptions(args.format, args.bit_depth, args.normal_convention),
+        export=ExportOptions(
+            args.format,
+            args.bit_depth,
+            args.normal_convention,
+            normal_strength=args.normal_strength,
+            height_scale=args.height_scale,
+        ),
+        tileable=args.tileable,
+        prefix_files=args.prefix,
         tiling=TilingConfig.for_tile(args.tile),
         preview=not args.no_preview,
         animate=args.animate,
         refine=None if args.refine is None else RefineConfig(steps=args.refine),
     )
-    predictor = Predictor.create(load_model(args.weights), options)
+    model = load_model(args.weights)
+    model.generator.to(device)
+    predictor = Predictor.create(model, options)
     # Before any photo is read or anything large allocated.
     check_memory(predictor.model, predictor.resolution, options.tiling)
     photos = collect_photos(args.inputs)
     if not photos:
         print("error: no photos to process", file=sys.stderr)
         return USER_ERROR_EXIT_CODE
-    model = predictor.model
-    print(
-        f"model {model.model_id} ({model.path}); {len(photos)} photo(s) at {predictor.resolution}²",
-        file=sys.stderr,
-    )
+    if not args.quiet:
+        print(
+            f"model {model.model_id} ({model.path}) on {device}; "
+            f"{len(photos)} photo(s) at {predictor.resolution}²",
+            file=sys.stderr,
+        )
     bar = tqdm(total=len(photos), unit="photo", disable=args.quiet or None, file=sys.stderr)
     # The refinement's steps of the photo in progress, under the batch's bar.
     quiet_steps = args.quiet or args.refine is None
@@ -303,8 +389,11 @@ def predict_command(args: argparse.Namespace) -> int:
         if isinstance(result, PhotoFailure):
             bar.write(f"error: {result.message}", file=sys.stderr)
         else:
-            for warning in result.warnings:
+            for warning in () if args.quiet else result.warnings:
                 bar.write(f"warning: {result.photo}: {warning}", file=sys.stderr)
+            if args.verbose:
+                stages = ", ".join(f"{stage} {seconds:.2f} s" for stage, seconds in result.timings.items())
+                bar.write(f"{result.photo.name}: {stages}", file=sys.stderr)
         bar.update(1)
 
     try:
@@ -314,7 +403,7 @@ def predict_command(args: argparse.Namespace) -> int:
     finally:
         steps_bar.close()
         bar.close()
-    for result in outcome.succeeded:
+    for result in outcome.succeeded:  # stdout is the result, also with --quiet (scripts read it)
         print(result.output)
     if outcome.stopped is not None:  # a full disk; its error line was printed as it happened
         print(
@@ -328,7 +417,8 @@ def predict_command(args: argparse.Namespace) -> int:
         for failure in outcome.failed:
             print(f"  {failure.message}", file=sys.stderr)
         return PARTIAL_FAILURE_EXIT_CODE
-    print(f"done: {len(outcome.succeeded)} material(s) in {args.out}", file=sys.stderr)
+    if not args.quiet:
+        print(f"done: {len(outcome.succeeded)} material(s) in {args.out}", file=sys.stderr)
     return 0
 
 

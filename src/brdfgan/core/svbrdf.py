@@ -21,6 +21,7 @@ Everything here is a pure torch function; nothing imports Lightning or Hydra.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import torch
@@ -202,6 +203,19 @@ def normalize_normal(normal: Tensor, dim: int = -3, eps: float = 1e-8) -> Tensor
     up = normal.new_zeros(shape)
     up.narrow(dim, 2, 1).fill_(1.0)
     return torch.where(length > eps, normal / length.clamp(min=eps), up)
+
+
+def scale_normal_strength(normal: Tensor, strength: float) -> Tensor:
+    """Normals with their tilt exaggerated (``strength > 1``) or flattened (``< 1``): the tangent
+    components scaled by ``strength``, then renormalised — the slopes of the surface scale by
+    ``strength``, as glTF's ``normalTexture.scale`` does.
+
+    Shape: ``(*, 3, H, W)`` unit normals → same.
+    """
+    if not (strength >= 0 and math.isfinite(strength)):
+        raise ValueError(f"normal strength must be a finite number >= 0, got {strength}")
+    scale = normal.new_tensor([strength, strength, 1.0]).view(3, 1, 1)
+    return normalize_normal(normal * scale)
 
 
 def roughness_to_alpha(roughness: Tensor) -> Tensor:

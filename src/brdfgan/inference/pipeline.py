@@ -6,6 +6,7 @@ For each photo::
       → preprocess (square crop on the flash hotspot, linear resize, the training auto exposure)
       → the generator, tiled with frozen normalisation statistics when large          model
       [→ refine_maps: the maps fitted to the photo with the differentiable renderer (--refine)]
+      [→ make_seamless: every map blended into a tile that wraps (--tileable)]
       → write_material (textures, material.glb, material.json, preview.png [, preview.gif/mp4])  outputs
 
 A batch keeps going when one photo fails: :func:`predict_batch` returns what succeeded and, for
@@ -21,13 +22,16 @@ from __future__ import annotations
 import logging
 import os
 import re
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
 from torch import Tensor
 
+from brdfgan.core.seamless import make_seamless, wrap_ratios
 from brdfgan.errors import UserError, disk_full_message, is_disk_full, one_line
 from brdfgan.inference.intake.lens import crop_field_of_view
 from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, read_photo
@@ -57,6 +61,8 @@ class PredictOptions:
     preview: bool = True
     animate: Literal["gif", "mp4"] | None = None
     refine: RefineConfig | None = None  # None: the network's maps as they are
+    tileable: bool = False  # blend the maps into a seamless tile (brdfgan.core.seamless)
+    prefix_files: bool = False  # texture files named <material>_<map>.<ext> for engines' importers
 
 
 @dataclass(frozen=True)
@@ -87,6 +93,7 @@ class PhotoResult:
     photo: Path
     output: Path
     warnings: tuple[str, ...]
+    timings: dict[str, float] = field(default_factory=dict)  # seconds per stage (--verbose)
 
 
 @dataclass(frozen=True)
@@ -137,27 +144,64 @@ def output_names(photos: Sequence[Path]) -> list[str]:
 RefineProgress = Callable[[Path, int, int], None]  # (photo, step, of steps)
 
 
+@dataclass
+class _StageClock:
+    """Wall-clock seconds per pipeline stage, added into ``timings`` (``--verbose`` prints them)."""
+
+    timings: dict[str, float]
+
+    @contextmanager
+    def __call__(self, stage: str) -> Iterator[None]:
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - start
+
+    def timed(self, stage: str, write: Callable[[Path], Any]) -> Callable[[Path], Any]:
+        """``write`` with its time counted under ``stage``."""
+
+        def run(target: Path) -> Any:
+            with self(stage):
+                return write(target)
+
+        return run
+
+
 def predict_photo(
     path: Path, out_dir: Path, predictor: Predictor, on_refine_step: RefineProgress | None = None
 ) -> PhotoResult:
     """Run the whole pipeline on one photo and write ``out_dir`` (replaced atomically)."""
     options = predictor.options
-    photo = read_photo(path, options.colorspace)
-    prepared = preprocess(photo, predictor.resolution, options.crop)
+    timings: dict[str, float] = {}
+    clock = _StageClock(timings)
+    with clock("read"):
+        photo = read_photo(path, options.colorspace)
+    with clock("preprocess"):
+        prepared = preprocess(photo, predictor.resolution, options.crop)
     fov_deg, fov_source = crop_field_of_view(photo.lens, photo.width, photo.height, prepared.crop.size)
     flash_frame = prepared.flash_frame(fov_deg)
-    maps = predictor.maps(prepared.photo, flash_frame)
+    with clock("network"):
+        maps = predictor.maps(prepared.photo, flash_frame)
     refinement: dict[str, Any] | None = None
     if options.refine is not None:
         steps = options.refine.steps
         progress = None if on_refine_step is None else lambda step, _loss: on_refine_step(path, step, steps)
-        refined = refine_maps(prepared.photo, maps, flash_frame, options.refine, on_step=progress)
+        with clock("refine"):
+            refined = refine_maps(prepared.photo, maps, flash_frame, options.refine, on_step=progress)
         maps = refined.maps
         refinement = {
             **refined.to_json(),
             "field_of_view": {"degrees": fov_deg, "source": fov_source},
             "settings": {k: v for k, v in options.refine.to_json().items() if k != "steps"},
         }
+    tiling_seams: dict[str, Any] | None = None
+    if options.tileable:
+        before = wrap_ratios(maps)
+        with clock("tileable"):
+            maps = make_seamless(maps)
+        # How visible the wrap is: last vs first column (row) over neighbouring columns (rows).
+        tiling_seams = {"wrap_ratio_before": list(before), "wrap_ratio_after": list(wrap_ratios(maps))}
     warnings = photo.warnings + prepared.warnings
     metadata = {
         "name": out_dir.name,
@@ -170,17 +214,28 @@ def predict_photo(
         "inference": options.tiling.to_json(predictor.tiled),
         # The test-time fit (brdfgan.inference.refine), None without --refine.
         "refinement": refinement,
+        # --tileable: the maps' wrap-around differences before and after the seamless blend.
+        "tileable": tiling_seams,
         "input_statistics": prepared.stats,
         "brdf": BRDF_DESCRIPTION,
         "warnings": list(warnings),
     }
     extra_files: dict[str, Callable[[Path], Any]] = {}
     if options.preview:
-        extra_files["preview.png"] = lambda target: write_preview(target, prepared.photo, maps)
+        extra_files["preview.png"] = clock.timed(
+            "preview", lambda target: write_preview(target, prepared.photo, maps)
+        )
     if options.animate is not None:
-        extra_files[f"preview.{options.animate}"] = lambda target: write_animation(target, maps)
-    write_material(out_dir, maps, options.export, metadata, extra_files=extra_files)
-    return PhotoResult(photo=path, output=out_dir, warnings=warnings)
+        extra_files[f"preview.{options.animate}"] = clock.timed(
+            "animation", lambda target: write_animation(target, maps)
+        )
+    # Tileable maps get a periodic height and occlusion (ExportOptions.periodic follows --tileable).
+    prefix = f"{out_dir.name}_" if options.prefix_files else ""
+    export = replace(options.export, periodic=options.tileable, file_prefix=prefix)
+    with clock("export"):  # textures, height and occlusion, material.glb (previews timed on their own)
+        write_material(out_dir, maps, export, metadata, extra_files=extra_files)
+    timings["export"] -= sum(timings.get(stage, 0.0) for stage in ("preview", "animation"))
+    return PhotoResult(photo=path, output=out_dir, warnings=warnings, timings=timings)
 
 
 def predict_batch(

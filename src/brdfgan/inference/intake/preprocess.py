@@ -147,6 +147,8 @@ class Preprocessed:
             output pixels the exposure clipped at 1), and ``clipped_fraction`` only when the
             source has a saturation level (not for EXR).
         warnings: human-readable warnings for the user.
+        chosen: how the crop was placed: ``"user"`` (``--crop``), ``"flash hotspot"``, or
+            ``"image centre"`` when no highlight stood out from the centre.
     """
 
     photo: Tensor
@@ -156,6 +158,7 @@ class Preprocessed:
     resized_from: int
     stats: dict[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    chosen: str = "flash hotspot"
 
     def flash_frame(self, fov_deg: float) -> Tensor:
         """The :mod:`flash frame <brdfgan.core.flash_geometry>` of :attr:`photo`: the detected
@@ -179,7 +182,7 @@ class Preprocessed:
                 "x": self.crop.x,
                 "y": self.crop.y,
                 "size": self.crop.size,
-                "chosen": "user" if self.hotspot is None else "flash hotspot",
+                "chosen": self.chosen,
                 "hotspot": list(self.hotspot) if self.hotspot is not None else None,
             },
             "resolution": int(self.photo.shape[-1]),
@@ -384,6 +387,7 @@ def preprocess(
             )
         crop = hotspot_crop(height, width, detected)
         reported_hotspot: tuple[float, float] | None = detected
+        chosen = "flash hotspot" if detected == found else "image centre"
     else:
         try:
             crop.check(height, width)
@@ -393,6 +397,7 @@ def preprocess(
         hx, hy = find_hotspot(crop.slice(linear))
         detected = (crop.x + hx, crop.y + hy)
         reported_hotspot = None
+        chosen = "user"
     region = crop.slice(linear)
 
     centre = (crop.x + (crop.size - 1) / 2.0, crop.y + (crop.size - 1) / 2.0)
@@ -442,6 +447,7 @@ def preprocess(
         resized_from=crop.size,
         stats=stats,
         warnings=tuple(warnings),
+        chosen=chosen,
     )
 
 

@@ -10,14 +10,23 @@ normal                RGB      ``(n + 1) / 2`` tangent space, +Z out; OpenGL (+Y
                                DirectX (``--normal-convention directx``: green = 1 − green)
 roughness             gray     perceptual roughness r (GGX α = r²), linear value
 metallic              gray     linear value
-metallicRoughness     RGB      glTF packing: R = 1 (no occlusion, so it doubles as an ORM texture),
-                               G = roughness, B = metallic; linear
+metallicRoughness     RGB      glTF ORM packing: R = ambient occlusion, G = roughness, B = metallic;
+                               linear
+height                gray     height from the normals (Frankot-Chellappa), value = 0.5 + S·h with
+                               h in units of the sample side and S the height scale (material.json);
+                               PNG always 16-bit; EXR: h itself
+ao                    gray     ambient occlusion of that height (horizon-based, cosine-weighted);
+                               linear, 1 = unoccluded
 diffuse               RGB      diffuse albedo b·(1 − m) (paper §3); PNG sRGB-encoded, EXR linear
 specular              RGB      specular F0 0.04·(1 − m) + b·m; PNG sRGB-encoded, EXR linear
 ===================== ======== ====================================================================
 
 ``material.glb`` always embeds 8-bit PNG base colour, OpenGL normal and metallicRoughness textures
-(what glTF 2.0 prescribes), whatever the format options of the loose files.
+(what glTF 2.0 prescribes), whatever the format options of the loose files; the ORM texture is
+also its ``occlusionTexture``. The normal strength (``--normal-strength S``) is baked into the
+loose normal map, while the ``.glb`` keeps the network's normals with ``normalTexture.scale = S``
+(glTF's own strength), so a viewer shows the same relief either way; height and occlusion are
+those of the strengthened normals in both.
 
 Atomicity: everything is written into a hidden staging directory beside the target,
 ``.<name>.<owner>.tmp``, which then takes the place of ``OUT/<name>``. On Linux the two directories
@@ -41,12 +50,13 @@ import functools
 import hashlib
 import json
 import logging
+import math
 import os
 import re
 import shutil
 import uuid
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -55,10 +65,12 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from brdfgan.core.height import ambient_occlusion, height_from_normals
 from brdfgan.core.svbrdf import (
     diffuse_albedo,
     encode_normal,
     linear_to_srgb,
+    scale_normal_strength,
     specular_albedo,
     split_maps,
     srgb_to_linear,
@@ -94,6 +106,10 @@ class ExportOptions:
     bit_depth: Literal[8, 16] = 8
     normal_convention: NormalConvention = "opengl"
     exr_precision: Literal["half", "float"] = "half"
+    normal_strength: float = 1.0  # tangent tilt × this (baked into the loose normal map)
+    height_scale: float | None = None  # height.png value = 0.5 + scale·h; None: fill the range
+    periodic: bool = False  # the maps wrap (--tileable): height and occlusion are integrated so
+    file_prefix: str = ""  # texture files named <prefix><map>.<ext> (--prefix: "<material>_")
 
     def __post_init__(self) -> None:
         if self.format not in TEXTURE_FORMATS:
@@ -104,10 +120,57 @@ class ExportOptions:
             raise ExportError(
                 f"normal convention: expected one of {NORMAL_CONVENTIONS}, got {self.normal_convention!r}"
             )
+        if not (math.isfinite(self.normal_strength) and self.normal_strength >= 0):
+            raise ExportError(f"normal strength: expected a number >= 0, got {self.normal_strength!r}")
+        if self.height_scale is not None and not (math.isfinite(self.height_scale) and self.height_scale > 0):
+            raise ExportError(f"height scale: expected a number > 0, got {self.height_scale!r}")
 
 
-# What glTF 2.0 prescribes for material.glb: sRGB base colour, OpenGL normals, 8-bit PNG.
+# What glTF 2.0 prescribes for material.glb: sRGB base colour, OpenGL normals, 8-bit PNG (the
+# normal strength goes into normalTexture.scale instead of the texture).
 GLTF_TEXTURES = ExportOptions()
+
+
+@dataclass(frozen=True)
+class Relief:
+    """The surface relief of a map set: height and ambient occlusion of its normals (at the
+    chosen normal strength), shared by the loose files and the ``.glb``.
+
+    Shape:
+        - height: ``(H, W)`` in units of the sample side, mean 0
+        - occlusion: ``(H, W)`` in ``[0, 1]``
+    """
+
+    height: Tensor
+    occlusion: Tensor
+    height_scale: float  # stored height value = 0.5 + height_scale · h
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "height_units": "sample side (the texture's width spans 1)",
+            "height_encoding": "value = 0.5 + height_scale * h",
+            "height_scale": self.height_scale,
+            "height_range": [float(self.height.min()), float(self.height.max())],
+            "occlusion": "horizon-based, cosine-weighted, 8 directions within 1/16 of the side",
+            "occlusion_mean": float(self.occlusion.mean()),
+        }
+
+
+def surface_relief(maps: Tensor, options: ExportOptions) -> Relief:
+    """Height (Frankot-Chellappa) and ambient occlusion of ``maps``' normals at
+    ``options.normal_strength``; periodic when ``options.periodic``.
+
+    Shape:
+        - maps: ``(8, H, W)``
+    """
+    normal = scale_normal_strength(
+        split_maps(maps.detach().to("cpu", torch.float32)).normal, options.normal_strength
+    )
+    height = height_from_normals(normal, periodic=options.periodic)
+    occlusion = ambient_occlusion(height, periodic=options.periodic)
+    reach = float(height.abs().max())
+    scale = options.height_scale if options.height_scale is not None else (0.5 / reach if reach > 0 else 1.0)
+    return Relief(height=height, occlusion=occlusion, height_scale=scale)
 
 
 @dataclass(frozen=True)
@@ -122,10 +185,12 @@ class Texture:
     colorspace: str  # "srgb" | "linear": the transfer function of the stored values
     channels: str  # what each channel holds
     encoding: str  # how to turn stored values into the quantity
+    bit_depth: Literal[8, 16] | None = None  # PNG depth when fixed (height: 16), else the option's
 
 
-def texture_set(maps: Tensor, options: ExportOptions) -> dict[str, Texture]:
-    """The stored values of every loose texture file, keyed by map name (no extension).
+def texture_set(maps: Tensor, options: ExportOptions, relief: Relief | None = None) -> dict[str, Texture]:
+    """The stored values of every loose texture file, keyed by map name (no extension); the
+    height and occlusion from ``relief`` (default: :func:`surface_relief` of the maps).
 
     Shape:
         - maps: ``(8, H, W)``, layout of :mod:`brdfgan.core.svbrdf`
@@ -138,11 +203,19 @@ def texture_set(maps: Tensor, options: ExportOptions) -> dict[str, Texture]:
     basecolor_linear = srgb_to_linear(parts.basecolor)
     diffuse = diffuse_albedo(basecolor_linear, parts.metallic)
     specular = specular_albedo(basecolor_linear, parts.metallic)
-    normal = encode_normal(parts.normal)
+    relief = relief if relief is not None else surface_relief(maps, options)
+    normal = encode_normal(scale_normal_strength(parts.normal, options.normal_strength))
     if options.normal_convention == "directx":
         normal = torch.cat([normal[0:1], 1.0 - normal[1:2], normal[2:3]])
-    packed = torch.cat([torch.ones_like(parts.roughness), parts.roughness, parts.metallic])
+    occlusion = relief.occlusion[None]
+    packed = torch.cat([occlusion, parts.roughness, parts.metallic])
     exr = options.format == "exr"
+    height = relief.height[None] if exr else (0.5 + relief.height_scale * relief.height[None]).clamp(0.0, 1.0)
+    height_encoding = (
+        "height h in units of the sample side"
+        if exr
+        else f"value = 0.5 + {relief.height_scale:.6g} * h, h in units of the sample side"
+    )
 
     def colour(linear: Tensor, what: str) -> Texture:
         stored = linear if exr else linear_to_srgb(linear)
@@ -159,8 +232,13 @@ def texture_set(maps: Tensor, options: ExportOptions) -> dict[str, Texture]:
         ),
         "metallic": Texture(_hwc(parts.metallic), "linear", "gray", "metalness"),
         "metallicRoughness": Texture(
-            _hwc(packed), "linear", "R = 1 (occlusion), G = roughness, B = metallic", "glTF metallicRoughness"
+            _hwc(packed),
+            "linear",
+            "R = occlusion, G = roughness, B = metallic",
+            "glTF occlusion-roughness-metallic",
         ),
+        "height": Texture(_hwc(height, clip=not exr), "linear", "gray", height_encoding, bit_depth=16),
+        "ao": Texture(_hwc(occlusion), "linear", "gray", "ambient occlusion (1 = open)"),
         "diffuse": colour(diffuse, "diffuse albedo b(1 - m)"),
         "specular": colour(specular, "specular F0 0.04(1 - m) + b m"),
     }
@@ -197,14 +275,19 @@ def write_material(
         ``out_dir``
     """
     target = Path(out_dir)
-    textures = texture_set(maps, options)
-    # The bit depth changes no value; another format or normal convention (EXR, DirectX) does, and
-    # then the glTF set is computed for itself.
-    same_values = (options.format, options.normal_convention) == (
-        GLTF_TEXTURES.format,
-        GLTF_TEXTURES.normal_convention,
+    relief = surface_relief(maps, options)
+    textures = texture_set(maps, options, relief)
+    # The bit depth changes no value; another format, normal convention or strength (EXR, DirectX,
+    # --normal-strength) does, and then the glTF set is computed for itself (same relief).
+    gltf_options = replace(
+        options, format="png", bit_depth=8, normal_convention="opengl", normal_strength=1.0
     )
-    gltf_textures = textures if same_values else texture_set(maps, GLTF_TEXTURES)
+    same_values = (options.format, options.normal_convention, options.normal_strength) == (
+        "png",
+        "opengl",
+        1.0,
+    )
+    gltf_textures = textures if same_values else texture_set(maps, gltf_options, relief)
     parent = target.parent
     try:
         parent.mkdir(parents=True, exist_ok=True)
@@ -219,7 +302,7 @@ def write_material(
     try:
         staging.mkdir()
         files = _write_files(staging, target.name, textures, gltf_textures, options, extra_files or {})
-        document = {"format": MATERIAL_JSON_FORMAT, **metadata, "files": files}
+        document = {"format": MATERIAL_JSON_FORMAT, **metadata, "relief": relief.to_json(), "files": files}
         (staging / "material.json").write_text(json.dumps(document, indent=2, sort_keys=False) + "\n")
         _swap_directory(staging, target, owner)
     except OSError as error:
@@ -271,9 +354,10 @@ def _write_files(
 ) -> dict[str, dict[str, Any]]:
     files: dict[str, dict[str, Any]] = {}
     for map_name, texture in textures.items():
-        path = directory / f"{map_name}.{options.format}"
-        write_image(path, texture.values, bit_depth=options.bit_depth, exr_precision=options.exr_precision)
-        depth = options.bit_depth if options.format == "png" else options.exr_precision
+        path = directory / f"{options.file_prefix}{map_name}.{options.format}"
+        bit_depth = texture.bit_depth or options.bit_depth
+        write_image(path, texture.values, bit_depth=bit_depth, exr_precision=options.exr_precision)
+        depth = bit_depth if options.format == "png" else options.exr_precision
         files[path.name] = {
             "map": map_name,
             "colorspace": texture.colorspace,
@@ -283,18 +367,22 @@ def _write_files(
         }
         if map_name == "normal":
             files[path.name]["convention"] = options.normal_convention
+            files[path.name]["strength"] = options.normal_strength
     write_glb(
         directory / "material.glb",
         basecolor_png=png_bytes(gltf_textures["basecolor"].values),
         normal_png=png_bytes(gltf_textures["normal"].values),
         metallic_roughness_png=png_bytes(gltf_textures["metallicRoughness"].values),
         name=name,
+        normal_scale=options.normal_strength,
     )
     files["material.glb"] = {
         "map": "glTF 2.0 binary: a 1 m square floor plane (+Y up) with this material",
         "colorspace": "baseColor sRGB; normal and metallicRoughness linear",
         "channels": "embedded 8-bit PNGs",
-        "encoding": "glTF metallic-roughness PBR; normal texture OpenGL convention",
+        "encoding": "glTF metallic-roughness PBR; occlusion in the metallicRoughness texture's R; "
+        "normal texture OpenGL convention at strength 1, "
+        f"normalTexture.scale {options.normal_strength:g}",
     }
     for file_name, write in extra_files.items():
         write(directory / file_name)
@@ -405,5 +493,7 @@ def _owner_running(pid: int, token: str) -> bool:
     return _start_token(pid) == token
 
 
-def _hwc(chw: Tensor) -> np.ndarray:
-    return chw.permute(1, 2, 0).clamp(0.0, 1.0).numpy()
+def _hwc(chw: Tensor, *, clip: bool = True) -> np.ndarray:
+    """``(C, H, W)`` → ``(H, W, C)`` values, clipped to ``[0, 1]`` unless raw (an EXR height)."""
+    hwc = chw.permute(1, 2, 0)
+    return (hwc.clamp(0.0, 1.0) if clip else hwc).numpy()

@@ -28,7 +28,8 @@ image up = bitangent, blue = +Z = the surface normal. w = +1 is also what Blende
 unmirrored UV layout, so viewers that regenerate tangents (MikkTSpace) agree.
 
 Texture semantics (glTF): base colour is sRGB; metallic-roughness is linear with G = roughness and
-B = metallic (R is ignored; an occlusion map could go there); the normal texture is linear,
+B = metallic and R = ambient occlusion (the same texture is the ``occlusionTexture``: glTF's ORM
+packing); the normal texture is linear,
 encoded ``(n + 1) / 2``. Beware that ``cv2.imencode`` expects BGR: encode an RGB array with
 ``cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)`` first, or metallic ends up in R.
 """
@@ -115,12 +116,16 @@ def build_glb(
     name: str = "material",
     size: float = 1.0,
     generator: str = "brdfgan",
+    normal_scale: float = 1.0,
+    occlusion: bool = True,
 ) -> bytes:
     """The GLB bytes of a ``size`` × ``size`` plane (X-Z, facing +Y) textured with the three PNGs.
 
     ``basecolor_png`` is sRGB RGB(A); ``metallic_roughness_png`` linear with G = roughness and
-    B = metallic; ``normal_png`` linear, tangent space, OpenGL convention (+Y = image up),
-    ``(n + 1) / 2``. The PNG bytes are embedded unchanged. Pure: no file is touched.
+    B = metallic, and with ``occlusion`` R = ambient occlusion (then also the material's
+    ``occlusionTexture``, glTF's ORM packing); ``normal_png`` linear, tangent space, OpenGL
+    convention (+Y = image up), ``(n + 1) / 2``, its strength ``normal_scale``
+    (``normalTexture.scale``). The PNG bytes are embedded unchanged. Pure: no file is touched.
     """
     try:
         side = float(size)  # also accepts numpy scalars
@@ -128,6 +133,8 @@ def build_glb(
         raise ValueError(f"size must be a positive finite number, got {size!r}") from None
     if not (math.isfinite(side) and side > 0):
         raise ValueError(f"size must be a positive finite number, got {size!r}")
+    if not (math.isfinite(normal_scale) and normal_scale >= 0):
+        raise ValueError(f"normal_scale must be a finite number >= 0, got {normal_scale!r}")
     images = {
         "basecolor": _check_png("basecolor_png", basecolor_png),
         "normal": _check_png("normal_png", normal_png),
@@ -194,7 +201,12 @@ def build_glb(
                     "metallicFactor": 1.0,
                     "roughnessFactor": 1.0,
                 },
-                "normalTexture": {"index": texture_index["normal"], "scale": 1.0},
+                "normalTexture": {"index": texture_index["normal"], "scale": _f32(normal_scale)},
+                **(
+                    {"occlusionTexture": {"index": texture_index["metallic_roughness"], "strength": 1.0}}
+                    if occlusion
+                    else {}
+                ),
                 "doubleSided": False,
             }
         ],
@@ -233,6 +245,8 @@ def write_glb(
     name: str = "material",
     size: float = 1.0,
     generator: str = "brdfgan",
+    normal_scale: float = 1.0,
+    occlusion: bool = True,
 ) -> Path:
     """Write :func:`build_glb`'s bytes to ``path`` atomically (the parent directory must exist).
 
@@ -246,6 +260,8 @@ def write_glb(
         name=name,
         size=size,
         generator=generator,
+        normal_scale=normal_scale,
+        occlusion=occlusion,
     )
     path = Path(path)
     with atomic_replace(path) as temp:

@@ -1,0 +1,105 @@
+"""Height and ambient occlusion from a normal map (the artist's ``height.png`` and ``ao.png``).
+
+Conventions (those of :func:`brdfgan.data.materials.base.height_to_normal`, the generator of the
+training data): tangent-space unit normals ``n ∝ (−∂h/∂x, −∂h/∂y, 1)`` with +x along the columns
+and +y *up the rows* (OpenGL). Heights are in **units of the sample side**: a map ``W`` pixels wide
+spans 1, one pixel is ``1 / W``.
+
+- :func:`height_from_normals`: the least-squares height of the normals' slopes, integrated in the
+  Fourier domain (Frankot & Chellappa 1988). Periodic maps are integrated as they are; others are
+  mirrored first (the even extension makes any slope field periodic without a seam), so borders
+  do not bend.
+- :func:`ambient_occlusion`: for every pixel and a few azimuths, the highest horizon the height
+  field raises within a radius; the cosine-weighted visible part of the hemisphere is
+  ``mean over azimuths of cos²(horizon elevation)`` (1: flat, open; towards 0 in a deep pit).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+# Azimuths and distances (pixels, roughly geometric) the horizon search looks along by default.
+AO_DIRECTIONS = 8
+AO_RADIUS_FRACTION = 1.0 / 16.0  # of the sample side
+
+
+def _slopes(normal: Tensor) -> tuple[Tensor, Tensor]:
+    """``(∂h/∂x, ∂h/∂row)`` in height per pixel of the same unit as a pixel; normals tilted to
+    grazing are clamped (a slope of at most 20)."""
+    nz = normal[..., 2, :, :].clamp_min(0.05)
+    dh_dx = -normal[..., 0, :, :] / nz
+    dh_drow = normal[..., 1, :, :] / nz  # +y is up the rows: rows go down
+    return dh_dx, dh_drow
+
+
+def height_from_normals(normal: Tensor, *, periodic: bool = False) -> Tensor:
+    """The height field whose normals are ``normal``, up to a constant (returned with mean 0).
+
+    Shape: ``(..., 3, H, W)`` unit normals → ``(..., H, W)`` heights in sample-side units
+    (the width is the side).
+    """
+    if normal.shape[-3] != 3:
+        raise ValueError(f"expected normals (..., 3, H, W), got {tuple(normal.shape)}")
+    height, width = normal.shape[-2:]
+    dh_dx, dh_drow = _slopes(normal.to(torch.float64))
+    # A sample is a flat surface: a mean slope is a bias of the normals (a periodic field cannot
+    # hold one anyway), and integrated it would become a ramp that swamps the relief.
+    dh_dx = dh_dx - dh_dx.mean(dim=(-2, -1), keepdim=True)
+    dh_drow = dh_drow - dh_drow.mean(dim=(-2, -1), keepdim=True)
+    if not periodic:
+        # Even extension of the height: x-slopes flip sign in the mirrored columns, row-slopes in
+        # the mirrored rows.
+        dh_dx = torch.cat([dh_dx, -dh_dx.flip(-1)], dim=-1)
+        dh_dx = torch.cat([dh_dx, dh_dx.flip(-2)], dim=-2)
+        dh_drow = torch.cat([dh_drow, dh_drow.flip(-1)], dim=-1)
+        dh_drow = torch.cat([dh_drow, -dh_drow.flip(-2)], dim=-2)
+    rows, cols = dh_dx.shape[-2:]
+    wx = 2.0 * math.pi * torch.fft.fftfreq(cols, dtype=torch.float64).view(1, cols)
+    wy = 2.0 * math.pi * torch.fft.fftfreq(rows, dtype=torch.float64).view(rows, 1)
+    denominator = wx**2 + wy**2
+    denominator[0, 0] = 1.0  # the mean is free: set to 0 below
+    spectrum = (-1j * wx * torch.fft.fft2(dh_dx) - 1j * wy * torch.fft.fft2(dh_drow)) / denominator
+    spectrum[..., 0, 0] = 0.0
+    heights = torch.fft.ifft2(spectrum).real[..., :height, :width]
+    heights = heights - heights.mean(dim=(-2, -1), keepdim=True)
+    return (heights / width).to(normal.dtype)  # pixels → sample sides
+
+
+def ambient_occlusion(
+    height: Tensor,
+    *,
+    periodic: bool = False,
+    directions: int = AO_DIRECTIONS,
+    radius: float = AO_RADIUS_FRACTION,
+) -> Tensor:
+    """Horizon-based ambient occlusion of a height field: per pixel the mean over ``directions``
+    azimuths of ``cos²`` of the highest horizon elevation within ``radius`` (sample sides).
+
+    Shape: ``(..., H, W)`` heights in sample-side units → ``(..., H, W)`` in ``[0, 1]``.
+    """
+    if directions < 1 or radius <= 0:
+        raise ValueError(f"need directions >= 1 and radius > 0, got {directions} and {radius}")
+    size = height.shape[-1]
+    pixels = max(1, round(radius * size))
+    distances = sorted({max(1, round(pixels ** (k / 7))) for k in range(8)} | {pixels})
+    field = height.reshape(-1, 1, *height.shape[-2:]).to(torch.float32)
+    mode = "circular" if periodic else "replicate"
+    padded = F.pad(field, (pixels, pixels, pixels, pixels), mode=mode)
+    rows, cols = field.shape[-2:]
+    visible = torch.zeros_like(field)
+    for index in range(directions):
+        angle = 2.0 * math.pi * index / directions
+        tangent = torch.zeros_like(field)
+        for distance in distances:
+            dx, dy = round(distance * math.cos(angle)), round(distance * math.sin(angle))
+            if dx == 0 and dy == 0:
+                continue
+            shifted = padded[..., pixels + dy : pixels + dy + rows, pixels + dx : pixels + dx + cols]
+            run = math.hypot(dx, dy) / size  # in sample sides, like the heights
+            tangent = torch.maximum(tangent, (shifted - field) / run)
+        visible += 1.0 / (1.0 + tangent**2)  # cos² of the elevation atan(tangent)
+    return (visible / directions).reshape(height.shape).to(height.dtype)
