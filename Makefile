@@ -15,7 +15,7 @@ endif
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml Makefile scripts/install_gltf_validator.sh scripts/install_chromium.sh
+$(STAMP): pyproject.toml Makefile scripts/install_gltf_validator.sh scripts/install_chromium.sh scripts/vendor_three.sh
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || { echo "error: $(PYTHON) must be Python >= 3.11" >&2; exit 1; }
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
@@ -31,6 +31,9 @@ $(STAMP): pyproject.toml Makefile scripts/install_gltf_validator.sh scripts/inst
 	@bash scripts/install_gltf_validator.sh
 	@# Debian's Chromium (headless) for the browser tests and screenshots; optional, never fails setup.
 	@bash scripts/install_chromium.sh
+	@# three.js (npm, pinned) bundled into src/brdfgan/viewer/three.bundle.js for OUT/<name>/index.html;
+	@# optional, never fails setup.
+	@bash scripts/vendor_three.sh
 	@touch $(STAMP)
 
 test: setup

@@ -180,8 +180,10 @@ def test_predict_photo_writes_everything(tmp_path: Path, weights: Path) -> None:
         "material.json",
         "preview.png",
         "preview.gif",
+        "index.html",
     }
     document = json.loads((result.output / "material.json").read_text())
+    assert document["files"]["index.html"]["channels"] == "HTML page, self-contained"
     assert document["model"]["id"] == "tiny-test" and document["resolution"] == 64
     assert document["crop"]["chosen"] == "flash hotspot"
     hotspot = document["crop"]["hotspot"]

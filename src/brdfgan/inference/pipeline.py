@@ -7,7 +7,8 @@ For each photo::
       → the generator, tiled with frozen normalisation statistics when large          model
       [→ refine_maps: the maps fitted to the photo with the differentiable renderer (--refine)]
       [→ make_seamless: every map blended into a tile that wraps (--tileable)]
-      → write_material (textures, material.glb, material.json, preview.png [, preview.gif/mp4])  outputs
+      → write_material (textures, material.glb, material.json, preview.png [, preview.gif/mp4],
+                        index.html: the material viewer)                                   outputs
 
 A batch keeps going when one photo fails: :func:`predict_batch` returns what succeeded and, for
 each failure, the one-line reason; only a full disk stops it (every later photo would fail the
@@ -40,6 +41,7 @@ from brdfgan.inference.model.tiling import TilingConfig, predict_direct, predict
 from brdfgan.inference.model.weights import Model
 from brdfgan.inference.outputs.export import ExportOptions, recover_outputs, write_material
 from brdfgan.inference.outputs.preview import write_animation, write_preview
+from brdfgan.inference.outputs.viewer import write_viewer
 from brdfgan.inference.refine import RefineConfig, refine_maps
 
 log = logging.getLogger(__name__)
@@ -232,9 +234,13 @@ def predict_photo(
     # Tileable maps get a periodic height and occlusion (ExportOptions.periodic follows --tileable).
     prefix = f"{out_dir.name}_" if options.prefix_files else ""
     export = replace(options.export, periodic=options.tileable, file_prefix=prefix)
+    # The material viewer page (index.html) last: it embeds the textures written before it.
+    extra_files["index.html"] = clock.timed(
+        "viewer", lambda target: write_viewer(target, metadata=metadata, options=export)
+    )
     with clock("export"):  # textures, height and occlusion, material.glb (previews timed on their own)
         write_material(out_dir, maps, export, metadata, extra_files=extra_files)
-    timings["export"] -= sum(timings.get(stage, 0.0) for stage in ("preview", "animation"))
+    timings["export"] -= sum(timings.get(stage, 0.0) for stage in ("preview", "animation", "viewer"))
     return PhotoResult(photo=path, output=out_dir, warnings=warnings, timings=timings)
 
 

@@ -126,6 +126,16 @@ class ExportOptions:
             raise ExportError(f"height scale: expected a number > 0, got {self.height_scale!r}")
 
 
+# material.json's entry of an extra file that is not an image (images: previews, sRGB).
+EXTRA_FILE_ENTRIES: dict[str, dict[str, Any]] = {
+    ".html": {
+        "map": "material viewer: the maps, the previews and an interactive 3D view (three.js, inlined)",
+        "colorspace": "srgb",
+        "channels": "HTML page, self-contained",
+        "encoding": "open in a browser, from file:// too",
+    },
+}
+
 # What glTF 2.0 prescribes for material.glb: sRGB base colour, OpenGL normals, 8-bit PNG (the
 # normal strength goes into normalTexture.scale instead of the texture).
 GLTF_TEXTURES = ExportOptions()
@@ -386,12 +396,10 @@ def _write_files(
     }
     for file_name, write in extra_files.items():
         write(directory / file_name)
-        files[file_name] = {
-            "map": "preview",
-            "colorspace": "srgb",
-            "channels": "RGB",
-            "encoding": "sRGB image",
-        }
+        files[file_name] = EXTRA_FILE_ENTRIES.get(
+            Path(file_name).suffix,
+            {"map": "preview", "colorspace": "srgb", "channels": "RGB", "encoding": "sRGB image"},
+        )
     return files
 
 
