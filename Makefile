@@ -47,11 +47,12 @@ test-slow: setup
 faults: setup
 	$(PY) -m faults
 
-# The artist's path on the photos the package ships (held-out procedural materials): textures,
-# material.glb, material.json, preview.png and a turntable preview.gif per photo.
+# The artist's path on the photos the package ships (held-out procedural materials): tileable
+# textures with height and ambient occlusion, material.glb, material.json, preview.png, a
+# turntable preview.gif and the viewer page index.html per photo.
 demo: setup
 	$(VENV)/bin/brdfgan predict src/brdfgan/samples --out outputs/demo --animate --tileable
-	@echo "results: outputs/demo/<photo>/ (open preview.png, preview.gif, or material.glb in any glTF viewer)"
+	@echo "results: outputs/demo/<photo>/ (open index.html in a browser, or material.glb in any glTF viewer)"
 
 # The foundation demo: our renderer against Mitsuba 3 on the same maps.
 demo-renderer: setup
