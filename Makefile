@@ -76,6 +76,7 @@ bench: setup
 	$(PY) -m benchmarks.bench_datamodule
 	$(PY) -m benchmarks.bench_evaluate
 	$(PY) -m benchmarks.bench_predict
+	$(PY) -m benchmarks.bench_preview
 
 data: setup
 	$(PY) generate.py

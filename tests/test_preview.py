@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 from pathlib import Path
 
 import cv2
@@ -10,22 +11,58 @@ import torch
 import torch.nn.functional as F
 from PIL import Image
 
-from brdfgan.core import relight as relight_module
-from brdfgan.core.svbrdf import linear_to_srgb, resize_maps
+from brdfgan.core.relight import relight, render_sky
+from brdfgan.core.render import ShadingInputs
+from brdfgan.core.sky import ProceduralSky
+from brdfgan.core.svbrdf import join_maps, linear_to_srgb, normalize_normal, resize_maps
+from brdfgan.inference.outputs import preview as preview_module
 from brdfgan.inference.outputs.preview import (
     LABEL_HEIGHT,
+    PREVIEW_SKY_SAMPLES,
     SEPARATOR,
     SEPARATOR_COLOR,
     animation_frames,
     preview_image,
     preview_lights,
     preview_size,
+    render_preview_tiles,
     write_animation,
     write_preview,
 )
 from tests.conftest import random_maps, tilted_plane
 
 SIZE = 32
+
+
+def quality_maps(kind: str, size: int) -> torch.Tensor:
+    """Map sets on which the environment tile's sampling noise differs (also used by
+    benchmarks/bench_preview.py): ``glossy_metal`` (gold, roughness 0.15–0.2, gentle bumps),
+    ``rough_dielectric`` (roughness 0.85–0.95, fine bumps), ``bumpy_glossy`` (roughness 0.25, strong
+    normal map), ``mixed`` (:func:`tests.conftest.random_maps`: random roughness, half metal)."""
+    if kind == "mixed":
+        return random_maps(size, size, seed=1)
+    g = torch.Generator().manual_seed(3)
+
+    def noise(channels: int = 1) -> torch.Tensor:
+        return torch.rand(channels, size, size, generator=g)
+
+    def bumps(amplitude: float, frequency: float) -> torch.Tensor:
+        y, x = torch.meshgrid(torch.linspace(0, 1, size), torch.linspace(0, 1, size), indexing="ij")
+        phase = 2 * math.pi * torch.rand(4, generator=g)
+        w = 2 * math.pi * frequency
+        dx = amplitude * torch.sin(w * x + phase[0]) * torch.cos(0.7 * w * y + phase[1])
+        dy = amplitude * torch.cos(1.3 * w * x + phase[2]) * torch.sin(w * y + phase[3])
+        return normalize_normal(torch.stack([dx, dy, torch.ones_like(dx)]))
+
+    one = torch.ones(1, size, size)
+    if kind == "glossy_metal":
+        gold = torch.tensor([1.0, 0.78, 0.34]).view(3, 1, 1) * (0.8 + 0.2 * noise())
+        return join_maps(gold, bumps(0.08, 3), 0.15 + 0.05 * noise(), one)
+    if kind == "rough_dielectric":
+        return join_maps(0.2 + 0.6 * noise(3), bumps(0.3, 12), 0.85 + 0.1 * noise(), 0 * one)
+    if kind == "bumpy_glossy":
+        return join_maps(0.1 + 0.3 * noise(3), bumps(0.5, 8), 0.25 * one, 0 * one)
+    raise ValueError(f"unknown map set {kind!r}")
 
 
 # ------------------------------------------------------------------------------------------- lights
@@ -93,16 +130,62 @@ def test_preview_image_layout_and_input_tile() -> None:
 
 def test_preview_image_renders_big_maps_at_tile_size(monkeypatch: pytest.MonkeyPatch) -> None:
     seen: list[tuple[int, ...]] = []
-    original = relight_module.render_point_lights
+    original = preview_module.shade_point_lights
 
-    def spy(maps: torch.Tensor, *args: object, **kwargs: object) -> torch.Tensor:
-        seen.append(tuple(maps.shape))
-        return original(maps, *args, **kwargs)
+    def spy(inputs: ShadingInputs, *args: object, **kwargs: object) -> torch.Tensor:
+        seen.append(inputs.shape)
+        return original(inputs, *args, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(relight_module, "render_point_lights", spy)
+    monkeypatch.setattr(preview_module, "shade_point_lights", spy)
     image = preview_image(torch.rand(3, 48, 80), random_maps(128, 128, seed=7), tile=16, lights=1, samples=4)
     assert image.shape[:2] == preview_size(16, 1)
     assert seen and all(shape[-2:] == (16, 16) for shape in seen)
+
+
+@pytest.mark.parametrize("chunk", [1, 3, 100])
+def test_render_preview_tiles_renders_the_lights_of_relight_and_render_sky(chunk: int) -> None:
+    # The batched renderer is a speed-up only: the same lights, the same images as the core
+    # functions it replaces in the preview, whatever the chunking (chunk 3 mixes point and sky
+    # lights in one call).
+    maps, sky = random_maps(24, 24, seed=9), ProceduralSky()
+    positions = preview_lights(3)
+    tiles = render_preview_tiles(maps, positions, sky, samples=7, chunk=chunk)
+    expected = torch.cat([relight(maps, positions), render_sky(maps, sky, samples=7)[None]])
+    assert tiles.shape == (4, 3, 24, 24)
+    torch.testing.assert_close(tiles, expected, rtol=1e-5, atol=1e-7)
+    sky_only = render_preview_tiles(maps, torch.zeros(0, 3), sky, samples=5, seed=2, chunk=chunk)
+    torch.testing.assert_close(sky_only[0], render_sky(maps, sky, samples=5, seed=2), rtol=1e-5, atol=1e-7)
+    dark = render_preview_tiles(
+        maps, torch.zeros(0, 3), ProceduralSky(zenith=(0, 0, 0), horizon=(0, 0, 0), sun_irradiance=0)
+    )
+    assert dark.shape == (1, 3, 24, 24) and not dark.any()
+    with pytest.raises(ValueError, match="chunk"):
+        render_preview_tiles(maps, positions, sky, chunk=0)
+
+
+def _environment_tile(maps: torch.Tensor, samples: int) -> np.ndarray:
+    tile = maps.shape[-1]
+    image = preview_image(
+        torch.zeros(3, tile, tile), maps, tile=tile, lights=0, samples=samples, labels=False
+    )
+    return image[:, tile + SEPARATOR :].astype(np.float64)
+
+
+# RMSE (8-bit sRGB levels) of the default environment tile against a 4×-sample reference at 64²,
+# as measured (deterministic: seed 0) plus ~10 %: bumpy_glossy 8.5, rough_dielectric 1.27. A quarter
+# of the lights measured 18.9 and 2.54, which is why the default stays at 64 lights
+# (benchmarks/bench_preview.py measures the same at 256²).
+ENVIRONMENT_TOLERANCE = {"bumpy_glossy": 9.4, "rough_dielectric": 1.4}
+
+
+@pytest.mark.parametrize("kind", sorted(ENVIRONMENT_TOLERANCE))
+def test_preview_environment_tile_stays_within_measured_error_of_a_reference(kind: str) -> None:
+    maps = quality_maps(kind, 64)
+    reference = _environment_tile(maps, 4 * PREVIEW_SKY_SAMPLES)
+    error = math.sqrt(((_environment_tile(maps, PREVIEW_SKY_SAMPLES) - reference) ** 2).mean())
+    fewer = math.sqrt(((_environment_tile(maps, PREVIEW_SKY_SAMPLES // 4) - reference) ** 2).mean())
+    assert error <= ENVIRONMENT_TOLERANCE[kind]
+    assert fewer > 1.5 * error  # a quarter of the lights is measurably noisier
 
 
 def test_preview_image_rejects_bad_input() -> None:

@@ -1,8 +1,10 @@
 """Relit previews of predicted maps for the CLI: still images and turntable-light animations.
 
-Everything is rendered by :mod:`brdfgan.core.relight` (the project's own renderer, the BRDF the
-network was trained with, from the capture camera), so a preview shows what the maps do, not what
-some other shading model makes of them.
+Everything is rendered by the project's own renderer (:func:`brdfgan.core.render.shade_point_lights`,
+the BRDF the network was trained with, from the capture camera), so a preview shows what the maps do,
+not what some other shading model makes of them. The still preview renders exactly the lights of
+:func:`~brdfgan.core.relight.relight` and :func:`~brdfgan.core.relight.render_sky`, batched
+(:func:`render_preview_tiles`).
 
 Lighting:
 
@@ -11,12 +13,23 @@ Lighting:
   in the image), plus one grazing light at 12° between the first two, which shows the normal map's
   relief. Distance 3 plane half-sizes, intensity 1 W/sr (the flash's default).
 - **Environment** tile: the procedural sky of :class:`~brdfgan.core.sky.ProceduralSky`, importance
-  sampled into distant lights (:func:`~brdfgan.core.relight.render_sky`).
+  sampled into :data:`PREVIEW_SKY_SAMPLES` distant lights (:func:`~brdfgan.core.sky.sample_sky`, placed
+  as :func:`~brdfgan.core.relight.render_sky` places them).
 - **Exposure**: each still rendering goes through the paper's auto exposure
   (:func:`brdfgan.core.exposure.auto_expose`) and then the sRGB curve; an animation uses one exposure for
   all frames so it does not flicker.
 
 Memory stays bounded for big maps: the maps are area-downscaled to the tile size *before* rendering.
+
+Speed (``python -m benchmarks.bench_preview``): a still preview at 256² shades 4 + 64 lights over
+65 536 texels in eager torch, where every elementwise step is one pass over memory and, with two
+threads, one fork-join, which stalls whenever another job holds a core (a 256² preview took 11 s on a
+shared machine). :func:`render_preview_tiles` decodes the maps once
+(:func:`~brdfgan.core.render.shading_inputs`) and shades all lights, point and sky, as configurations
+of a few :func:`~brdfgan.core.render.shade_point_lights` calls (:data:`RENDER_CHUNK` lights each):
+about 530 full-size elementwise steps per preview instead of about 1 630, the same lights, the same
+images to float32 rounding. Fewer sky lights would be cheaper but measurably noisier
+(:data:`PREVIEW_SKY_SAMPLES`); rendering at half size and upsampling loses the maps' detail.
 """
 
 from __future__ import annotations
@@ -34,9 +47,9 @@ from torch import Tensor
 
 from brdfgan.core.exposure import auto_expose, auto_exposure_scale
 from brdfgan.core.lighting import spherical_direction
-from brdfgan.core.relight import check_single_maps, relight, render_sky
-from brdfgan.core.render import FlashCapture
-from brdfgan.core.sky import ProceduralSky
+from brdfgan.core.relight import SKY_LIGHT_DISTANCE, check_single_maps, relight
+from brdfgan.core.render import FlashCapture, PointLights, shade_point_lights, shading_inputs
+from brdfgan.core.sky import ProceduralSky, sample_sky
 from brdfgan.core.svbrdf import linear_to_srgb, resize_image, resize_maps
 from brdfgan.io.atomic import atomic_replace
 from brdfgan.io.video import write_video
@@ -45,6 +58,7 @@ __all__ = [
     "animation_frames",
     "preview_image",
     "preview_lights",
+    "render_preview_tiles",
     "write_animation",
     "write_preview",
 ]
@@ -56,6 +70,15 @@ ANIMATION_ELEVATION_DEG = 30.0
 SEPARATOR = 4  # px between tiles
 SEPARATOR_COLOR = (48, 48, 48)
 LABEL_HEIGHT = 18  # px strip above each tile for its label
+# Sky lights of the environment tile. Measured at 256² (benchmarks/bench_preview.py: RMSE of the 8-bit
+# tile against 4× the lights): 32 lights are up to 1.6× as far off as 64 (normal-mapped glossy maps),
+# 16 up to 2×, so the count stays and the speed comes from RENDER_CHUNK.
+PREVIEW_SKY_SAMPLES = 64
+# Lights shaded per renderer call (as configurations): fewer, bigger calls mean fewer elementwise
+# steps, each a pass over memory and a thread fork-join. A light costs ~12 MiB of intermediates at
+# 256², so 17 (4 point + 64 sky lights: 4 calls) peaks at ~0.2 GiB; 34 halves the steps again but
+# was slower on an idle machine (cache) and needs ~0.3 GiB.
+RENDER_CHUNK = 17
 
 
 # ---------------------------------------------------------------------------------------------- maps
@@ -101,6 +124,70 @@ def preview_lights(
 # ------------------------------------------------------------------------------------------- preview
 
 
+def render_preview_tiles(
+    maps: Tensor,
+    light_positions: Tensor,
+    sky: ProceduralSky,
+    *,
+    samples: int = PREVIEW_SKY_SAMPLES,
+    seed: int = 0,
+    capture: FlashCapture = FlashCapture(),
+    chunk: int = RENDER_CHUNK,
+) -> Tensor:
+    """The maps under each point light (intensity 1 W/sr) and under the sky, in one batched pass.
+
+    The same lights and the same renderer as ``relight(maps, light_positions)`` followed by
+    ``render_sky(maps, sky, samples=samples, seed=seed)`` (:mod:`brdfgan.core.relight`), so the
+    same images up to float32 rounding (the sky's lights are summed in another order): the sky
+    becomes ``samples`` distant lights (:func:`~brdfgan.core.sky.sample_sky`) placed
+    :data:`~brdfgan.core.relight.SKY_LIGHT_DISTANCE` plane half-sizes away with intensity ``E·D²``,
+    those below the horizon dropped. What differs is the cost: the per-texel terms of the maps are
+    computed once (:func:`~brdfgan.core.render.shading_inputs`) and all lights, point and sky, are
+    shaded as configurations of :func:`~brdfgan.core.render.shade_point_lights`, ``chunk`` (at most)
+    per call, in calls of equal size. Peak memory grows with ``chunk`` (~12 MiB per light at 256²),
+    not with the number of lights.
+
+    Returns:
+        Linear HDR radiance: ``L`` point-light renderings, then the sky's.
+
+    Shape:
+        - maps: ``(8, H, W)``
+        - light_positions: ``(L, 3)`` world positions (plane units)
+        - output: ``(L + 1, 3, H, W)``
+    """
+    check_single_maps(maps)
+    if light_positions.ndim != 2 or light_positions.shape[-1] != 3:
+        raise ValueError(f"light_positions must have shape (L, 3), got {tuple(light_positions.shape)}")
+    if chunk < 1:
+        raise ValueError(f"chunk must be >= 1, got {chunk}")
+    directions, irradiance = sample_sky(sky, samples, seed=seed)
+    keep = irradiance.amax(dim=-1) > 0.0
+    distance = SKY_LIGHT_DISTANCE * capture.plane_half_size
+    point_count = light_positions.shape[0]
+    positions = torch.cat([light_positions.to(directions), directions[keep] * distance]).to(maps)
+    rgb = torch.cat([irradiance.new_ones(point_count, 3), irradiance[keep] * distance**2]).to(maps)
+    total = positions.shape[0]
+    size = math.ceil(total / max(math.ceil(total / chunk), 1)) if total else 1
+    inputs = shading_inputs(maps[None])
+    camera = maps.new_tensor([0.0, 0.0, capture.camera_height])
+    point_images: list[Tensor] = []
+    sky_image = maps.new_zeros(3, *maps.shape[-2:])
+    for start in range(0, total, size):
+        views = min(size, total - start)
+        lights = PointLights(
+            position=positions[start : start + views].view(1, views, 1, 3),
+            intensity=maps.new_ones(1, views, 1),
+            color=rgb[start : start + views].view(1, views, 1, 3),
+        )
+        rendered = shade_point_lights(inputs, camera.expand(1, views, 3), lights, capture.plane_half_size)[0]
+        points_here = min(max(point_count - start, 0), views)
+        if points_here:
+            point_images.append(rendered[:points_here])
+        if points_here < views:
+            sky_image = sky_image + rendered[points_here:].sum(dim=0)
+    return torch.cat([*point_images, sky_image[None]])
+
+
 def _to_uint8_srgb(linear: Tensor) -> np.ndarray:
     """Linear [0, 1] RGB → 8-bit sRGB image. Shape: ``(3, H, W)`` → ``(H, W, 3)`` uint8."""
     encoded = linear_to_srgb(linear.detach().float().clamp(0.0, 1.0))
@@ -136,14 +223,15 @@ def preview_image(
     tile: int = 256,
     lights: int = 4,
     sky: ProceduralSky | None = None,
-    samples: int = 64,
+    samples: int = PREVIEW_SKY_SAMPLES,
     labels: bool = True,
     capture: FlashCapture = FlashCapture(),
 ) -> np.ndarray:
     """The input photo beside re-renderings of the predicted maps, as one sRGB image.
 
     Tiles, left to right: the input (what the network saw, sRGB-encoded), the maps under each of
-    :func:`preview_lights` ``(lights)``, and under ``sky`` (default :class:`~brdfgan.core.sky.ProceduralSky`).
+    :func:`preview_lights` ``(lights)``, and under ``sky`` (default :class:`~brdfgan.core.sky.ProceduralSky`)
+    as ``samples`` distant lights, all rendered by :func:`render_preview_tiles`.
     Every tile is ``tile²`` (the renderer maps any ``H×W`` onto the square sample, so non-square
     inputs are stretched the same way); the maps are area-downscaled to ``tile²`` before rendering,
     so the cost does not grow with the map resolution. Each rendering is tone-mapped on its own with
@@ -164,10 +252,7 @@ def preview_image(
     positions = preview_lights(lights) * capture.plane_half_size if lights else torch.zeros(0, 3)
     with torch.no_grad():
         small = resize_maps(maps.detach().float(), tile)
-        renders = [render_sky(small, sky, samples=samples, capture=capture)[None]]
-        if lights:
-            renders.insert(0, relight(small, positions, capture=capture))
-        ldr, _ = auto_expose(torch.cat(renders))
+        ldr, _ = auto_expose(render_preview_tiles(small, positions, sky, samples=samples, capture=capture))
         input_tile = resize_image(photo.detach().float().to(small.device), tile, tile)
         tiles = [_to_uint8_srgb(input_tile), *(_to_uint8_srgb(image) for image in ldr)]
     names = ["input", *(_light_label(p) for p in positions), "environment"]
