@@ -30,8 +30,9 @@ of a few :func:`~brdfgan.core.render.shade_point_lights` calls (:data:`RENDER_CH
 about 530 full-size elementwise steps per preview instead of about 1 630, the same lights, the same
 images to float32 rounding. Fewer sky lights would be cheaper but measurably noisier
 (:data:`PREVIEW_SKY_SAMPLES`); rendering at half size and upsampling loses the maps' detail;
-``torch.compile`` of the renderer makes the rendering ~2.4× faster but costs ~16 s once per process
-(cold cache) and needs a C++ compiler, which a one-photo ``brdfgan predict`` never earns back.
+``torch.compile`` of the renderer makes the rendering ~2.4× faster on an idle machine but costs
+~16 s once per process (cold cache) and needs a C++ compiler, which a one-photo ``brdfgan predict``
+never earns back.
 """
 
 from __future__ import annotations
