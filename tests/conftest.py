@@ -1,5 +1,8 @@
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import hydra
@@ -71,3 +74,12 @@ def tiny_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     assert module.data_dir == root / "data" / "tiny"
     module.prepare_data()
     return root
+
+
+def run_train_py(*args: str, cwd: Path, project_root: Path) -> subprocess.CompletedProcess[str]:
+    """``python train.py ARGS`` in a subprocess with ``PROJECT_ROOT`` at ``project_root`` (where
+    its data and logs go) and this checkout's sources first on the path."""
+    env = {**os.environ, "PYTHONPATH": str(CONF.parent / "src"), "PROJECT_ROOT": str(project_root),
+           "WANDB_SILENT": "true"}  # fmt: skip
+    return subprocess.run([sys.executable, str(CONF.parent / "train.py"), *args], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=600)  # fmt: skip

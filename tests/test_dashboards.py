@@ -26,14 +26,9 @@ from brdfgan.evaluation.evaluator import GRID_COLUMNS, comparison_grid, fixed_sa
 from brdfgan.figures import HEADER_HEIGHT, with_column_header
 from brdfgan.models.generator import Generator
 from brdfgan.tracking import run_identity, with_identity
+from tests.conftest import run_train_py
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _train(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "PROJECT_ROOT": str(cwd), "WANDB_SILENT": "true"}
-    return subprocess.run([sys.executable, str(ROOT / "train.py"), *args], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=600)  # fmt: skip
 
 
 def test_column_header_names_every_column_and_refuses_a_mismatch() -> None:
@@ -130,8 +125,13 @@ def test_tensorboard_server_shows_scalars_prediction_grids_and_hparams(
     tiny_data: Path, tensorboard_server: tuple[str, Path]
 ) -> None:
     url, logdir = tensorboard_server
-    result = _train(
-        "debug=default", "logger=tensorboard", "seed=4", f"hydra.run.dir={logdir}/run", cwd=tiny_data
+    result = run_train_py(
+        "debug=default",
+        "logger=tensorboard",
+        "seed=4",
+        f"hydra.run.dir={logdir}/run",
+        cwd=tiny_data,
+        project_root=tiny_data,
     )
     assert result.returncode == 0, result.stderr[-3000:]
 
@@ -215,8 +215,8 @@ def test_sweep_of_a_dozen_overrides_logs_each_job_to_its_own_wandb_run_and_repor
         "callbacks.mid_epoch_checkpoint.every_n_train_steps=0", "trainer.accelerator=cpu",
         "trainer.devices=1",
     ]  # fmt: skip
-    result = _train("-m", "debug=default", "logger=wandb", "loss=full,no_adv", "seed=0,1", *budget,
-                    f"hydra.sweep.dir={sweep}", cwd=tiny_data)  # fmt: skip
+    result = run_train_py("-m", "debug=default", "logger=wandb", "loss=full,no_adv", "seed=0,1", *budget,
+                    f"hydra.sweep.dir={sweep}", cwd=tiny_data, project_root=tiny_data)  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
     jobs = sorted(path.name for path in sweep.iterdir() if path.is_dir())
     assert jobs == [

@@ -3,9 +3,6 @@ named by what the run is, usable as ``evaluate.py ckpt=<path>`` unquoted."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import yaml
@@ -13,7 +10,7 @@ from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from brdfgan.sweep_folders import JOB_FOLDER_MAX_LENGTH, job_folder_name
-from tests.conftest import CONF
+from tests.conftest import CONF, run_train_py
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -53,11 +50,7 @@ def test_a_multirun_with_a_dozen_overrides_gets_short_folders_that_evaluate_acce
         "model.generator.residual_blocks=2",
         "train=false", "test=false",
     ]  # fmt: skip
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "PROJECT_ROOT": str(tmp_path)}
-    result = subprocess.run(
-        [sys.executable, str(ROOT / "train.py"), "-m", *overrides],
-        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
+    result = run_train_py("-m", *overrides, cwd=tmp_path, project_root=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
     jobs = sorted(p for p in (tmp_path / "logs" / "train" / "multiruns").glob("*/*") if p.is_dir())
     assert [job.name.split("_")[0] for job in jobs] == ["0", "1"]
