@@ -12,7 +12,7 @@ from torch import nn
 from brdfgan.core.exposure import auto_expose
 from brdfgan.core.flash_geometry import centred_flash_frame
 from brdfgan.core.render import FlashCapture, render_flash
-from brdfgan.core.svbrdf import split_maps, srgb_to_linear, validate_maps
+from brdfgan.core.svbrdf import scale_normal_strength, split_maps, srgb_to_linear, validate_maps
 from brdfgan.errors import UserError
 from brdfgan.inference.refine import (
     RefineConfig,
@@ -135,6 +135,44 @@ def test_a_global_correction_moves_each_map_by_one_logit_and_keeps_the_normals()
         )
         assert float(delta.std()) < 1e-3
     assert abs(float(result.maps[6].mean()) - 0.3) < abs(0.55 - 0.3) / 4
+
+
+def test_a_map_left_out_of_the_fit_keeps_its_prediction() -> None:
+    # fit_roughness=False: the photo asks for a smoother lobe, but the roughness map stays as
+    # predicted (to the logit margin) while metallic still moves toward the truth.
+    truth = random_maps(32, 32, seed=12)
+    truth[6] = 0.3
+    truth[7] = 0.1
+    photo = render_flash(truth[None], FlashCapture(fov_deg=FOV))[0]
+    start = truth.clone()
+    start[6] = 0.55
+    start[7] = 0.5
+    config = RefineConfig(steps=40, learning_rate=0.05, ambient=False, fit_roughness=False)
+    result = refine_maps(photo, start, centred_flash_frame(1, 32, 32, FOV), config)
+    kept = parameters_to_maps(maps_to_parameters(start[None]))[0]
+    torch.testing.assert_close(result.maps[3:7], kept[3:7])
+    assert abs(float(result.maps[7].mean()) - 0.1) < 0.5 * abs(0.5 - 0.1)
+    assert result.normal_strength is None
+
+
+def test_the_normal_strength_fit_recovers_flattened_normals() -> None:
+    # The photo of the true relief, the prediction's normals flattened to 40 % of the slopes: the
+    # one fitted strength comes back to ~1 / 0.4 = 2.5 and the normals' angular error falls.
+    truth = random_maps(32, 32, seed=21)
+    truth[6] = 0.35
+    truth[7] = 0.0
+    photo = render_flash(truth[None], FlashCapture(fov_deg=FOV))[0]
+    start = truth.clone()
+    start[3:6] = scale_normal_strength(truth[3:6], 0.4)
+    config = RefineConfig(steps=80, learning_rate=0.05, ambient=False, fit_normal_strength=True)
+    result = refine_maps(photo, start, centred_flash_frame(1, 32, 32, FOV), config)
+    assert result.normal_strength == pytest.approx(2.5, rel=0.1)
+
+    def angle(normal: torch.Tensor) -> float:
+        return float(torch.rad2deg(torch.acos((normal * truth[3:6]).sum(0).clamp(-1, 1))).mean())
+
+    assert angle(result.maps[3:6]) < 0.3 * angle(start[3:6])
+    validate_maps(result.maps)
 
 
 def test_refinement_is_deterministic() -> None:

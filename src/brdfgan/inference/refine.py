@@ -90,6 +90,7 @@ class RefineResult:
     gain: tuple[float, float, float]
     flash_offset: tuple[float, float] | None
     ambient_mean: tuple[float, float, float] | None  # irradiance relative to the flash's at the centre
+    normal_strength: float | None  # the fitted scale of the normals' slopes (fit_normal_strength)
     loss_start: float
     loss_end: float
     photo_rmse_start: float  # sRGB RMSE of the re-rendered input view, before and after
@@ -223,16 +224,25 @@ def refine_maps(
         # alike): the albedo's level against the specular highlight, which the gain cannot set.
         material_delta = torch.zeros(1, 2 if config.pixel_maps else 3, grid, grid, device=prior.device)
         material_delta.requires_grad_(True)
+        # A map left out of the fit keeps its offset at zero (channels: roughness, metallic, base).
+        fitted = torch.tensor([float(config.fit_roughness), 1.0, 1.0], device=prior.device)
+        fitted = fitted[: material_delta.shape[1]].view(1, -1, 1, 1)
+        # The normals' strength: one log-scale of the predicted slopes (as --normal-strength).
+        log_strength = torch.zeros(1, 1, 1, 1, device=prior.device, requires_grad=config.fit_normal_strength)
 
         def current_parameters() -> Tensor:
-            upsampled = material_delta
+            upsampled = material_delta * fitted
             if grid != size:
-                upsampled = F.interpolate(
-                    material_delta, size=(size, size), mode="bilinear", align_corners=False
-                )
+                upsampled = F.interpolate(upsampled, size=(size, size), mode="bilinear", align_corners=False)
             base_shift = upsampled[:, 2:3] if not config.pixel_maps else 0.0
-            return prior + torch.cat(
-                [pixel_delta[:, _BASECOLOR] + base_shift, pixel_delta[:, _SLOPES], upsampled[:, :2]], dim=1
+            slopes = prior_slopes * log_strength.exp() + pixel_delta[:, _SLOPES]
+            return torch.cat(
+                [
+                    prior[:, _BASECOLOR] + pixel_delta[:, _BASECOLOR] + base_shift,
+                    slopes,
+                    prior[:, 5:7] + upsampled[:, :2],
+                ],
+                dim=1,
             )
 
         with torch.no_grad():
@@ -246,6 +256,8 @@ def refine_maps(
         variables: list[Tensor] = (
             [pixel_delta, material_delta, log_gain] if config.pixel_maps else [material_delta, log_gain]
         )
+        if config.fit_normal_strength:
+            variables.append(log_strength)
         ambient = None
         if config.ambient:
             # Start at 1 % of the flash's irradiance at the centre: small but with a gradient.
@@ -278,7 +290,9 @@ def refine_maps(
             loss = photo_loss(render, target, config.clip_level)
             loss = loss + config.prior_weight * (current[:, 0:3] - prior_values[:, 0:3]).abs().mean()
             loss = loss + config.material_prior_weight * (current[:, 6:8] - prior_values[:, 6:8]).abs().mean()
-            loss = loss + config.normal_prior_weight * (parameters[:, _SLOPES] - prior_slopes).abs().mean()
+            if config.pixel_maps:
+                slope_change = (parameters[:, _SLOPES] - prior_slopes).abs().mean()
+                loss = loss + config.normal_prior_weight * slope_change
             if config.low_frequency_weight > 0:
                 low = gaussian_blur(current[:, 0:3], config.low_frequency_sigma, "reflect")
                 loss = loss + config.low_frequency_weight * (low - prior_low).abs().mean()
@@ -318,6 +332,7 @@ def refine_maps(
         gain=tuple(float(v) for v in log_gain.detach().exp().flatten()),  # type: ignore[arg-type]
         flash_offset=None if offset is None else tuple(float(v) for v in offset.detach()[0]),  # type: ignore[arg-type]
         ambient_mean=irradiance,  # type: ignore[arg-type]
+        normal_strength=float(log_strength.detach().exp()) if config.fit_normal_strength else None,
         loss_start=float(loss_start),
         loss_end=float(loss_end),
         photo_rmse_start=srgb_rmse(render_start),

@@ -54,6 +54,8 @@ class RefineConfig:
     ambient: bool = True
     ambient_grid: int = 4
     fit_flash_offset: bool = False
+    fit_roughness: bool = True  # False: the roughness map is kept as predicted
+    fit_normal_strength: bool = False  # one scale of the predicted normals' slopes
     clip_level: float = 0.98
 
     def __post_init__(self) -> None:
