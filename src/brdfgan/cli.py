@@ -135,7 +135,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--resolution",
         type=_positive,
         metavar="N",
-        help="output size N×N (default: the model's training resolution); large sizes run tiled",
+        help="output size N×N (default: the crop's size in the photo, at least the model's training "
+        "resolution and at most 2048); sizes above the tile (--tile) run tiled",
     )
     predict.add_argument(
         "--crop",
@@ -199,9 +200,9 @@ def build_parser() -> argparse.ArgumentParser:
         const=DEFAULT_REFINE_STEPS,
         type=_positive,
         metavar="STEPS",
-        help="fit one offset per map (base colour, roughness, metallic), the exposure and the ambient "
-        "light to the photo with the differentiable renderer: relit views come closer to the "
-        "surface's, the roughness map moves away from the true one (README); STEPS Adam steps "
+        help="fit one offset of the base colour and one of the metallic map, the exposure and the "
+        "ambient light to the photo with the differentiable renderer (normals and roughness stay "
+        "the network's): relit views come closer to the surface's (README); STEPS Adam steps "
         f"(default {DEFAULT_REFINE_STEPS} when given bare; ~4 s per photo at 256² on 2 CPU cores)",
     )
     predict.add_argument(
@@ -363,7 +364,7 @@ def predict_command(args: argparse.Namespace) -> int:
     model.generator.to(device)
     predictor = Predictor.create(model, options)
     # Before any photo is read or anything large allocated.
-    check_memory(predictor.model, predictor.resolution, options.tiling)
+    check_memory(predictor.model, predictor.largest_resolution, options.tiling)
     photos = collect_photos(args.inputs)
     if not photos:
         print("error: no photos to process", file=sys.stderr)
@@ -371,7 +372,7 @@ def predict_command(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(
             f"model {model.model_id} ({model.path}) on {device}; "
-            f"{len(photos)} photo(s) at {predictor.resolution}²",
+            f"{len(photos)} photo(s) at {predictor.describe_resolution()}",
             file=sys.stderr,
         )
     bar = tqdm(total=len(photos), unit="photo", disable=args.quiet or None, file=sys.stderr)
