@@ -1,4 +1,5 @@
-"""`brdfgan predict` end to end at 512², 1024², 2048², 4096²: wall time, peak memory, generator share.
+"""`brdfgan predict` end to end at 512², 1024², 2048², 4096² and at its default resolution (the
+crop's side, capped at 2048²): wall time, peak memory, generator share.
 
 Each resolution runs in a fresh subprocess (so its peak RSS is its own) on a synthetic 4000×3000
 flash photo (JPEG), with the shipped default weights when they are installed, else a randomly
@@ -10,7 +11,7 @@ search, resizing, encoding seven textures, the .glb and the preview.
 It also measures the sgemm rate of this machine (4096³ fp32 matmul) and reports the paper
 generator's 512² forward against the floor that rate implies (424 GFLOP, docs/conventions.md#generator-cost).
 
-    python -m benchmarks.bench_predict [--sizes 512 1024 2048 4096]
+    python -m benchmarks.bench_predict [--sizes 512 1024 2048 4096 default]
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import torch
 
@@ -65,27 +67,39 @@ def _weights(directory: Path) -> Path:
     )
 
 
-def run_one(photo: Path, weights: Path, size: int, out: Path) -> dict[str, float]:
-    """One predict call in this process; returns seconds and peak RSS (MiB)."""
+def run_one(photo: Path, weights: Path, size: int | None, out: Path) -> dict[str, Any]:
+    """One predict call in this process (``size`` None: predict's default); returns seconds,
+    peak RSS (MiB) and the output side."""
     from brdfgan.inference.model.weights import load_model
     from brdfgan.inference.pipeline import PredictOptions, Predictor, predict_photo
 
     spent = {"generator": 0.0}
     original = Predictor.maps
 
-    def timed(self: Predictor, photo):
+    def timed(self: Predictor, *args: Any) -> Any:
         start = time.perf_counter()
-        result = original(self, photo)
+        result = original(self, *args)
         spent["generator"] += time.perf_counter() - start
         return result
 
     Predictor.maps = timed  # type: ignore[method-assign]  # timing only, in this throwaway process
     model = load_model(weights)
     start = time.perf_counter()
-    predict_photo(photo, out / f"p{size}", Predictor.create(model, PredictOptions(resolution=size)))
+    result = predict_photo(photo, out / f"p{size}", Predictor.create(model, PredictOptions(resolution=size)))
     total = time.perf_counter() - start
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    return {"total": total, "generator": spent["generator"], "peak_mib": peak, "model": model.model_id}
+    side = json.loads((result.output / "material.json").read_text())["resolution"]
+    folder_mib = sum(f.stat().st_size for f in result.output.iterdir()) / 2**20
+    page_mib = (result.output / "index.html").stat().st_size / 2**20
+    return {
+        "total": total,
+        "generator": spent["generator"],
+        "peak_mib": peak,
+        "model": model.model_id,
+        "side": side,
+        "folder_mib": folder_mib,
+        "page_mib": page_mib,
+    }
 
 
 def sgemm_gflops(size: int = 4096, repeats: int = 3) -> float:
@@ -111,12 +125,16 @@ def paper_forward_512() -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[512, 1024, 2048, 4096])
+    parser.add_argument("--sizes", nargs="+", default=["512", "1024", "2048", "4096", "default"])
     parser.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         photo, weights, size, out = args.child
-        print(json.dumps(run_one(Path(photo), Path(weights), int(size), Path(out))))
+        print(
+            json.dumps(
+                run_one(Path(photo), Path(weights), None if size == "default" else int(size), Path(out))
+            )
+        )
         return
     with tempfile.TemporaryDirectory() as tmp:
         directory = Path(tmp)
@@ -130,7 +148,7 @@ def main() -> None:
                 "--child",
                 str(photo),
                 str(weights),
-                str(size),
+                size,
                 str(directory),
             ]
             result = subprocess.run(command, capture_output=True, text=True, check=False)
@@ -142,19 +160,22 @@ def main() -> None:
     model = rows[0][1]["model"] if rows else "?"
     print(f"\nbrdfgan predict on a 4000×3000 JPEG, model: {model}, {threads} threads; ratios against 512²\n")
     print(
-        "| resolution | wall s | generator s | generator share | peak RSS MiB | time ratio | memory ratio |"
+        "| resolution | wall s | generator s | generator share | peak RSS MiB | time ratio | memory ratio "
+        "| output MiB | index.html MiB |"
     )
-    print("|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     base = rows[0][1] if rows else {}
     for size, row in rows:
         cells = [
-            f"{size}²",
+            f"{row['side']}²" + (" (default)" if size == "default" else ""),
             f"{row['total']:.1f}",
             f"{row['generator']:.1f}",
             f"{row['generator'] / row['total']:.0%}",
             f"{row['peak_mib']:.0f}",
             f"{row['total'] / base['total']:.2f}×",
             f"{row['peak_mib'] / base['peak_mib']:.2f}×",
+            f"{row['folder_mib']:.1f}",
+            f"{row['page_mib']:.1f}",
         ]
         print("| " + " | ".join(cells) + " |")
     rate = sgemm_gflops()

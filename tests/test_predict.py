@@ -191,6 +191,34 @@ def test_predict_photo_writes_everything(tmp_path: Path, weights: Path) -> None:
     assert read_image(result.output / "basecolor.png").shape == (64, 64, 3)
 
 
+def test_the_default_resolution_is_the_crops_size_within_the_model_size_and_the_cap(
+    tmp_path: Path, weights: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A 160-pixel crop (the photo's short side, hotspot at the centre) gives 160² maps: the
+    # photo's pixels, neither thrown away nor invented; a 61-pixel crop gives the model's 64²;
+    # above the cap the cap.
+    model = load_model(weights)
+    sides = {}
+    for name, size, centre in [("whole", (160, 200), (100, 80)), ("corner", (96, 128), (95, 30))]:
+        result = predict_photo(
+            flash_photo(tmp_path / f"{name}.png", size, centre),
+            tmp_path / "out" / name,
+            Predictor.create(model, PredictOptions(preview=False)),
+        )
+        document = json.loads((result.output / "material.json").read_text())
+        assert document["resolution"] == read_image(result.output / "basecolor.png").shape[0]
+        sides[name] = (document["crop"]["size"], document["resolution"])
+    assert sides == {"whole": (160, 160), "corner": (61, 64)}
+    monkeypatch.setattr("brdfgan.inference.pipeline.MAX_DEFAULT_RESOLUTION", 128)
+    capped = Predictor.create(model, PredictOptions(preview=False))
+    assert capped.largest_resolution == 128
+    result = predict_photo(tmp_path / "whole.png", tmp_path / "out" / "capped", capped)
+    assert json.loads((result.output / "material.json").read_text())["resolution"] == 128
+    fixed = Predictor.create(model, PredictOptions(preview=False, resolution=96))
+    result = predict_photo(tmp_path / "whole.png", tmp_path / "out" / "fixed", fixed)
+    assert json.loads((result.output / "material.json").read_text())["resolution"] == 96
+
+
 def test_load_model_accepts_safetensors_only(tmp_path: Path, weights: Path) -> None:
     state = {"weight": torch.zeros(2)}
     pickled = tmp_path / "evil.safetensors"
@@ -336,8 +364,8 @@ def test_a_flash_aware_model_gets_the_detected_hotspot_and_the_field_of_view(tmp
     # A user crop with the highlight at its right edge: the frame must say so.
     photo_path = flash_photo(tmp_path / "edge.png")
     crop = Crop(0, 0, 96)
-    predictor = Predictor.create(load_model(path), PredictOptions(preview=False, crop=crop))
-    result = predict_photo(photo_path, tmp_path / "out" / "edge", predictor)
+    options = PredictOptions(preview=False, crop=crop, resolution=64)
+    result = predict_photo(photo_path, tmp_path / "out" / "edge", Predictor.create(load_model(path), options))
     document = json.loads((result.output / "material.json").read_text())
     assert document["field_of_view"] == {"degrees": DEFAULT_FOV_DEG, "source": "training default"}
 

@@ -36,7 +36,7 @@ from brdfgan.core.seamless import make_seamless, wrap_ratios
 from brdfgan.errors import UserError, disk_full_message, is_disk_full, one_line
 from brdfgan.inference.intake.lens import crop_field_of_view
 from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, read_photo
-from brdfgan.inference.intake.preprocess import Crop, preprocess
+from brdfgan.inference.intake.preprocess import Crop, CropSized, preprocess
 from brdfgan.inference.model.tiling import TilingConfig, predict_direct, predict_tiled
 from brdfgan.inference.model.weights import Model
 from brdfgan.inference.outputs.export import ExportOptions, recover_outputs, write_material
@@ -45,6 +45,10 @@ from brdfgan.inference.outputs.viewer import write_viewer
 from brdfgan.inference.refine import RefineConfig, refine_maps
 
 log = logging.getLogger(__name__)
+
+# The default output side is the crop's side in the photo, capped here: 2K textures are what
+# artists' tools export by default, and a 2048² run stays within the memory of 1024² tiles.
+MAX_DEFAULT_RESOLUTION = 2048
 
 BRDF_DESCRIPTION = (
     "Cook-Torrance GGX (Smith, Schlick) + Burley diffuse, metallic workflow, alpha = roughness^2"
@@ -55,7 +59,7 @@ BRDF_DESCRIPTION = (
 class PredictOptions:
     """Everything ``brdfgan predict`` lets the user choose besides inputs and weights."""
 
-    resolution: int | None = None  # None: the resolution the model was trained at
+    resolution: int | None = None  # None: each photo's crop size (CropSized, MAX_DEFAULT_RESOLUTION)
     crop: Crop | None = None  # None: a square centred on the detected flash hotspot
     colorspace: Colorspace | None = None  # None: the file format's default (sRGB for JPEG/PNG)
     export: ExportOptions = field(default_factory=ExportOptions)
@@ -69,23 +73,38 @@ class PredictOptions:
 
 @dataclass(frozen=True)
 class Predictor:
-    """A model with the options of one run, the resolution and "tiled or not" decided once."""
+    """A model with the options of one run: the output side fixed (``--resolution``) or, by
+    default, each photo's crop side clamped to [the model's resolution, MAX_DEFAULT_RESOLUTION]."""
 
     model: Model
     options: PredictOptions
-    resolution: int
-    tiled: bool
+    resolution: int | CropSized
 
     @classmethod
     def create(cls, model: Model, options: PredictOptions) -> Predictor:
-        resolution = options.resolution or model.resolution
-        return cls(model, options, resolution, options.tiling.runs_tiled(resolution, resolution))
+        resolution = options.resolution or CropSized(
+            model.resolution, max(model.resolution, MAX_DEFAULT_RESOLUTION)
+        )
+        return cls(model, options, resolution)
+
+    @property
+    def largest_resolution(self) -> int:
+        """The largest output side a photo of this run can get (what the memory check sizes)."""
+        return self.resolution if isinstance(self.resolution, int) else self.resolution.maximum
+
+    def describe_resolution(self) -> str:
+        if isinstance(self.resolution, int):
+            return f"{self.resolution}²"
+        return f"the crop's size ({self.resolution.minimum}²–{self.resolution.maximum}²)"
+
+    def tiled(self, side: int) -> bool:
+        return self.options.tiling.runs_tiled(side, side)
 
     def maps(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
         """The generator's maps of one prepared photo with its flash frame (default: centred).
 
         Shape: ``(3, N, N)`` and ``(1, 3)`` → ``(8, N, N)``."""
-        if self.tiled:
+        if self.tiled(photo.shape[-1]):
             return predict_tiled(self.model.generator, photo[None], self.options.tiling, flash=flash)[0]
         return predict_direct(self.model.generator, photo[None], flash)[0]
 
@@ -213,7 +232,7 @@ def predict_photo(
         # The crop's horizontal field of view: what a flash-aware network is told about the
         # geometry (brdfgan.core.flash_geometry), and the capture model of a refinement.
         "field_of_view": {"degrees": fov_deg, "source": fov_source},
-        "inference": options.tiling.to_json(predictor.tiled),
+        "inference": options.tiling.to_json(predictor.tiled(prepared.photo.shape[-1])),
         # The test-time fit (brdfgan.inference.refine), None without --refine.
         "refinement": refinement,
         # --tileable: the maps' wrap-around differences before and after the seamless blend.

@@ -130,6 +130,22 @@ class Crop:
 
 
 @dataclass(frozen=True)
+class CropSized:
+    """An output side that follows the crop: its side in photo pixels (no detail is invented or
+    thrown away), clamped to ``[minimum, maximum]`` — ``brdfgan predict``'s default resolution."""
+
+    minimum: int
+    maximum: int
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.minimum <= self.maximum:
+            raise ValueError(f"CropSized needs 1 <= minimum <= maximum, got {self.minimum}, {self.maximum}")
+
+    def side(self, crop_size: int) -> int:
+        return min(max(crop_size, self.minimum), self.maximum)
+
+
+@dataclass(frozen=True)
 class Preprocessed:
     """The generator's input and how it was made.
 
@@ -348,13 +364,13 @@ def clipped_fraction(linear: Tensor, crop: Crop, hotspot: tuple[float, float]) -
 
 
 def preprocess(
-    photo: Photo, resolution: int, crop: Crop | None = None, *, clipped_is_saturated: bool = True
+    photo: Photo, resolution: int | CropSized, crop: Crop | None = None, *, clipped_is_saturated: bool = True
 ) -> Preprocessed:
     """Crop, resize (linear) and auto-expose a photo into the generator's input.
 
     Args:
         photo: the decoded photo (:func:`~brdfgan.inference.intake.photo.read_photo`).
-        resolution: the side N of the network input.
+        resolution: the side N of the network input, or a rule that sets it from the crop's side.
         crop: a user-given square (validated against the photo); ``None`` chooses one around the
             flash highlight with :func:`hotspot_crop`.
         clipped_is_saturated: whether source values at 1.0 mean sensor saturation, which enables
@@ -368,7 +384,9 @@ def preprocess(
         - ``photo.linear``: ``(3, H, W)``
         - output ``Preprocessed.photo``: ``(3, N, N)`` float32 in [0, 1]
     """
-    if isinstance(resolution, bool) or not isinstance(resolution, int) or resolution < 1:
+    if not isinstance(resolution, CropSized) and (
+        isinstance(resolution, bool) or not isinstance(resolution, int) or resolution < 1
+    ):
         raise ValueError(f"resolution must be a positive integer, got {resolution!r}")
     linear = photo.linear
     _check_image(linear)
@@ -399,6 +417,8 @@ def preprocess(
         reported_hotspot = None
         chosen = "user"
     region = crop.slice(linear)
+    if isinstance(resolution, CropSized):
+        resolution = resolution.side(crop.size)
 
     centre = (crop.x + (crop.size - 1) / 2.0, crop.y + (crop.size - 1) / 2.0)
     offset = math.hypot(detected[0] - centre[0], detected[1] - centre[1]) / crop.size
