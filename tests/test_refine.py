@@ -156,6 +156,26 @@ def test_a_map_left_out_of_the_fit_keeps_its_prediction() -> None:
     assert result.normal_strength is None
 
 
+def test_a_nuisance_roughness_is_fitted_jointly_but_not_returned() -> None:
+    # roughness_nuisance: the same fit as with a roughness offset (base colour and metallic move
+    # exactly as they do there), but the maps keep the predicted roughness.
+    truth = random_maps(32, 32, seed=14)
+    truth[6] = 0.3
+    photo = render_flash(truth[None], FlashCapture(fov_deg=FOV))[0]
+    start = truth.clone()
+    start[6] = 0.55
+    start[7] = (truth[7] * 0.5 + 0.25).clamp(0, 1)
+    frame = centred_flash_frame(1, 32, 32, FOV)
+    joint = refine_maps(photo, start, frame, RefineConfig(steps=30, ambient=False, fit_roughness=True))
+    nuisance = RefineConfig(steps=30, ambient=False, fit_roughness=True, roughness_nuisance=True)
+    hidden = refine_maps(photo, start, frame, nuisance)
+    kept = parameters_to_maps(maps_to_parameters(start[None]))[0]
+    torch.testing.assert_close(hidden.maps[6], kept[6])
+    torch.testing.assert_close(hidden.maps[[0, 1, 2, 7]], joint.maps[[0, 1, 2, 7]])
+    assert float((joint.maps[6] - kept[6]).abs().mean()) > 0.05  # the joint fit did move it
+    assert hidden.loss_end == joint.loss_end  # the loss is that of the fitted (joint) state
+
+
 def test_the_normal_strength_fit_recovers_flattened_normals() -> None:
     # The photo of the true relief, the prediction's normals flattened to 40 % of the slopes: the
     # one fitted strength comes back to ~1 / 0.4 = 2.5 and the normals' angular error falls.

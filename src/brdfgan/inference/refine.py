@@ -231,8 +231,13 @@ def refine_maps(
         # The normals' strength: one log-scale of the predicted slopes (as --normal-strength).
         log_strength = torch.zeros(1, 1, 1, 1, device=prior.device, requires_grad=config.fit_normal_strength)
 
-        def current_parameters() -> Tensor:
-            upsampled = material_delta * fitted
+        # roughness_nuisance: the roughness offset is fitted but not returned (the maps keep the
+        # predicted roughness): it soaks up the highlight's spread the flat normals cannot give.
+        returned = fitted.clone()
+        returned[:, :1] *= float(not config.roughness_nuisance)
+
+        def current_parameters(mask: Tensor = fitted) -> Tensor:
+            upsampled = material_delta * mask
             if grid != size:
                 upsampled = F.interpolate(upsampled, size=(size, size), mode="bilinear", align_corners=False)
             base_shift = upsampled[:, 2:3] if not config.pixel_maps else 0.0
@@ -313,7 +318,7 @@ def refine_maps(
                 on_step(step + 1, float(loss.detach()))
         with torch.no_grad():
             loss_end, render_end = objective()
-            refined = parameters_to_maps(current_parameters())
+            refined = parameters_to_maps(current_parameters(returned))
             out = (
                 refined
                 if maps_full.shape[-1] == size

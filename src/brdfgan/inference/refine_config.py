@@ -72,6 +72,7 @@ class RefineConfig:
     ambient_grid: int = 4
     fit_flash_offset: bool = False
     fit_roughness: bool = False  # True: one roughness offset too (relit views gain, the map drifts)
+    roughness_nuisance: bool = False  # with fit_roughness: fit the offset, return the predicted roughness
     fit_normal_strength: bool = False  # one scale of the predicted normals' slopes
     clip_level: float = 0.98
 
