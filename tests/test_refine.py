@@ -125,8 +125,7 @@ def test_a_global_correction_moves_each_map_by_one_logit_and_keeps_the_normals()
     photo = render_flash(truth[None], FlashCapture(fov_deg=FOV))[0]
     start = truth.clone()
     start[6] = 0.55
-    # One offset per map (the default), the roughness's included (off by default).
-    config = RefineConfig(steps=60, learning_rate=0.05, ambient=False, fit_roughness=True)
+    config = RefineConfig(steps=60, learning_rate=0.05, ambient=False)  # the default: one offset per map
     result = refine_maps(photo, start, centred_flash_frame(1, 32, 32, FOV), config)
     kept = parameters_to_maps(maps_to_parameters(start[None]))[0]
     torch.testing.assert_close(result.maps[3:6], kept[3:6])
@@ -148,7 +147,7 @@ def test_a_map_left_out_of_the_fit_keeps_its_prediction() -> None:
     start = truth.clone()
     start[6] = 0.55
     start[7] = 0.5
-    config = RefineConfig(steps=40, ambient=False)  # the default keeps the roughness
+    config = RefineConfig(steps=40, learning_rate=0.05, ambient=False, fit_roughness=False)
     result = refine_maps(photo, start, centred_flash_frame(1, 32, 32, FOV), config)
     kept = parameters_to_maps(maps_to_parameters(start[None]))[0]
     torch.testing.assert_close(result.maps[3:7], kept[3:7])

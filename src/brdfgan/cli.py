@@ -200,9 +200,9 @@ def build_parser() -> argparse.ArgumentParser:
         const=DEFAULT_REFINE_STEPS,
         type=_positive,
         metavar="STEPS",
-        help="fit one offset of the base colour and one of the metallic map, the exposure and the "
-        "ambient light to the photo with the differentiable renderer (normals and roughness stay "
-        "the network's): relit views come closer to the surface's (README); STEPS Adam steps "
+        help="fit one offset per map (base colour, roughness, metallic), the exposure and the ambient "
+        "light to the photo with the differentiable renderer: relit views come closer to the "
+        "surface's, the roughness map moves away from the true one (README); STEPS Adam steps "
         f"(default {DEFAULT_REFINE_STEPS} when given bare; ~4 s per photo at 256² on 2 CPU cores)",
     )
     predict.add_argument(

@@ -9,10 +9,11 @@ The capture model is the training captures' (:class:`~brdfgan.core.render.FlashC
 camera looking straight down from above the photo's flash hotspot (the flash frame the network
 read; a crop is a window of a view centred on its hotspot), at the height the frame's field of
 view gives (from the EXIF, :mod:`brdfgan.inference.intake.lens`), the flash at the lens. What is
-corrected (:class:`~brdfgan.inference.refine_config.RefineConfig`): by default one logit offset for
-the base colour and one for the metallic map, keeping the network's normals, roughness and spatial
-detail; optionally a roughness offset (``fit_roughness``), a scale of the normals' slopes
-(``fit_normal_strength``) and per-pixel corrections (``pixel_maps``). Fitted beside the maps:
+corrected (:class:`~brdfgan.inference.refine_config.RefineConfig`): by default one logit offset per
+map — base colour, roughness, metallic — keeping the network's normals and spatial detail;
+optionally the roughness kept (``fit_roughness=False``) or fitted but not returned
+(``roughness_nuisance``), a scale of the normals' slopes (``fit_normal_strength``) and per-pixel
+corrections (``pixel_maps``). Fitted beside the maps:
 
 - a per-channel **gain** (log-parametrised): the photo's unknown exposure and white balance;
 - optionally a low-frequency **ambient irradiance** (a ``g × g`` grid per channel, bilinearly
