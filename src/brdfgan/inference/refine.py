@@ -12,8 +12,9 @@ view gives (from the EXIF, :mod:`brdfgan.inference.intake.lens`), the flash at t
 corrected (:class:`~brdfgan.inference.refine_config.RefineConfig`): by default one logit offset per
 map — base colour, roughness, metallic — keeping the network's normals and spatial detail;
 optionally the roughness kept (``fit_roughness=False``) or fitted but not returned
-(``roughness_nuisance``), a scale of the normals' slopes (``fit_normal_strength``) and per-pixel
-corrections (``pixel_maps``). Fitted beside the maps:
+(``roughness_nuisance``), a scale of the normals' slopes (``fit_normal_strength``), the gradient
+of a fitted height field added to them (``fit_relief``) and per-pixel corrections (``pixel_maps``).
+Fitted beside the maps:
 
 - a per-channel **gain** (log-parametrised): the photo's unknown exposure and white balance;
 - optionally a low-frequency **ambient irradiance** (a ``g × g`` grid per channel, bilinearly
@@ -232,6 +233,18 @@ def refine_maps(
         # The normals' strength: one log-scale of the predicted slopes (as --normal-strength).
         log_strength = torch.zeros(1, 1, 1, 1, device=prior.device, requires_grad=config.fit_normal_strength)
 
+        # fit_relief: a height field on a relief_grid² lattice whose gradient adds to the predicted
+        # slopes — an integrable correction, the relief the network's flat normals lack.
+        relief = torch.zeros(1, 1, config.relief_grid, config.relief_grid, device=prior.device)
+        relief.requires_grad_(config.fit_relief)
+
+        def relief_slopes() -> Tensor:
+            height = F.interpolate(relief, size=(size, size), mode="bilinear", align_corners=False)
+            padded = F.pad(height, (1, 1, 1, 1), mode="replicate")
+            dh_dx = (padded[..., 1:-1, 2:] - padded[..., 1:-1, :-2]) / 2
+            dh_drow = (padded[..., 2:, 1:-1] - padded[..., :-2, 1:-1]) / 2
+            return torch.cat([-dh_dx, dh_drow], dim=1)  # +y up the rows (core.height)
+
         # roughness_nuisance: the roughness offset is fitted but not returned (the maps keep the
         # predicted roughness): it soaks up the highlight's spread the flat normals cannot give.
         returned = fitted.clone()
@@ -243,6 +256,8 @@ def refine_maps(
                 upsampled = F.interpolate(upsampled, size=(size, size), mode="bilinear", align_corners=False)
             base_shift = upsampled[:, 2:3] if not config.pixel_maps else 0.0
             slopes = prior_slopes * log_strength.exp() + pixel_delta[:, _SLOPES]
+            if config.fit_relief:
+                slopes = slopes + relief_slopes()
             return torch.cat(
                 [
                     prior[:, _BASECOLOR] + pixel_delta[:, _BASECOLOR] + base_shift,
@@ -265,6 +280,8 @@ def refine_maps(
         )
         if config.fit_normal_strength:
             variables.append(log_strength)
+        if config.fit_relief:
+            variables.append(relief)
         ambient = None
         if config.ambient:
             # Start at 1 % of the flash's irradiance at the centre: small but with a gradient.
@@ -305,6 +322,8 @@ def refine_maps(
                 loss = loss + config.low_frequency_weight * (low - prior_low).abs().mean()
             if config.tv_weight > 0:
                 loss = loss + config.tv_weight * total_variation(current[:, 6:8])
+            if config.fit_relief and config.relief_weight > 0:
+                loss = loss + config.relief_weight * relief_slopes().square().mean()
             return loss, render
 
         with torch.no_grad():
