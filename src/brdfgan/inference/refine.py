@@ -238,7 +238,9 @@ def refine_maps(
         relief = torch.zeros(1, 1, config.relief_grid, config.relief_grid, device=prior.device)
         relief.requires_grad_(config.fit_relief)
 
-        def relief_slopes() -> Tensor:
+        def relief_slopes() -> Tensor | None:
+            if not config.fit_relief:
+                return None
             height = F.interpolate(relief, size=(size, size), mode="bilinear", align_corners=False)
             padded = F.pad(height, (1, 1, 1, 1), mode="replicate")
             dh_dx = (padded[..., 1:-1, 2:] - padded[..., 1:-1, :-2]) / 2
@@ -250,14 +252,14 @@ def refine_maps(
         returned = fitted.clone()
         returned[:, :1] *= float(not config.roughness_nuisance)
 
-        def current_parameters(mask: Tensor = fitted) -> Tensor:
+        def current_parameters(mask: Tensor, added_slopes: Tensor | None) -> Tensor:
             upsampled = material_delta * mask
             if grid != size:
                 upsampled = F.interpolate(upsampled, size=(size, size), mode="bilinear", align_corners=False)
             base_shift = upsampled[:, 2:3] if not config.pixel_maps else 0.0
             slopes = prior_slopes * log_strength.exp() + pixel_delta[:, _SLOPES]
-            if config.fit_relief:
-                slopes = slopes + relief_slopes()
+            if added_slopes is not None:
+                slopes = slopes + added_slopes
             return torch.cat(
                 [
                     prior[:, _BASECOLOR] + pixel_delta[:, _BASECOLOR] + base_shift,
@@ -303,7 +305,8 @@ def refine_maps(
         )
 
         def objective() -> tuple[Tensor, Tensor]:
-            parameters = current_parameters()
+            added_slopes = relief_slopes()  # once per step: the photo term and the relief prior
+            parameters = current_parameters(fitted, added_slopes)
             current = parameters_to_maps(parameters)
             render = render_flash(current, capture, flash_offset=offset, camera_xy=camera_xy)
             if ambient is not None:
@@ -322,8 +325,8 @@ def refine_maps(
                 loss = loss + config.low_frequency_weight * (low - prior_low).abs().mean()
             if config.tv_weight > 0:
                 loss = loss + config.tv_weight * total_variation(current[:, 6:8])
-            if config.fit_relief and config.relief_weight > 0:
-                loss = loss + config.relief_weight * relief_slopes().square().mean()
+            if added_slopes is not None and config.relief_weight > 0:
+                loss = loss + config.relief_weight * added_slopes.square().mean()
             return loss, render
 
         with torch.no_grad():
@@ -338,7 +341,7 @@ def refine_maps(
                 on_step(step + 1, float(loss.detach()))
         with torch.no_grad():
             loss_end, render_end = objective()
-            refined = parameters_to_maps(current_parameters(returned))
+            refined = parameters_to_maps(current_parameters(returned, relief_slopes()))
             out = (
                 refined
                 if maps_full.shape[-1] == size
