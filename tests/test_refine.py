@@ -116,18 +116,33 @@ def test_refinement_at_a_working_size_keeps_the_output_size() -> None:
     assert set(result.to_json()) >= {"gain", "steps", "loss_start", "loss_end", "photo_rmse_end"}
 
 
-def test_a_global_correction_moves_each_map_by_one_logit_and_keeps_the_normals() -> None:
-    # pixel_maps=False with material_grid=1: the normals stay as predicted; base colour, roughness
-    # and metallic move by one logit offset each, everywhere — the roughness toward the truth.
-    truth = random_maps(32, 32, seed=12)
+def _too_rough_start(
+    seed: int, metallic: float | None = None
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """A 32² truth of roughness 0.3 (and ``metallic`` when given), its photo under the refinement's
+    own capture model, and a start equal to the truth but for a roughness of 0.55."""
+    truth = random_maps(32, 32, seed=seed)
     truth[6] = 0.3
-    truth[7] = 0.2
+    if metallic is not None:
+        truth[7] = metallic
     photo = render_flash(truth[None], FlashCapture(fov_deg=FOV))[0]
     start = truth.clone()
     start[6] = 0.55
+    return truth, photo, start
+
+
+def _unchanged(maps: torch.Tensor) -> torch.Tensor:
+    """``maps`` as a refinement returns them when nothing moves (the logit margin applied)."""
+    return parameters_to_maps(maps_to_parameters(maps[None]))[0]
+
+
+def test_a_global_correction_moves_each_map_by_one_logit_and_keeps_the_normals() -> None:
+    # pixel_maps=False with material_grid=1: the normals stay as predicted; base colour, roughness
+    # and metallic move by one logit offset each, everywhere — the roughness toward the truth.
+    _, photo, start = _too_rough_start(12, metallic=0.2)
     config = RefineConfig(steps=60, learning_rate=0.05, ambient=False)  # the default: one offset per map
     result = refine_maps(photo, start, centred_flash_frame(1, 32, 32, FOV), config)
-    kept = parameters_to_maps(maps_to_parameters(start[None]))[0]
+    kept = _unchanged(start)
     torch.testing.assert_close(result.maps[3:6], kept[3:6])
     for channels in (slice(0, 3), slice(6, 7), slice(7, 8)):
         delta = torch.logit(result.maps[channels].clamp(1e-3, 1 - 1e-3)) - torch.logit(
@@ -140,17 +155,11 @@ def test_a_global_correction_moves_each_map_by_one_logit_and_keeps_the_normals()
 def test_a_map_left_out_of_the_fit_keeps_its_prediction() -> None:
     # fit_roughness=False: the photo asks for a smoother lobe, but the roughness map stays as
     # predicted (to the logit margin) while metallic still moves toward the truth.
-    truth = random_maps(32, 32, seed=12)
-    truth[6] = 0.3
-    truth[7] = 0.1
-    photo = render_flash(truth[None], FlashCapture(fov_deg=FOV))[0]
-    start = truth.clone()
-    start[6] = 0.55
+    _, photo, start = _too_rough_start(12, metallic=0.1)
     start[7] = 0.5
     config = RefineConfig(steps=40, learning_rate=0.05, ambient=False, fit_roughness=False)
     result = refine_maps(photo, start, centred_flash_frame(1, 32, 32, FOV), config)
-    kept = parameters_to_maps(maps_to_parameters(start[None]))[0]
-    torch.testing.assert_close(result.maps[3:7], kept[3:7])
+    torch.testing.assert_close(result.maps[3:7], _unchanged(start)[3:7])
     assert abs(float(result.maps[7].mean()) - 0.1) < 0.5 * abs(0.5 - 0.1)
     assert result.normal_strength is None
 
@@ -158,17 +167,13 @@ def test_a_map_left_out_of_the_fit_keeps_its_prediction() -> None:
 def test_a_nuisance_roughness_is_fitted_jointly_but_not_returned() -> None:
     # roughness_nuisance: the same fit as with a roughness offset (base colour and metallic move
     # exactly as they do there), but the maps keep the predicted roughness.
-    truth = random_maps(32, 32, seed=14)
-    truth[6] = 0.3
-    photo = render_flash(truth[None], FlashCapture(fov_deg=FOV))[0]
-    start = truth.clone()
-    start[6] = 0.55
+    truth, photo, start = _too_rough_start(14)
     start[7] = (truth[7] * 0.5 + 0.25).clamp(0, 1)
     frame = centred_flash_frame(1, 32, 32, FOV)
     joint = refine_maps(photo, start, frame, RefineConfig(steps=30, ambient=False, fit_roughness=True))
     nuisance = RefineConfig(steps=30, ambient=False, fit_roughness=True, roughness_nuisance=True)
     hidden = refine_maps(photo, start, frame, nuisance)
-    kept = parameters_to_maps(maps_to_parameters(start[None]))[0]
+    kept = _unchanged(start)
     torch.testing.assert_close(hidden.maps[6], kept[6])
     torch.testing.assert_close(hidden.maps[[0, 1, 2, 7]], joint.maps[[0, 1, 2, 7]])
     assert float((joint.maps[6] - kept[6]).abs().mean()) > 0.05  # the joint fit did move it
