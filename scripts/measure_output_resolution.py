@@ -6,8 +6,8 @@ crop.scale_min=1 crop.scale_max=1 out_dir=data/ood_1024``), the maps of every ph
 at each output size N, each through predict's own intake (the photo written as an 8-bit sRGB PNG,
 read, cropped around its hotspot and auto-exposed, no EXIF):
 
-- ``upsampled``: the network at its training resolution, the maps resized to N (bilinear on the
-  stored values, normals renormalised);
+- ``upsampled``: the network at its training resolution, the maps enlarged to N
+  (:func:`~brdfgan.core.svbrdf.resize_maps`: bilinear, base colour in linear, normals renormalised);
 - ``native``: the network on the N² photo (tiled above the tiling's direct size);
 - ``detail``: ``upsampled`` plus the high frequencies of ``native`` (``native`` minus its own
   low-pass at the training resolution): the network's judgement at the scale it was trained for,
@@ -27,7 +27,6 @@ import time
 from pathlib import Path
 
 import torch
-import torch.nn.functional as F
 from torch import Tensor
 
 from brdfgan.core.svbrdf import linear_to_srgb, normalize_normal, resize_maps
@@ -44,20 +43,10 @@ from brdfgan.metrics import SVBRDFMetrics
 METHODS = ("upsampled", "native", "detail")
 
 
-def upsample(maps: Tensor, size: int) -> Tensor:
-    """Bilinear resize of the stored values, normals renormalised. Shape: (8, n, n) → (8, N, N)."""
-    out = F.interpolate(maps[None], size=(size, size), mode="bilinear", align_corners=False)[0]
-    return _valid(out)
-
-
-def _valid(maps: Tensor) -> Tensor:
-    return torch.cat([maps[0:3].clamp(0, 1), normalize_normal(maps[3:6]), maps[6:8].clamp(0, 1)])
-
-
 def with_detail(coarse: Tensor, fine: Tensor, model_size: int) -> Tensor:
-    """``coarse`` (upsampled) plus ``fine``'s detail above the model resolution."""
-    low = upsample(resize_maps(fine, model_size), fine.shape[-1])
-    return _valid(coarse + (fine - low))
+    """``coarse`` (enlarged) plus ``fine``'s detail above the model resolution, kept valid."""
+    detailed = coarse + (fine - resize_maps(resize_maps(fine, model_size), fine.shape[-1]))
+    return torch.cat([detailed[0:3].clamp(0, 1), normalize_normal(detailed[3:6]), detailed[6:8].clamp(0, 1)])
 
 
 def main() -> None:
@@ -94,7 +83,7 @@ def main() -> None:
                 for size in args.sizes:
                     truth = resize_maps(sample.maps, size)[None]
                     started = time.perf_counter()
-                    coarse = upsample(predicted[model.resolution], size)
+                    coarse = resize_maps(predicted[model.resolution], size)
                     seconds[("upsampled", size)] += time.perf_counter() - started
                     outputs = {
                         "upsampled": coarse,

@@ -36,22 +36,22 @@ class RefineConfig:
     validation photos (the default re-measured: session 5's −8 % on them did not reproduce),
     then the 112 OOD photos:
 
-    ==========================================  =================  ====================
-    offsets, steps × learning rate              validation         OOD benchmark
-    ==========================================  =================  ====================
-    base, roughness, metallic, 60 × 0.02        −5.2 %, rough +3 %  −12.0 %, rough +7 %
+    =========================================  ==================  =====================
+    offsets, steps × learning rate             validation          OOD benchmark
+    =========================================  ==================  =====================
+    base, roughness, metallic, 60 × 0.02       −5.2 %, rough +3 %  −12.0 %, rough +7 %
     (the default)
-    base, metallic (``fit_roughness=False``),   −5.0 %, none worse  −1.6 %, diffuse +4 %,
-    60 × 0.05                                                       specular +4 %
-    same, 120 × 0.05                            −5.4 %, none worse  +0.7 %, diffuse +16 %
-    roughness fitted, not returned              −4.9 %, none worse  −0.8 %, specular +8 %
+    base, metallic (``fit_roughness=False``),  −5.0 %, none worse  −1.6 %, diffuse +4 %,
+    60 × 0.05                                                      specular +4 %
+    same, 120 × 0.05                           −5.4 %, none worse  +0.7 %, diffuse +16 %
+    roughness fitted, not returned             −4.9 %, none worse  −0.8 %, specular +8 %
     (``roughness_nuisance=True``), 60 × 0.05
-    + ``fit_normal_strength`` (60 × 0.02)       −5.1 %              not run
-    + ``fit_relief``, 64² heights, weight 0.1   −1.8 %, normal      not run
-    (60 × 0.02)                                 +8.5 % (° +29 %)
-    + ``fit_relief``, weight 1                  −3.0 %, normal      not run
-                                                +3.6 % (° +18 %)
-    ==========================================  =================  ====================
+    + ``fit_normal_strength`` (60 × 0.02)      −5.1 %              not run
+    + ``fit_relief``, 64² heights, weight 0.1  −1.8 %, normal      not run
+    (60 × 0.02)                                +8.5 % (° +29 %)
+    + ``fit_relief``, weight 1                 −3.0 %, normal      not run
+                                               +3.6 % (° +18 %)
+    =========================================  ==================  =====================
 
     (re-render error change, and the largest rise of a map's RMSE.) On validation the variants
     are as good as the default; out of distribution the relit views gain only when the returned
