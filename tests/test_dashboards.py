@@ -25,6 +25,7 @@ import pytest
 from brdfgan.evaluation.evaluator import GRID_COLUMNS, comparison_grid, fixed_samples
 from brdfgan.figures import HEADER_HEIGHT, with_column_header
 from brdfgan.models.generator import Generator
+from brdfgan.models.reference import ConstantMaps
 from brdfgan.tracking import run_identity, with_identity
 from tests.conftest import run_train_py
 
@@ -58,6 +59,12 @@ def test_comparison_grid_has_labelled_columns_and_one_row_per_sample(tiny_data: 
     photo = samples[0].photo.clamp(0, 1).numpy().transpose(1, 2, 0)
     shown = grid[HEADER_HEIGHT : HEADER_HEIGHT + side, :side]
     assert np.corrcoef(shown.ravel(), photo.ravel())[0, 1] > 0.95
+    # A model without parameters (the reference predictors `make ood` scores) gets its grid too:
+    # its predicted base colour column is its constant.
+    constant = comparison_grid(ConstantMaps(), samples)
+    assert constant.shape == grid.shape
+    predicted_basecolor = constant[HEADER_HEIGHT:, 2 * side : 3 * side]
+    assert float(predicted_basecolor.std()) < 1e-6
 
 
 def test_run_identity_names_a_run_by_what_it_compares() -> None:

@@ -30,6 +30,7 @@ from brdfgan.data.datamodule import flash_frames
 from brdfgan.data.shards import Sample, iter_shard, list_shards
 from brdfgan.errors import UserError
 from brdfgan.figures import with_column_header
+from brdfgan.inference.model.tiling import model_placement
 from brdfgan.io.atomic import atomic_replace, write_text_atomic
 from brdfgan.io.images import write_image
 from brdfgan.metrics import hotspot_centres
@@ -192,12 +193,12 @@ def fixed_samples(
 def comparison_grid(generator: nn.Module, samples: Sequence[Sample]) -> np.ndarray:
     """One row per sample under a header naming the columns (:data:`GRID_COLUMNS`): input |
     (GT, prediction) per map | (GT, prediction) re-render. The generator runs on the device of
-    its parameters.
+    its parameters or buffers (:func:`~brdfgan.inference.model.tiling.model_placement`).
 
     Shape: output ``(HEADER_HEIGHT + N·H, 11·W, 3)`` display-ready in [0, 1].
     """
-    device = next(generator.parameters()).device
     photos = torch.stack([s.photo for s in samples])
+    device, _ = model_placement(generator, photos)
     truth = torch.stack([s.maps for s in samples])
     flash = flash_frames([s.meta for s in samples], *photos.shape[-2:])
     pred = generator.eval()(photos.to(device), flash.to(device)).float().cpu()

@@ -414,7 +414,7 @@ def activation_bytes_per_pixel(generator: nn.Module) -> float:
     device would cost no compute, but its one-off set-up takes longer than this pass.)
     """
     height, width = padded_size(generator, 64, 64)
-    device, dtype = _model_placement(generator, torch.empty(0))
+    device, dtype = model_placement(generator, torch.empty(0))
     largest = 0
 
     def hook(_module: nn.Module, args: tuple[object, ...], output: object) -> None:
@@ -464,7 +464,9 @@ def _check_photo(photo: Tensor, *, single: bool) -> None:
         raise ValueError(f"expected a floating-point photo of at least 2×2 pixels, got {tuple(photo.shape)}")
 
 
-def _model_placement(model: nn.Module, photo: Tensor) -> tuple[torch.device, torch.dtype]:
+def model_placement(model: nn.Module, photo: Tensor) -> tuple[torch.device, torch.dtype]:
+    """The device and dtype of the model's first floating-point parameter or buffer; the photo's
+    for a model with neither (a reference predictor without weights)."""
     # Tiles go to the model's device and dtype; the output buffers stay with the photo (e.g. a CPU
     # photo with a GPU model keeps only one tile on the GPU).
     for tensor in (*model.parameters(), *model.buffers()):
@@ -507,7 +509,7 @@ def predict_direct(generator: nn.Module, photo: Tensor, flash: Tensor | None = N
         - output: ``(B, 8, H, W)`` on the photo's device and dtype
     """
     _check_photo(photo, single=False)
-    device, dtype = _model_placement(generator, photo)
+    device, dtype = model_placement(generator, photo)
     height, width = photo.shape[-2:]
     frame = _whole_photo_frame(photo, flash).to(device)
     with _inference(generator):
@@ -543,7 +545,7 @@ def predict_tiled(
     multiple = _size_multiple(generator)
     if config.tile % multiple:
         raise TilingError(f"tile {config.tile} must be a multiple of the model's size multiple {multiple}")
-    device, dtype = _model_placement(generator, photo)
+    device, dtype = model_placement(generator, photo)
     height, width = photo.shape[-2:]
 
     with _inference(generator):
