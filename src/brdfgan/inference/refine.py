@@ -170,6 +170,28 @@ def _ambient_irradiance(grid: Tensor, size: int) -> Tensor:
     return F.interpolate(grid.exp(), size=(size, size), mode="bilinear", align_corners=False)
 
 
+def add_ambient(render: Tensor, maps: Tensor, log_irradiance: Tensor) -> Tensor:
+    """The flash render plus the diffuse reflection of a low-frequency ambient irradiance
+    (``exp`` of a ``g × g`` grid per channel, bilinearly upsampled), relative to the flash's.
+
+    Shape: render ``(B, 3, H, W)``, maps ``(B, 8, H, W)``, log_irradiance ``(B, 3, g, g)`` →
+    ``(B, 3, H, W)``."""
+    parts = split_maps(maps)
+    albedo = diffuse_albedo(srgb_to_linear(parts.basecolor), parts.metallic)
+    return render + albedo * _ambient_irradiance(log_irradiance, render.shape[-1])
+
+
+def initial_log_gain(photo: Tensor, render: Tensor, clip_level: float) -> Tensor:
+    """Per channel, the log of the median ratio photo / render over the pixels neither clipped
+    nor black in the render (0 when there are none): where the fitted gain starts.
+
+    Shape: photo, render ``(1, 3, H, W)`` → ``(1, 3, 1, 1)``."""
+    valid = (photo < clip_level).all(dim=1, keepdim=True) & (render > 1e-4).all(1, keepdim=True)
+    ratio = (photo / render.clamp_min(1e-6)).permute(1, 0, 2, 3)[:, valid[:, 0]]
+    gain = ratio.median(dim=1).values if ratio.shape[1] > 0 else photo.new_ones(3)
+    return gain.clamp_min(1e-6).log().view(1, 3, 1, 1)
+
+
 def refine_maps(
     photo: Tensor,
     maps: Tensor,
@@ -271,12 +293,7 @@ def refine_maps(
 
         with torch.no_grad():
             start_render = render_flash(prior_values, capture, camera_xy=camera_xy)
-            valid = (target < config.clip_level).all(dim=1, keepdim=True) & (start_render > 1e-4).all(
-                1, keepdim=True
-            )
-            ratio = (target / start_render.clamp_min(1e-6)).permute(1, 0, 2, 3)[:, valid[:, 0]]
-            gain0 = ratio.median(dim=1).values if ratio.shape[1] > 0 else prior.new_ones(3)
-        log_gain = gain0.clamp_min(1e-6).log().view(1, 3, 1, 1).clone().requires_grad_(True)
+        log_gain = initial_log_gain(target, start_render, config.clip_level).clone().requires_grad_(True)
         variables: list[Tensor] = (
             [pixel_delta, material_delta, log_gain] if config.pixel_maps else [material_delta, log_gain]
         )
@@ -310,9 +327,7 @@ def refine_maps(
             current = parameters_to_maps(parameters)
             render = render_flash(current, capture, flash_offset=offset, camera_xy=camera_xy)
             if ambient is not None:
-                parts = split_maps(current)
-                albedo = diffuse_albedo(srgb_to_linear(parts.basecolor), parts.metallic)
-                render = render + albedo * _ambient_irradiance(ambient, size)
+                render = add_ambient(render, current, ambient)
             render = render * log_gain.exp()
             loss = photo_loss(render, target, config.clip_level)
             loss = loss + config.prior_weight * (current[:, 0:3] - prior_values[:, 0:3]).abs().mean()
