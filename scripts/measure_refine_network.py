@@ -34,7 +34,7 @@ from torch import Tensor, nn
 import brdfgan.evaluation.run
 from brdfgan.core.flash_geometry import centred_flash_frame, field_of_view, hotspot_position
 from brdfgan.core.render import FlashCapture, render_flash
-from brdfgan.inference.refine import add_ambient, initial_log_gain, photo_loss
+from brdfgan.inference.refine import add_ambient, cosine_decay, initial_log_gain, photo_loss
 from brdfgan.inference.refine_config import RefineConfig
 
 LEARNING_RATE = float(os.environ.get("FT_LR", "1e-4"))
@@ -70,10 +70,7 @@ def finetune(generator: nn.Module, photo: Tensor, flash_frame: Tensor, config: R
             {"params": [log_gain, ambient], "lr": config.learning_rate},
         ]
     )
-    steps = max(config.steps, 1)
-    schedule = torch.optim.lr_scheduler.LambdaLR(
-        optimizer, lambda s: 0.5 * (1 + math.cos(math.pi * min(s, steps) / steps))
-    )
+    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: cosine_decay(step, config.steps))
     with torch.enable_grad():
         for _ in range(config.steps):
             maps = network(target, frame)

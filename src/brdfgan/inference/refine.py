@@ -192,6 +192,11 @@ def initial_log_gain(photo: Tensor, render: Tensor, clip_level: float) -> Tensor
     return gain.clamp_min(1e-6).log().view(1, 3, 1, 1)
 
 
+def cosine_decay(step: int, steps: int) -> float:
+    """The learning-rate factor of a fit of ``steps`` steps at ``step``: 1 → 0 along half a cosine."""
+    return 0.5 * (1 + math.cos(math.pi * min(step, steps) / max(steps, 1)))
+
+
 def refine_maps(
     photo: Tensor,
     maps: Tensor,
@@ -318,7 +323,7 @@ def refine_maps(
         optimizer = torch.optim.Adam(variables, lr=config.learning_rate)
         schedule = torch.optim.lr_scheduler.LambdaLR(
             optimizer,
-            lambda step: 0.5 * (1 + math.cos(math.pi * min(step, config.steps) / max(config.steps, 1))),
+            lambda step: cosine_decay(step, config.steps),
         )
 
         def objective() -> tuple[Tensor, Tensor]:
