@@ -81,13 +81,24 @@ def test_user_errors_and_full_disks_are_one_line_bugs_keep_their_traceback(
         run_reporting_errors(lambda: fail(ValueError("a bug")))
 
 
-def test_references_writes_both_weight_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_references_writes_the_three_weight_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     maps = [random_maps(8, 8, seed=seed) for seed in range(3)]
     samples = [Sample(f"train-{i}", torch.rand(3, 8, 8), m, meta={}) for i, m in enumerate(maps)]
     write_shard(shard_path(tmp_path / "data", "train", 0), samples)
     assert main(["references", str(tmp_path / "data"), "--out", str(tmp_path / "refs")]) == 0
     written = [Path(line) for line in capsys.readouterr().out.split()]
-    assert [p.name for p in written] == ["mean_maps.safetensors", "photo_basecolor.safetensors"]
+    assert [p.name for p in written] == [
+        "mean_maps.safetensors",
+        "photo_basecolor.safetensors",
+        "de_lit.safetensors",
+    ]
+    delit, meta = load_weights(written[2])
+    assert delit(torch.rand(1, 3, 4, 4)).shape == (1, 8, 4, 4) and "gain" in meta["extra"]
+    assert (
+        main(["references", str(tmp_path / "data"), "--out", str(tmp_path / "only"), "--only", "de_lit"]) == 0
+    )
+    assert capsys.readouterr().out.split() == [str(tmp_path / "only" / "de_lit.safetensors")]
+    assert main(["references", str(tmp_path / "data"), "--out", str(tmp_path / "x"), "--only", "median"]) != 0
     constant, _ = load_weights(written[0])
     predicted = constant(torch.rand(1, 3, 4, 4))[0, :, 0, 0].double()
     expected = torch.stack(maps).double().mean(dim=(0, 2, 3))  # base colour, roughness, metallic

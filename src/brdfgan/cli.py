@@ -298,12 +298,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     references = commands.add_parser(
         "references",
-        help="a dataset → weights of the trivial reference predictors (mean maps, photo as base colour)",
-        description="Average the train split of DATA_DIR and write OUT/mean_maps.safetensors and "
-        "OUT/photo_basecolor.safetensors, which predict and evaluate.py load like any model.",
+        help="a dataset → weights of the trivial reference predictors (mean maps, photo as base "
+        "colour, de-lit photo)",
+        description="Fit the trivial references on the train split of DATA_DIR and write "
+        "OUT/mean_maps.safetensors, OUT/photo_basecolor.safetensors and OUT/de_lit.safetensors, which "
+        "predict and evaluate.py load like any model.",
     )
-    references.add_argument("data_dir", type=Path, metavar="DATA_DIR", help="its train split is averaged")
+    references.add_argument("data_dir", type=Path, metavar="DATA_DIR", help="its train split is used")
     references.add_argument("--out", type=Path, required=True, metavar="DIR")
+    references.add_argument(
+        "--only", nargs="+", default=None, metavar="NAME", help="some of: mean_maps photo_basecolor de_lit"
+    )
     references.set_defaults(run=references_command, interrupted="interrupted")
 
     stats = commands.add_parser(
@@ -476,9 +481,9 @@ def report_command(args: argparse.Namespace) -> int:
 
 
 def references_command(args: argparse.Namespace) -> int:
-    from brdfgan.references import write_reference_weights
+    from brdfgan.references import REFERENCE_NAMES, write_reference_weights
 
-    for path in write_reference_weights(args.data_dir, args.out):
+    for path in write_reference_weights(args.data_dir, args.out, args.only or REFERENCE_NAMES):
         print(path)
     return 0
 

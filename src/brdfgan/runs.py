@@ -43,6 +43,7 @@ NETWORK_CLASSES: dict[str, tuple[str, str]] = {
     "brdfgan.models.discriminator.PatchDiscriminator": ("brdfgan.models.discriminator", "PatchDiscriminator"),
     "brdfgan.models.reference.ConstantMaps": ("brdfgan.models.reference", "ConstantMaps"),
     "brdfgan.models.reference.PhotoAsBasecolor": ("brdfgan.models.reference", "PhotoAsBasecolor"),
+    "brdfgan.models.reference.DeLitPhoto": ("brdfgan.models.reference", "DeLitPhoto"),
 }
 # Hydra flags that may sit in a stored network node; they change how Hydra would call the
 # class, and we call it ourselves, so they are dropped (``_partial_``: the discriminator).

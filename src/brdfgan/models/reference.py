@@ -4,12 +4,17 @@
   under a per-pixel squared error in the stored encodings (normal: the mean direction).
 - :class:`PhotoAsBasecolor`: the input photo (sRGB-encoded) as base colour, a flat normal and
   constant roughness/metallic (the training means) — what "use the photo as the texture" gives.
+- :class:`DeLitPhoto`: the de-lit photo (:func:`brdfgan.core.delit.delit_photo`: the photo
+  divided by the flash's falloff on a flat surface for the photo's field of view and hotspot, the
+  hotspot clipped) times an exposure gain fitted on a training split, as base colour; a flat
+  normal; constant roughness and metallic (the training medians). A physics heuristic with no
+  learning: on real phone captures it relit better than the v3 network (issue 31).
 
 Both behave like generators (``forward(photo) -> maps``, ``config()``, ``size_multiple``), so the
 evaluator, :mod:`brdfgan.runs` and ``brdfgan predict`` take them unchanged. Build
 their weight files from a dataset with::
 
-    brdfgan references DATA_DIR --out DIR         # DIR/{mean_maps,photo_basecolor}.safetensors
+    brdfgan references DATA_DIR --out DIR      # DIR/{mean_maps,photo_basecolor,de_lit}.safetensors
 """
 
 from __future__ import annotations
@@ -19,6 +24,9 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
+from brdfgan.core.delit import delit_photo
+from brdfgan.core.exposure import luminance
+from brdfgan.core.flash_geometry import DEFAULT_FOV_DEG, centred_flash_frame
 from brdfgan.core.svbrdf import (
     BASECOLOR,
     METALLIC,
@@ -27,6 +35,7 @@ from brdfgan.core.svbrdf import (
     ROUGHNESS,
     linear_to_srgb,
     normalize_normal,
+    srgb_to_linear,
 )
 from brdfgan.errors import UserError
 
@@ -76,6 +85,72 @@ class PhotoAsBasecolor(nn.Module):
         maps[:, ROUGHNESS] = self.roughness.to(photo.dtype)
         maps[:, METALLIC] = self.metallic.to(photo.dtype)
         return maps
+
+
+class DeLitPhoto(nn.Module):
+    """Base colour = ``gain`` × the de-lit photo, sRGB-encoded; flat normal; constant roughness
+    and metallic. The flash frame says where the hotspot is and the field of view; without one
+    the photo is taken as centred on its hotspot with the default field of view (as
+    ``brdfgan predict`` assumes without EXIF)."""
+
+    size_multiple = 1
+    gain: Tensor  # () buffer: exposure gain from the de-lit photo to linear base colour
+    roughness: Tensor  # () buffer
+    metallic: Tensor  # () buffer
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.register_buffer("gain", torch.tensor(1.0))
+        self.register_buffer("roughness", torch.tensor(0.5))
+        self.register_buffer("metallic", torch.tensor(0.0))
+
+    def config(self) -> dict[str, Any]:
+        return {}
+
+    def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        """Shape: photo ``(B, 3, H, W)`` linear LDR, flash ``(B, 3)`` or ``None`` → maps ``(B, 8, H, W)``."""
+        batch, _, height, width = photo.shape
+        frame = flash
+        if frame is None:
+            frame = centred_flash_frame(
+                batch, height, width, DEFAULT_FOV_DEG, device=photo.device, dtype=photo.dtype
+            )
+        maps = photo.new_zeros(batch, NUM_CHANNELS, height, width)
+        delit = delit_photo(photo, frame.to(photo.dtype))
+        maps[:, BASECOLOR] = linear_to_srgb((self.gain.to(photo.dtype) * delit).clamp(0.0, 1.0))
+        maps[:, NORMAL.start + 2] = 1.0
+        maps[:, ROUGHNESS] = self.roughness.to(photo.dtype)
+        maps[:, METALLIC] = self.metallic.to(photo.dtype)
+        return maps
+
+
+def fit_delit_reference(batches: Any, stride: int = 4) -> DeLitPhoto:
+    """A :class:`DeLitPhoto` fitted on the batches of a training split: the exposure gain is the
+    median over samples of the ratio of the true linear base colour's mean luminance to the de-lit
+    photo's (a median of ratios: a few glossy or dark samples do not move it), roughness and
+    metallic the medians of every ``stride``-th texel's.
+
+    Shape:
+        - each batch: ``"photo"`` ``(B, 3, H, W)``, ``"maps"`` ``(B, 8, H, W)``, ``"flash"`` ``(B, 3)``
+    """
+    log_ratios: list[Tensor] = []
+    roughness: list[Tensor] = []
+    metallic: list[Tensor] = []
+    for batch in batches:
+        photo, maps = batch["photo"].double(), batch["maps"].double()
+        delit = delit_photo(photo, batch["flash"].double())
+        truth = srgb_to_linear(maps[:, BASECOLOR])
+        ratio = luminance(truth).mean(dim=(1, 2, 3)) / luminance(delit).mean(dim=(1, 2, 3)).clamp_min(1e-6)
+        log_ratios.append(ratio.clamp_min(1e-6).log())
+        roughness.append(maps[:, ROUGHNESS, ::stride, ::stride].flatten())
+        metallic.append(maps[:, METALLIC, ::stride, ::stride].flatten())
+    if not log_ratios:
+        raise UserError("no training samples to fit the de-lit reference on")
+    model = DeLitPhoto()
+    model.gain.fill_(float(torch.cat(log_ratios).median().exp()))
+    model.roughness.fill_(float(torch.cat(roughness).median()))
+    model.metallic.fill_(float(torch.cat(metallic).median()))
+    return model
 
 
 def mean_maps(batches: Any) -> Tensor:

@@ -1,0 +1,95 @@
+"""The de-lit photo: a flash photo divided by the flash's falloff on a flat surface.
+
+Under a point flash at the lens, a flat Lambertian surface of albedo ``ρ`` photographed from
+distance ``d`` along the axis returns, at a pixel whose offset from the hotspot is ``o`` (in units
+of the camera distance, :func:`~brdfgan.core.flash_geometry.flash_offset_channels`), the radiance
+``ρ/π · I cos θ / r²`` with ``r² = d² (1 + |o|²)`` and ``cos θ = 1 / √(1 + |o|²)``. Relative to the
+hotspot that is the **flat-surface falloff**
+
+    ``falloff(o) = (1 + |o|²)^(−3/2)``
+
+so ``photo / falloff`` is the photo with the flash's geometric light distribution removed: a
+uniform matte material comes out uniform whatever the field of view (the field of view sets how
+far ``|o|`` reaches at the photo's edges: ±0.18 at 20°, ±0.77 at 75°). What remains in it is the
+material's albedo times the exposure, plus what the flat-diffuse model does not explain: the
+specular highlight (clipped here), relief shading and environment light.
+
+It is the photo-anchored starting point of a base-colour estimate (``brdfgan.models.reference
+.DeLitPhoto`` and the next default model), and a physics heuristic that real phone captures
+showed to relight better than the v3 network (docs: issue 31).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from brdfgan.core.exposure import luminance
+from brdfgan.core.flash_geometry import check_flash_frame, flash_offset_channels
+
+# The hotspot is clipped at this multiple of the de-lit luminance's upper quartile: a glossy
+# highlight is several times brighter than the albedo around it, a matte one's peak is not
+# clipped (measured on real captures: 1.5 × the 75th percentile, DESIGN.md §8).
+HOTSPOT_CLIP_FACTOR = 1.5
+HOTSPOT_CLIP_QUANTILE = 0.75
+
+
+def flat_flash_falloff(frame: Tensor, height: int, width: int) -> Tensor:
+    """The flash's irradiance on a flat surface relative to its hotspot, ``(1 + |o|²)^(−3/2)``,
+    with ``o`` each pixel's offset from the hotspot in camera distances (module docstring).
+
+    Shape:
+        - frame: ``(B, 3)`` flash frame ``(x, y, s)``
+        - output: ``(B, 1, height, width)`` in ``(0, 1]``, 1 at the hotspot
+    """
+    offsets = flash_offset_channels(frame, height, width)
+    return (1.0 + offsets.square().sum(dim=1, keepdim=True)).pow(-1.5)
+
+
+def clip_hotspot(
+    image: Tensor, factor: float = HOTSPOT_CLIP_FACTOR, quantile: float = HOTSPOT_CLIP_QUANTILE
+) -> Tensor:
+    """Scale down every pixel whose luminance exceeds ``factor`` × the image's ``quantile`` of
+    luminance to that level, keeping its chromaticity (a clipped highlight stays the albedo's
+    hue rather than turning white).
+
+    Shape:
+        - image: ``(B, 3, H, W)`` linear RGB, non-negative
+        - output: same
+    """
+    if image.ndim != 4 or image.shape[1] != 3:
+        raise ValueError(f"expected a (B, 3, H, W) image, got {tuple(image.shape)}")
+    if not factor > 0 or not 0.0 < quantile <= 1.0:
+        raise ValueError(f"need factor > 0 and 0 < quantile <= 1, got {factor=}, {quantile=}")
+    lum = luminance(image)  # (B, 1, H, W)
+    cap = factor * torch.quantile(lum.flatten(1).float(), quantile, dim=1).to(image.dtype)
+    cap = cap.view(-1, 1, 1, 1)
+    scale = torch.where(lum > cap, cap / lum.clamp_min(torch.finfo(image.dtype).tiny), torch.ones_like(lum))
+    return image * scale
+
+
+def delit_photo(photo: Tensor, frame: Tensor, *, clip: bool = True) -> Tensor:
+    """The linear photo divided by the flat-surface flash falloff for its flash frame (its field
+    of view and hotspot), the hotspot then clipped (:func:`clip_hotspot`) unless ``clip=False``.
+    No exposure gain: multiply by one to get an albedo estimate.
+
+    Shape:
+        - photo: ``(B, 3, H, W)`` linear LDR
+        - frame: ``(B, 3)``
+        - output: ``(B, 3, H, W)`` linear, non-negative (not bounded above)
+    """
+    if photo.ndim != 4 or photo.shape[1] != 3:
+        raise ValueError(f"expected a (B, 3, H, W) photo, got {tuple(photo.shape)}")
+    check_flash_frame(frame, photo.shape[0])
+    falloff = flat_flash_falloff(frame.to(photo.dtype), photo.shape[-2], photo.shape[-1])
+    delit = photo.clamp_min(0.0) / falloff
+    return clip_hotspot(delit) if clip else delit
+
+
+__all__ = [
+    "HOTSPOT_CLIP_FACTOR",
+    "HOTSPOT_CLIP_QUANTILE",
+    "clip_hotspot",
+    "delit_photo",
+    "flat_flash_falloff",
+]
