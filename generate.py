@@ -39,20 +39,30 @@ def generate(cfg: DictConfig) -> None:
         dataset_ready,
         plan_shards,
         run_generation,
+        scan_materials,
         spec_from_config,
         split_materials,
+        split_scan_sets,
     )
+    from brdfgan.data.scanned import scanned_material_folders
 
     check_config(cfg, ["dataset_spec"])  # types, naming the key; the spec checks ranges
     spec = spec_from_config(cfg.dataset_spec)
     shard = OmegaConf.to_object(cfg.shard) if isinstance(cfg.shard, DictConfig | list) else cfg.shard
     if cfg.plan:
         jobs = plan_shards(spec)
+        scans = scan_materials(spec)
         for position, job in enumerate(jobs):
+            scanned = sum(material in scans for material in job.materials)
             print(
                 f"{position:6d}  {job.split:5s}  shard {job.index:6d}  "
                 f"materials {list(job.materials)}  samples {job.sample_count(spec)}"
+                + (f"  ({scanned} scanned)" if scans else "")
             )
+        if scans:
+            names = [folder.name for folder in scanned_material_folders(str(spec.scans.folder))]
+            for split, sets in split_scan_sets(spec).items():
+                print(f"scanned sets of {split} ({len(sets)}): {', '.join(names[i] for i in sets)}")
         print(f"{len(jobs)} shards; run them all with: python generate.py -m shard='range(0,{len(jobs)})'")
         return
     summary = run_generation(spec, cfg.out_dir, shards=shard, progress=cfg.progress)

@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from brdfgan.core.render import render_flash
+from brdfgan.core.sampling import log_uniform
 from brdfgan.core.svbrdf import CHANNELS, flat_maps, join_maps, linear_to_srgb, srgb_to_linear, validate_maps
 from brdfgan.data.augment import CropSampling, CropTransform, crop_maps, random_crops
 from brdfgan.data.materials.base import height_to_normal
@@ -143,3 +144,42 @@ def test_bad_input() -> None:
         crop_maps(flat_maps(8, 16), CropTransform((0.0, 0.0), 1.0, 0.0), 8)
     with pytest.raises(ValueError, match="scale_min"):
         CropSampling(scale_min=0.6, scale_max=0.5)
+
+
+def test_render_of_mirrored_maps_is_the_mirrored_render() -> None:
+    # The flash capture is symmetric under x -> -x too: photographing the mirrored (and turned)
+    # maps must give the mirrored (turned) photo, which holds only if the slopes mirror as well.
+    maps, _ = _material(seed=5)
+    transform = CropTransform(center=(0.0, 0.0), scale=1.0, angle=math.pi / 2, mirror=True)
+    cropped = crop_maps(maps, transform, 64)
+    expected_content = torch.flip(torch.rot90(maps[CHANNELS["basecolor"]], 1, dims=(1, 2)), dims=(2,))
+    torch.testing.assert_close(cropped[CHANNELS["basecolor"]], expected_content, atol=1e-5, rtol=0)
+    render_mirrored = torch.flip(torch.rot90(render_flash(maps[None])[0], 1, dims=(1, 2)), dims=(2,))
+    mirrored_render = render_flash(cropped[None])[0]
+    error = (mirrored_render - render_mirrored).abs().mean() / render_mirrored.abs().mean()
+    assert error < 1e-4
+    unmirrored = cropped.clone()
+    unmirrored[3] = -unmirrored[3]  # content mirrored, slopes not
+    wrong = render_flash(unmirrored[None])[0]
+    assert (wrong - render_mirrored).abs().mean() / render_mirrored.abs().mean() > 50 * max(
+        error.item(), 1e-5
+    )
+
+
+def test_crops_inside_stay_inside_and_mirror_half_the_time() -> None:
+    sampling = CropSampling(scale_min=0.25, scale_max=0.5, mirror=True, inside=True)
+    generator = torch.Generator().manual_seed(0)
+    draws = [sampling.sample(generator) for _ in range(400)]
+    for t in draws:  # every corner of the rotated square lies inside [-1, 1]²
+        for cx, cy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+            x = t.center[0] + t.scale * (math.cos(t.angle) * cx + math.sin(t.angle) * cy)
+            y = t.center[1] + t.scale * (-math.sin(t.angle) * cx + math.cos(t.angle) * cy)
+            assert abs(x) <= 1.0 + 1e-9 and abs(y) <= 1.0 + 1e-9
+    assert 150 < sum(t.mirror for t in draws) < 250
+    # Without the options a draw takes its four uniforms as it always did: the same crops.
+    u = torch.rand(4, generator=torch.Generator().manual_seed(1), dtype=torch.float64).tolist()
+    plain = CropSampling(0.25, 0.5).sample(torch.Generator().manual_seed(1))
+    assert plain == CropTransform(
+        (2 * u[2] - 1, 2 * u[3] - 1), log_uniform(u[0], 0.25, 0.5), 2 * math.pi * u[1]
+    )
+    assert "mirror" not in plain.to_json()

@@ -87,7 +87,7 @@ def _spec_numeric_fields(cls: type, prefix: str) -> set[str]:
     keys = set()
     for field in dataclasses.fields(cls):
         kind = hints[field.name]
-        if kind in (int, float):
+        if kind in (int, float) or int in typing.get_args(kind):  # a number, or a number or names
             keys.add(f"{prefix}.{field.name}")
         elif dataclasses.is_dataclass(kind):
             keys |= _spec_numeric_fields(kind, f"{prefix}.{field.name}")

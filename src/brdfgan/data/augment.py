@@ -1,13 +1,16 @@
 """Paper §5 augmentation: random crops with rotation and scale from large maps to training size.
 
 A crop is a square of side ``2·scale`` (plane units; the source covers ``[-1, 1]²``) centred at
-``center`` and rotated by ``angle``: the feature at source position ``q`` lands at output
-position ``R(angle)·(q − center)/scale``. Procedural materials tile, so sampling wraps around.
+``center``, rotated by ``angle`` and optionally mirrored: the feature at source position ``q``
+lands at output position ``M·R(angle)·(q − center)/scale``, with ``M`` the mirror ``x → −x`` or
+the identity. Procedural materials tile, so sampling wraps around; scanned sets need not tile, so
+their crops can be drawn to stay inside the source (``CropSampling.inside``).
 
 Per map:
 - base color is resampled in linear space (filtering sRGB values darkens edges) and re-encoded;
 - normals are resampled, their XY components rotated by the same angle as the content (a slope
-  facing +X rotated by 90° faces +Y), then renormalised;
+  facing +X rotated by 90° faces +Y) and mirrored with it (a mirrored slope facing +X faces −X),
+  then renormalised;
 - roughness and metallic are resampled as they are.
 
 Downscaling pre-filters with an antialiased resize so a 2048² material reduced to 256² does not
@@ -18,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 import torch.nn.functional as F
@@ -40,20 +44,35 @@ from brdfgan.data.spec_checks import in_range, ordered
 @dataclass(frozen=True)
 class CropTransform:
     """Where a crop comes from: centre in ``[-1, 1]²``, half side ``scale`` (1 = whole source),
-    rotation ``angle`` in radians (counter-clockwise, +Y up)."""
+    rotation ``angle`` in radians (counter-clockwise, +Y up), then ``mirror`` (x → −x)."""
 
     center: tuple[float, float]
     scale: float
     angle: float
+    mirror: bool = False
+
+    def to_json(self) -> dict[str, Any]:
+        """The record of a sample's metadata; ``mirror`` only when set, so that the records of
+        crops without it are the bytes they were before mirroring existed."""
+        record: dict[str, Any] = {"center": list(self.center), "scale": self.scale, "angle": self.angle}
+        return record | {"mirror": True} if self.mirror else record
 
 
 @dataclass(frozen=True)
 class CropSampling:
-    """Ranges of the random crops: crop side as a fraction of the source side, rotation."""
+    """Ranges of the random crops: crop side as a fraction of the source side, rotation.
+
+    ``mirror``: mirror half of the crops (x → −x). ``inside``: draw the centre so that the
+    rotated crop lies inside the source (for sources that do not tile, such as scans; a crop
+    too large for that is centred). Both off by default, and then a draw takes the same four
+    uniforms it always took, so a spec without them paints the crops it painted before.
+    """
 
     scale_min: float = 0.125
     scale_max: float = 0.5
     rotate: bool = True
+    mirror: bool = False
+    inside: bool = False
 
     def __post_init__(self) -> None:
         key = "dataset_spec.crop"  # where a crop spec is configured; messages name the key as typed
@@ -62,11 +81,15 @@ class CropSampling:
         in_range(f"{key}.scale_max", self.scale_max, 0.0, 1.0, low_open=True)
 
     def sample(self, generator: torch.Generator) -> CropTransform:
-        u = torch.rand(4, generator=generator, dtype=torch.float64).tolist()
+        u = torch.rand(5 if self.mirror else 4, generator=generator, dtype=torch.float64).tolist()
         # Log-uniform scale: each octave of zoom is equally likely.
         scale = log_uniform(u[0], self.scale_min, self.scale_max)
         angle = 2.0 * math.pi * u[1] if self.rotate else 0.0
-        return CropTransform(center=(2.0 * u[2] - 1.0, 2.0 * u[3] - 1.0), scale=scale, angle=angle)
+        # The rotated square's half extent along x and y is scale·(|cos| + |sin|).
+        reach = 1.0 - scale * (abs(math.cos(angle)) + abs(math.sin(angle))) if self.inside else 1.0
+        reach = max(reach, 0.0)
+        center = (reach * (2.0 * u[2] - 1.0), reach * (2.0 * u[3] - 1.0))
+        return CropTransform(center=center, scale=scale, angle=angle, mirror=self.mirror and u[4] < 0.5)
 
 
 def _prefilter(maps: Tensor, size: int) -> Tensor:
@@ -82,6 +105,8 @@ def _sampling_grid(transform: CropTransform, out_size: int, source_size: int, pa
     """grid_sample coordinates ``(1, N, N, 2)`` into a source circularly padded by ``pad`` texels."""
     c = (torch.arange(out_size, dtype=torch.float64) + 0.5) * (2.0 / out_size) - 1.0
     y_out, x_out = torch.meshgrid(-c, c, indexing="ij")  # row 0 is +Y
+    if transform.mirror:  # the output's x comes from the mirrored source: q = c + s R(−θ) M p
+        x_out = -x_out
     cos, sin = math.cos(transform.angle), math.sin(transform.angle)
     # Inverse rotation takes an output position back to the source.
     x = transform.center[0] + transform.scale * (cos * x_out + sin * y_out)
@@ -123,7 +148,10 @@ def _crop_linear(work: Tensor, transform: CropTransform, out_size: int) -> Tenso
 
     cos, sin = math.cos(transform.angle), math.sin(transform.angle)
     nx, ny, nz = out[NORMAL][0], out[NORMAL][1], out[NORMAL][2]
-    out[NORMAL] = normalize_normal(torch.stack([cos * nx - sin * ny, sin * nx + cos * ny, nz]))
+    turned_x = cos * nx - sin * ny
+    if transform.mirror:  # M R(θ) n: the slopes turn with the content, then mirror with it
+        turned_x = -turned_x
+    out[NORMAL] = normalize_normal(torch.stack([turned_x, sin * nx + cos * ny, nz]))
     out[BASECOLOR] = linear_to_srgb(out[BASECOLOR].clamp(0.0, 1.0))
     # Resampling weights sum to 1 only up to rounding: keep the scalar maps inside [0, 1].
     out[ROUGHNESS] = out[ROUGHNESS].clamp(0.0, 1.0)

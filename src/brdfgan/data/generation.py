@@ -64,7 +64,7 @@ from brdfgan.data.lighting import (
     draw_lighting,
     realize_lighting,
 )
-from brdfgan.data.material_source import PaintedMaterial, paint_procedural, paint_scanned
+from brdfgan.data.material_source import PaintedMaterial, ScanSampling, paint_procedural, paint_scanned
 from brdfgan.data.materials.families import resolve_families
 from brdfgan.data.materials.mixing import MixingConfig
 from brdfgan.data.materials.recolor import RecolorConfig
@@ -122,6 +122,8 @@ class DatasetSpec:
     # A folder of scanned material sets (brdfgan.data.scanned) instead of the procedural
     # families: such a dataset is test only, so real scans never become training data.
     scanned: str | None = None
+    # Scanned sets as a share of every split's materials, beside the families (split by set).
+    scans: ScanSampling = field(default_factory=ScanSampling)
     # How samples are stored (brdfgan.data.shards): "u16z" or "png", the same 16-bit values either
     # way. "png" here because a spec without the key (every dataset.json made before it) describes
     # PNG shards; conf/dataset_spec/default.yaml makes new datasets "u16z". Not part of a dataset's
@@ -158,6 +160,8 @@ class DatasetSpec:
         if self.scanned is not None:
             self._check_scanned()
             return
+        if self.scans.enabled:
+            self._check_scans()
         test = in_range("dataset_spec.test_fraction", self.test_fraction, 0.0, 1.0, high_open=True)
         val = in_range("dataset_spec.val_fraction", self.val_fraction, 0.0, 1.0, high_open=True)
         if test + val >= 1.0:
@@ -185,13 +189,30 @@ class DatasetSpec:
                 "set dataset_spec.mixing.fraction=0 and dataset_spec.recolor.probability=0"
             )
 
+    def _check_scans(self) -> None:
+        found = len(scanned_material_folders(str(self.scans.folder), key="dataset_spec.scans.folder"))
+        held_out = self.scans.held_out_count("val_sets") + self.scans.held_out_count("test_sets")
+        if held_out >= found:
+            raise DatasetConfigError(
+                f"dataset_spec.scans: {held_out} validation and test sets leave none of the {found} "
+                f"sets in {self.scans.folder!r} to train on"
+            )
+        split_scan_sets(self)  # unknown set names fail here
+
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready description (recorded in ``dataset.json`` and the manifests). An empty
         family list is recorded resolved, as the registry's names: a dataset made before a family
-        joined the registry then differs from today's, and is not taken for it."""
+        joined the registry then differs from today's, and is not taken for it. Options added
+        since (scans, mirrored crops, crops inside the source) are recorded only when used, so a
+        dataset made before them keeps its identity."""
         description = json.loads(json.dumps(dataclasses.asdict(self)))
         if self.scanned is None:
             description["families"] = [family.name for family in resolve_families(self.families)]
+        if not self.scans.enabled:
+            del description["scans"]
+        for option in ("mirror", "inside"):
+            if not description["crop"][option]:
+                del description["crop"][option]
         return description
 
     def renders_per_crop(self, split: str) -> int:
@@ -256,6 +277,59 @@ def split_materials(spec: DatasetSpec) -> dict[str, tuple[int, ...]]:
     val = order[counts["test"] : counts["test"] + counts["val"]]
     train = order[counts["test"] + counts["val"] :]
     return {name: tuple(sorted(t.tolist())) for name, t in (("train", train), ("val", val), ("test", test))}
+
+
+def split_scan_sets(spec: DatasetSpec) -> dict[str, tuple[int, ...]]:
+    """Indices of the scanned sets (in :func:`~brdfgan.data.scanned.scanned_material_folders`'
+    order) per split, each sorted: the sets ``test_sets`` and ``val_sets`` name, or as many as
+    they say from a seeded permutation, held out; the rest ``train``. Empty without scans."""
+    if not spec.scans.enabled:
+        return {split: () for split in SPLITS}
+    key = "dataset_spec.scans"
+    folders = scanned_material_folders(str(spec.scans.folder), key=f"{key}.folder")
+    names = [folder.name for folder in folders]
+    held: dict[str, list[int]] = {}
+    for split, which in (("test", "test_sets"), ("val", "val_sets")):
+        for name in spec.scans.named_sets(which):
+            if name not in names:
+                raise DatasetConfigError(f"{key}.{which}: no set {name!r} in {spec.scans.folder!r}")
+        held[split] = [names.index(name) for name in spec.scans.named_sets(which)]
+    seeded = torch.Generator().manual_seed(derive_seed(spec.seed, "scan-split"))
+    free = [
+        int(i)
+        for i in torch.randperm(len(names), generator=seeded)
+        if int(i) not in held["test"] + held["val"]
+    ]
+    for split, which in (("test", "test_sets"), ("val", "val_sets")):
+        if not spec.scans.named_sets(which):  # a number: the next sets of the permutation
+            count = spec.scans.held_out_count(which)
+            held[split], free = free[:count], free[count:]
+    train = [index for index in range(len(names)) if index not in held["test"] + held["val"]]
+    return {"train": tuple(train), "val": tuple(sorted(held["val"])), "test": tuple(sorted(held["test"]))}
+
+
+def scan_materials(spec: DatasetSpec) -> dict[int, int]:
+    """Material index → scanned set index, for the indices painted from a scan. Each index is a
+    scan with probability ``scans.fraction`` (a draw of its own: the others stay procedural and
+    unchanged); a split's scan materials take its sets in turn, starting at a seeded offset, so
+    every set of the split is used about equally."""
+    if not spec.scans.enabled:
+        return {}
+    sets = split_scan_sets(spec)
+    chosen: dict[int, int] = {}
+    for split, indices in split_materials(spec).items():
+        pool = sets[split]
+        scans = [i for i in indices if _unit_draw(spec.seed, "scan", i) < spec.scans.fraction]
+        if not pool or not scans:
+            continue
+        start = int(_unit_draw(spec.seed, "scan-offset", split) * len(pool))
+        chosen.update({index: pool[(start + rank) % len(pool)] for rank, index in enumerate(scans)})
+    return chosen
+
+
+def _unit_draw(*parts: int | str) -> float:
+    """A uniform number in [0, 1) from a hash of ``parts`` (:func:`derive_seed`)."""
+    return derive_seed(*parts) / 2**63
 
 
 def plan_shards(spec: DatasetSpec) -> list[ShardJob]:
@@ -353,7 +427,8 @@ def material_samples(
     except InvalidMapsError as error:  # a family bug, not a user error: keep the traceback
         where = f"material {material_index} ({material.family}, {material.parameters}, {material.extra})"
         raise RuntimeError(f"{where}: {error}") from error
-    crops, transforms = random_crops(maps, spec.crops_per_material, spec.resolution, generator, spec.crop)
+    crop_sampling = material.crop or spec.crop
+    crops, transforms = random_crops(maps, spec.crops_per_material, spec.resolution, generator, crop_sampling)
     pool = pools.test if split == "test" else pools.train
     for c, (crop, transform) in enumerate(zip(crops, transforms, strict=True)):
         for r in range(spec.renders_per_crop(split)):
@@ -376,7 +451,7 @@ def material_samples(
                     "family": material.family,
                     "parameters": material.parameters,
                     **material.extra,
-                    "crop": {"index": c, **dataclasses.asdict(transform)},
+                    "crop": {"index": c, **transform.to_json()},
                     "render": {"index": r, "seed": render_seed, "spp": spec.spp},
                     "lighting": lighting.to_json(),
                     "flash": {"intensity_w_sr": flash_intensity, "temperature_k": temperature},
@@ -390,10 +465,20 @@ def paint_material(
     spec: DatasetSpec, split: str, material_index: int, generator: torch.Generator
 ) -> PaintedMaterial:
     """The maps of material ``material_index`` of ``split`` (:mod:`brdfgan.data.material_source`):
-    a scanned set, or a family draw from ``generator`` (mixed with a partner of the same split
-    and recoloured as the spec says)."""
+    a scanned set (a test-only scanned dataset's, or one of the split's sets where
+    :func:`scan_materials` says so), or a family draw from ``generator`` (mixed with a partner
+    of the same split and recoloured as the spec says)."""
     if spec.scanned is not None:
         return paint_scanned(scanned_material_folders(spec.scanned)[material_index], spec.material_resolution)
+    scans = scan_materials(spec)
+    scan = scans.get(material_index)
+    if scan is not None:
+        folder = scanned_material_folders(str(spec.scans.folder), key="dataset_spec.scans.folder")[scan]
+        recolor = dataclasses.replace(spec.recolor, probability=spec.scans.recolor_probability)
+        return paint_scanned(
+            folder, spec.scans.resolution, crop=spec.scans.crop, recolor=recolor,
+            choice_seed=derive_seed(spec.seed, "mix", material_index),
+        )  # fmt: skip
     return paint_procedural(
         resolve_families(spec.families),
         material_index,
@@ -401,7 +486,8 @@ def paint_material(
         generator,
         choice_seed=derive_seed(spec.seed, "mix", material_index),
         partner_seed=lambda index: material_seed(spec.seed, index),
-        split_indices=split_materials(spec)[split],
+        # A partner is painted as it is on its own: procedural, so not a scan's index.
+        split_indices=[index for index in split_materials(spec)[split] if index not in scans],
         mixing=spec.mixing,
         recolor=spec.recolor,
     )

@@ -1,5 +1,6 @@
 """The material of one dataset index: a procedural family draw (optionally mixed with a partner
-material of the same split and recoloured) or a scanned set — maps plus what to record about it.
+material of the same split and recoloured) or a scanned set (optionally recoloured) — maps plus
+what to record about it, and how its crops are drawn.
 
 Draws for mixing and recolouring come from their own generator (seeded from the material seed),
 so a spec with both switched off paints exactly the materials it painted before they existed,
@@ -20,10 +21,89 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from brdfgan.core.svbrdf import BASECOLOR, METALLIC
+from brdfgan.data.augment import CropSampling
 from brdfgan.data.materials.base import MaterialFamily, layers_to_maps
 from brdfgan.data.materials.mixing import MixingConfig, draw_mix, mix_layers, mixture_mask
-from brdfgan.data.materials.recolor import RecolorConfig, draw_recolor, recolor_layers
+from brdfgan.data.materials.recolor import RecolorConfig, draw_recolor, recolor_basecolor, recolor_layers
 from brdfgan.data.scanned import read_scanned_material
+from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, ordered
+
+SCANS_KEY = "dataset_spec.scans"
+
+
+@dataclass(frozen=True)
+class ScanSampling:
+    """Real scanned sets (:mod:`brdfgan.data.scanned`) as a share of every split's materials.
+
+    Attributes:
+        folder: a folder of scanned sets in any layout :mod:`brdfgan.data.scanned` reads;
+            ``None``: procedural materials only.
+        fraction: the share of each split's material indices painted from a scan (each index
+            decides with a draw of its own, so the procedural materials stay what they were).
+        val_sets, test_sets: the scanned sets held out for validation and test: their names, or
+            a number of them drawn by a seeded permutation of the sorted sets. A set belongs to
+            one split only: validation and test scans are never trained on, and each split's scan
+            materials are its own sets, in turn.
+        resolution: the side the sets are read at (their own 1024² for ``../shared/scans``).
+        scale_min, scale_max: the side of a scan's crops as a fraction of the set's, log-uniform:
+            a quarter to half (a 1024² scan covers 1–2 m of surface, a phone photo at 50 cm about
+            40 cm). Crops turn by any angle and stay inside the set (scans need not tile).
+        mirror: mirror half the crops (the normals' x with them).
+        recolor_probability: the share of scan materials recoloured with the spec's ``recolor``
+            ranges (metal keeps its colour, :func:`~brdfgan.data.materials.recolor.recolor_basecolor`).
+    """
+
+    folder: str | None = None
+    fraction: float = 0.0
+    val_sets: int | tuple[str, ...] = 3
+    test_sets: int | tuple[str, ...] = 3
+    resolution: int = 1024
+    scale_min: float = 0.25
+    scale_max: float = 0.5
+    mirror: bool = True
+    recolor_probability: float = 0.0
+
+    def __post_init__(self) -> None:
+        in_range(f"{SCANS_KEY}.fraction", self.fraction, 0.0, 1.0)
+        for name in ("scale_min", "scale_max"):  # log-uniform: strictly positive
+            in_range(f"{SCANS_KEY}.{name}", getattr(self, name), 0.0, 1.0, low_open=True)
+        ordered(SCANS_KEY, self, "scale_min", "scale_max")
+        if not isinstance(self.mirror, bool):
+            raise DatasetConfigError(f"{SCANS_KEY}.mirror={self.mirror!r}: must be true or false")
+        in_range(f"{SCANS_KEY}.recolor_probability", self.recolor_probability, 0.0, 1.0)
+        for name in ("val_sets", "test_sets"):
+            value = getattr(self, name)
+            if isinstance(value, list | tuple):
+                if not all(isinstance(item, str) for item in value):
+                    raise DatasetConfigError(f"{SCANS_KEY}.{name}={value!r}: must be a number or set names")
+                object.__setattr__(self, name, tuple(value))
+            else:
+                integer(f"{SCANS_KEY}.{name}", value, minimum=0)
+        named = set(self.named_sets("val_sets")) & set(self.named_sets("test_sets"))
+        if named:
+            raise DatasetConfigError(f"{SCANS_KEY}: {sorted(named)[0]!r} is both a validation and a test set")
+        integer(f"{SCANS_KEY}.resolution", self.resolution, minimum=1)
+        if self.fraction > 0 and self.folder is None:
+            raise DatasetConfigError(f"{SCANS_KEY}.fraction={self.fraction:g} needs {SCANS_KEY}.folder")
+
+    @property
+    def enabled(self) -> bool:
+        return self.folder is not None and self.fraction > 0
+
+    @property
+    def crop(self) -> CropSampling:
+        """How a scan's crops are drawn."""
+        return CropSampling(self.scale_min, self.scale_max, rotate=True, mirror=self.mirror, inside=True)
+
+    def named_sets(self, which: str) -> tuple[str, ...]:
+        """The names ``val_sets`` or ``test_sets`` gives (none when it gives a number)."""
+        value = getattr(self, which)
+        return value if isinstance(value, tuple) else ()
+
+    def held_out_count(self, which: str) -> int:
+        value = getattr(self, which)
+        return len(value) if isinstance(value, tuple) else int(value)
 
 
 @dataclass(frozen=True)
@@ -35,6 +115,7 @@ class PaintedMaterial:
     family: str
     parameters: dict[str, float]
     extra: dict[str, Any] = field(default_factory=dict)
+    crop: CropSampling | None = None  # how its crops are drawn; None: the dataset spec's
 
 
 def family_draw(
@@ -92,9 +173,29 @@ def paint_procedural(
     return PaintedMaterial(layers_to_maps(layers), family.name, params, extra)
 
 
-def paint_scanned(folder: Path, resolution: int) -> PaintedMaterial:
-    """A scanned set as a material (family ``scanned/<folder name>``, no parameters)."""
-    return PaintedMaterial(read_scanned_material(folder, resolution), f"scanned/{folder.name}", {})
+def paint_scanned(
+    folder: Path,
+    resolution: int,
+    *,
+    crop: CropSampling | None = None,
+    recolor: RecolorConfig | None = None,
+    choice_seed: int = 0,
+) -> PaintedMaterial:
+    """A scanned set as a material (family ``scanned/<folder name>``, no parameters), recoloured
+    when ``recolor.probability`` says so (drawn from ``choice_seed``), its crops drawn by ``crop``."""
+    maps = read_scanned_material(folder, resolution)
+    extra: dict[str, Any] = {}
+    choices = torch.Generator().manual_seed(choice_seed)
+    if (
+        recolor is not None
+        and recolor.probability > 0
+        and torch.rand((), generator=choices).item() < recolor.probability
+    ):
+        draw = draw_recolor(recolor, choices)
+        maps = maps.clone()
+        maps[BASECOLOR] = recolor_basecolor(maps[BASECOLOR], maps[METALLIC], draw)
+        extra["recolor"] = draw.to_json()
+    return PaintedMaterial(maps, f"scanned/{folder.name}", {}, extra, crop)
 
 
-__all__ = ["PaintedMaterial", "family_draw", "paint_procedural", "paint_scanned"]
+__all__ = ["PaintedMaterial", "ScanSampling", "family_draw", "paint_procedural", "paint_scanned"]

@@ -145,13 +145,18 @@ def read_maps(directory: str | os.PathLike[str], *, format: MapFormat | None = N
 
 
 def read_map_files(
-    paths: Mapping[str, Path | None], *, linear_basecolor: bool = False, where: str | os.PathLike[str]
+    paths: Mapping[str, Path | None],
+    *,
+    linear_basecolor: bool = False,
+    where: str | os.PathLike[str],
+    channels: Mapping[str, int] | None = None,
 ) -> Tensor:
     """Read the map set stored in the files ``paths`` (keys ``basecolor``, ``normal``,
     ``roughness``, ``metallic``) under this module's encodings — for texture packs that name
     their files otherwise. A ``None`` metallic path means a dielectric (metallic 0);
     ``linear_basecolor`` says the base colour file is linear (EXR). ``where`` names the set in
-    messages.
+    messages. ``channels`` maps ``roughness``/``metallic`` to the colour channel that holds it in
+    a packed RGB file (e.g. an ARM texture: roughness 1, metallic 2); the others are grayscale.
 
     Shape:
         - output: ``(8, H, W)`` float32, passes :func:`validate_maps`
@@ -184,8 +189,9 @@ def read_map_files(
         basecolor = linear_to_srgb(basecolor)
     encoded = _in_unit_range(files["normal"], _normal_channels(files["normal"], images["normal"]))
     normal = _decode_normal(files["normal"], torch.from_numpy(encoded).permute(2, 0, 1).double())
+    packed = dict(channels or {})
     scalars = [
-        torch.from_numpy(_in_unit_range(files[name], _grayscale(files[name], images[name])))
+        torch.from_numpy(_in_unit_range(files[name], _scalar(files[name], images[name], packed.get(name))))
         .permute(2, 0, 1)
         .double()
         if name in files
@@ -246,6 +252,15 @@ def _grayscale(path: Path, image: np.ndarray) -> np.ndarray:
             "(packed textures such as ORM are not supported)"
         )
     return image[:, :, :1]
+
+
+def _scalar(path: Path, image: np.ndarray, channel: int | None) -> np.ndarray:
+    """Channel ``channel`` of a packed RGB(A) file, or the grayscale map (``None``) → ``(H, W, 1)``."""
+    if channel is None:
+        return _grayscale(path, image)
+    if image.shape[2] < 3:
+        raise MapIOError(f"{path}: a packed texture must be RGB, this file has {image.shape[2]} channel(s)")
+    return image[:, :, channel : channel + 1]
 
 
 def _in_unit_range(path: Path, values: np.ndarray) -> np.ndarray:
