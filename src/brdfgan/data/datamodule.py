@@ -414,9 +414,14 @@ class ShardStream(IterableDataset):
         return True  # continue with the next member or shard
 
     def _sensed(self, sample: Sample, seed: int) -> Sample:
-        """The sample with :attr:`sensor` applied to its photo, seeded by ``seed``."""
+        """The sample with :attr:`sensor` applied to its photo, seeded by ``seed``, under the
+        flash colour its meta records (for the auto white balance; ``None`` if it records none)."""
         assert self.sensor is not None
-        photo, record = self.sensor.apply(sample.photo, torch.Generator().manual_seed(seed))
+        photo, record = self.sensor.apply(
+            sample.photo,
+            torch.Generator().manual_seed(seed),
+            illuminant_rgb=self.sensor.flash_illuminant(sample.meta),
+        )
         return Sample(sample.key, photo, sample.maps, {**sample.meta, "sensor": record}, check=False)
 
     def _decode(self, records: Iterator[dict]) -> Iterator[Sample]:
