@@ -7,15 +7,20 @@ import logging
 import os
 import subprocess
 import sys
+from functools import partial
 from pathlib import Path
 
 import pytest
 import torch
 import yaml
 from safetensors import safe_open
+from torch import Tensor, nn
 
+from brdfgan.core.svbrdf import flat_maps
+from brdfgan.evaluation.evaluator import evaluate_models, markdown_table, write_results
 from brdfgan.inference.model.export_weights import tested_checkpoint as checkpoint_tested_by_train
 from brdfgan.inference.model.weights import load_model
+from brdfgan.metrics import SVBRDFMetrics
 from brdfgan.models.generator import Generator
 from brdfgan.report import (
     ReportError,
@@ -225,6 +230,54 @@ def test_baseline_trains_and_is_evaluated_by_the_same_commands(tiny_data: Path) 
     assert result.returncode == 0, result.stderr[-3000:]
     out = sorted((tiny_data / "logs" / "baseline_eval" / "runs").iterdir())[-1]
     assert "| deschaintre2018 |" in (out / "metrics.md").read_text()
+
+
+class ConstantBaseColour(nn.Module):
+    """Predicts flat maps of one base colour whatever the photo."""
+
+    def __init__(self, basecolor: tuple[float, float, float]) -> None:
+        super().__init__()
+        self.basecolor = basecolor
+
+    def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        return flat_maps(*photo.shape[-2:], basecolor=self.basecolor, batch=(photo.shape[0],))
+
+
+def test_evaluator_tables_report_base_colour_saturation_and_hue(tmp_path: Path) -> None:
+    # Teal tiles (sRGB 0.1, 0.6, 0.6: hue 180°, HSV saturation 5/6) predicted grey-brown (0.5, 0.45,
+    # 0.4: hue 30°, saturation 0.2), as the shipped model did on phone captures.
+    truth = flat_maps(8, 8, basecolor=(0.1, 0.6, 0.6), batch=(2,))
+    batches = [
+        {"photo": torch.rand(2, 3, 8, 8), "maps": truth},
+        {"photo": torch.rand(1, 3, 8, 8), "maps": truth[:1]},
+    ]
+    models = {"greyed": ConstantBaseColour((0.5, 0.45, 0.4)), "right": ConstantBaseColour((0.1, 0.6, 0.6))}
+    results = evaluate_models(models, batches, partial(SVBRDFMetrics, downscale_to=None, rerender_configs=2))
+    assert results["greyed"]["basecolor_saturation_ratio"] == pytest.approx(0.24, rel=1e-5)
+    assert results["greyed"]["basecolor_hue_error_deg"] == pytest.approx(150.0, rel=1e-5)
+    assert results["right"]["basecolor_saturation_ratio"] == pytest.approx(1.0, rel=1e-6)
+    assert results["right"]["basecolor_hue_error_deg"] == pytest.approx(0.0, abs=1e-4)
+
+    header, rule, greyed, right = markdown_table(results).splitlines()
+    columns = [cell.strip() for cell in header.strip("|").split("|")]
+    assert columns[0] == "model" and columns.index("sat ratio") == columns.index("re-render") + 1
+    assert columns.index("hue °") == columns.index("sat ratio") + 1
+    assert {"diffuse", "normal °", "re-render"} <= set(columns)  # the earlier columns stay
+    cells = [cell.strip() for cell in greyed.strip("|").split("|")]
+    assert cells[columns.index("sat ratio")] == "0.2400" and cells[columns.index("hue °")] == "150.0000"
+    cells = [cell.strip() for cell in right.strip("|").split("|")]
+    assert cells[columns.index("sat ratio")] == "1.0000" and cells[columns.index("hue °")] == "0.0000"
+    assert rule.count("---") == len(columns)
+
+    write_results(results, tmp_path)
+    stored = json.loads((tmp_path / "metrics.json").read_text())
+    assert stored["greyed"]["basecolor_saturation_ratio"] == pytest.approx(0.24, rel=1e-5)
+    csv_header, csv_greyed, _ = (tmp_path / "metrics.csv").read_text().splitlines()
+    names = csv_header.split(",")
+    assert {"basecolor_saturation_ratio", "basecolor_hue_error_deg"} <= set(names)
+    assert float(csv_greyed.split(",")[names.index("basecolor_hue_error_deg")]) == pytest.approx(
+        150.0, rel=1e-5
+    )
 
 
 def test_checkpoint_of_another_architecture_is_a_clear_error(tmp_path: Path) -> None:

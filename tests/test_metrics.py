@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 
+import kornia.color
 import pytest
 import torch
 from torch import Tensor
@@ -12,16 +13,24 @@ from torch import Tensor
 from brdfgan.core.svbrdf import InvalidMapsError, flat_maps, join_maps, split_maps
 from brdfgan.metrics import (
     RMSE_MAPS,
+    HueError,
     MapRMSE,
     NormalAngularError,
     RerenderError,
+    SaturationRatio,
     SVBRDFMetrics,
+    basecolor_hsv,
     compared_maps,
     fixed_render_configs,
+    hue_difference_deg,
+    hue_error_deg,
+    saturation_ratio,
 )
 from tests.conftest import random_maps
 
 SRGB_HALF_LINEAR = ((0.5 + 0.055) / 1.055) ** 2.4  # sRGB 0.5 decoded: 0.21404…
+# The collection's keys besides the per-map RMSE (without hotspot).
+SCALAR_KEYS = ("normal_angle_deg", "rerender_rmse", "basecolor_saturation_ratio", "basecolor_hue_error_deg")
 
 
 def normal_maps(normal: tuple[float, float, float], size: int = 4, batch: int = 1) -> Tensor:
@@ -106,6 +115,135 @@ def test_normal_metrics_renormalise_and_are_exact_for_identical_normals() -> Non
     assert angle.compute().item() == pytest.approx(math.degrees(1e-4), rel=1e-6)  # atan2, not acos
 
 
+# ---------------------------------------------------------------- base-colour hue and saturation
+
+
+def coloured_maps(size: int = 8, batch: int = 3, seed: int = 0) -> tuple[Tensor, Tensor]:
+    """Random maps whose base colour has HSV saturation and value in [0.3, 1], and that HSV."""
+    g = torch.Generator().manual_seed(seed)
+    hue = 2.0 * math.pi * torch.rand(batch, 1, size, size, generator=g, dtype=torch.float64)
+    sat_value = 0.3 + 0.7 * torch.rand(batch, 2, size, size, generator=g, dtype=torch.float64)
+    hsv = torch.cat([hue, sat_value], dim=1)
+    maps = random_maps(size, size, seed=seed, batch=(batch,), dtype=torch.float64)
+    maps[:, 0:3] = kornia.color.hsv_to_rgb(hsv)
+    return maps, hsv
+
+
+def with_hsv(maps: Tensor, hsv: Tensor) -> Tensor:
+    """``maps`` with the base colour of HSV ``hsv`` (every other map kept)."""
+    out = maps.clone()
+    out[:, 0:3] = kornia.color.hsv_to_rgb(hsv)
+    return out
+
+
+def test_basecolor_hsv_round_trips_and_matches_kornia() -> None:
+    maps, hsv = coloured_maps()
+    torch.testing.assert_close(basecolor_hsv(maps), hsv)
+    clipped = maps.clone()
+    clipped[:, 0] += 0.5  # out of range: clamped first, like brdfgan.data.statistics
+    expected = kornia.color.rgb_to_hsv(clipped[:, 0:3].clamp(0.0, 1.0))
+    torch.testing.assert_close(basecolor_hsv(clipped), expected)
+    with pytest.raises(InvalidMapsError):
+        basecolor_hsv(torch.zeros(1, 3, 4, 4))
+
+
+def test_hue_difference_is_circular() -> None:
+    deg = math.pi / 180.0
+    a = torch.tensor([10.0, 350.0, 0.0, 90.0, 359.0], dtype=torch.float64) * deg
+    b = torch.tensor([350.0, 10.0, 180.0, 90.0, 0.0], dtype=torch.float64) * deg
+    torch.testing.assert_close(hue_difference_deg(a, b), torch.tensor([20.0, 20.0, 180.0, 0.0, 1.0]).double())
+
+
+def test_identical_base_colours_give_ratio_one_and_hue_error_zero() -> None:
+    maps, _ = coloured_maps()
+    assert saturation_ratio(maps, maps).item() == 1.0
+    assert hue_error_deg(maps, maps).item() == 0.0
+
+
+def test_grey_prediction_of_a_saturated_truth() -> None:
+    true, hsv = coloured_maps()
+    grey = with_hsv(true, torch.stack([hsv[:, 0], torch.zeros_like(hsv[:, 1]), hsv[:, 2]], dim=1))
+    assert saturation_ratio(grey, true).item() == pytest.approx(0.0, abs=1e-12)
+    # No hue to compare: every weight min(S_pred, S_true) is 0.
+    assert math.isnan(hue_error_deg(grey, true).item())
+
+
+@pytest.mark.parametrize("degrees", [60.0, -60.0, 150.0])
+def test_hue_rotation_gives_its_angle(degrees: float) -> None:
+    true, hsv = coloured_maps()
+    rotated = hsv.clone()
+    rotated[:, 0] = torch.remainder(hsv[:, 0] + math.radians(degrees), 2.0 * math.pi)
+    pred = with_hsv(true, rotated)
+    assert hue_error_deg(pred, true).item() == pytest.approx(abs(degrees), abs=1e-6)
+    assert saturation_ratio(pred, true).item() == pytest.approx(1.0, abs=1e-9)
+
+
+def test_half_saturation_gives_ratio_one_half() -> None:
+    true, hsv = coloured_maps()
+    pred = with_hsv(true, hsv * torch.tensor([1.0, 0.5, 1.0], dtype=torch.float64).view(1, 3, 1, 1))
+    assert saturation_ratio(pred, true).item() == pytest.approx(0.5, abs=1e-9)
+    assert hue_error_deg(pred, true).item() == pytest.approx(0.0, abs=1e-6)  # same hues
+    assert saturation_ratio(true, pred).item() == pytest.approx(2.0, abs=1e-9)  # oversaturated
+
+
+def test_teal_turned_grey_brown_by_hand() -> None:
+    # Teal sRGB (0.1, 0.6, 0.6): hue 180°, S = 0.5 / 0.6. Grey-brown (0.5, 0.45, 0.4): hue 30°, S = 0.2.
+    true = flat_maps(4, 4, basecolor=(0.1, 0.6, 0.6), batch=(2,), dtype=torch.float64)
+    pred = flat_maps(4, 4, basecolor=(0.5, 0.45, 0.4), batch=(2,), dtype=torch.float64)
+    assert saturation_ratio(pred, true).item() == pytest.approx(0.2 / (0.5 / 0.6), rel=1e-7)  # kornia eps
+    assert hue_error_deg(pred, true).item() == pytest.approx(150.0, abs=1e-9)
+
+
+def test_grey_truths_are_finite_and_weigh_nothing() -> None:
+    true, hsv = coloured_maps(batch=2)
+    pred = with_hsv(true, hsv * torch.tensor([1.0, 0.5, 1.0], dtype=torch.float64).view(1, 3, 1, 1))
+    for level in (0.0, 0.5):  # black and mid grey: S = 0, kornia's hue 0
+        grey = flat_maps(8, 8, basecolor=(level, level, level), batch=(1,), dtype=torch.float64)
+        both_true, both_pred = torch.cat([true, grey]), torch.cat([pred, grey])
+        # A grey truth predicted grey adds nothing: the values of the coloured samples alone.
+        assert saturation_ratio(both_pred, both_true).item() == pytest.approx(0.5, abs=1e-9)
+        assert hue_error_deg(both_pred, both_true).item() == pytest.approx(0.0, abs=1e-6)
+        # A grey truth predicted coloured raises the ratio (finite) and has no hue weight.
+        coloured_pred = torch.cat([pred, true[:1]])
+        ratio = saturation_ratio(coloured_pred, both_true).item()
+        assert math.isfinite(ratio) and ratio > 0.5
+        assert hue_error_deg(coloured_pred, both_true).item() == pytest.approx(0.0, abs=1e-6)
+    # Only an all-grey truth leaves the ratio undefined: NaN, never inf.
+    grey = flat_maps(8, 8, basecolor=(0.5, 0.5, 0.5), batch=(2,), dtype=torch.float64)
+    assert math.isnan(saturation_ratio(pred[:2], grey).item())
+    assert math.isnan(saturation_ratio(grey, grey).item()) and math.isnan(hue_error_deg(grey, grey).item())
+
+
+def test_colour_metrics_accumulate_exactly() -> None:
+    true, hsv = coloured_maps(batch=5, seed=3)
+    scale = torch.tensor([1.0, 0.7, 1.0], dtype=torch.float64).view(1, 3, 1, 1)
+    shifted = hsv * scale
+    shifted[:, 0] = torch.remainder(hsv[:, 0] + 0.4 * torch.rand(5, 8, 8, dtype=torch.float64), 2 * math.pi)
+    pred = with_hsv(true, shifted)
+    true[3:] = flat_maps(8, 8, basecolor=(0.4, 0.4, 0.4), batch=(2,), dtype=torch.float64)  # grey truths
+    for metric, function in ((SaturationRatio(), saturation_ratio), (HueError(), hue_error_deg)):
+        for part in (slice(0, 1), slice(1, 4), slice(4, 5)):  # uneven batches
+            metric.update(pred[part], true[part])
+        torch.testing.assert_close(metric.compute(), function(pred, true), rtol=1e-12, atol=0.0)
+        assert metric.compute().dtype == torch.float64
+        metric.reset()
+        with pytest.warns(UserWarning, match="called before the ``update``"):
+            assert math.isnan(metric.compute().item())  # nothing accumulated
+    unbatched = SaturationRatio()
+    unbatched.update(pred[0], true[0])
+    torch.testing.assert_close(unbatched.compute(), saturation_ratio(pred[:1], true[:1]))
+
+
+def test_colour_metric_input_checks() -> None:
+    maps, _ = coloured_maps()
+    with pytest.raises(ValueError, match="same shape"):
+        saturation_ratio(maps, maps[:, :, :4])
+    with pytest.raises(InvalidMapsError):
+        hue_error_deg(maps[:, :7], maps[:, :7])
+    with pytest.raises(ValueError, match="same shape"):
+        HueError().update(maps, maps[:2])
+
+
 # ---------------------------------------------------------------- accumulation
 
 
@@ -135,6 +273,7 @@ def test_reset() -> None:
     metric.update(same, same)
     after = metric.compute()
     assert before["rmse/roughness"] > 0
+    assert after.pop("basecolor_saturation_ratio").item() == pytest.approx(1.0, abs=1e-6)
     for key, value in after.items():
         assert value.item() == pytest.approx(0.0, abs=1e-5), key
 
@@ -216,12 +355,12 @@ def test_downscale_skips_small_inputs() -> None:
     collection = SVBRDFMetrics(downscale_to=8, rerender_configs=2)
     collection.update(pred, true)
     keys = set(collection.compute())
-    assert keys == {f"rmse/{name}" for name in RMSE_MAPS} | {"normal_angle_deg", "rerender_rmse"}
+    assert keys == {f"rmse/{name}" for name in RMSE_MAPS} | set(SCALAR_KEYS)
     collection = SVBRDFMetrics(downscale_to=4, rerender_configs=2, prefix="val/")
     collection.update(pred, true)
     keys = set(collection.compute())
     assert {f"val/rmse4/{name}" for name in RMSE_MAPS} <= keys
-    assert "val/rerender_rmse" in keys and len(keys) == 2 * len(RMSE_MAPS) + 2
+    assert "val/rerender_rmse" in keys and len(keys) == 2 * len(RMSE_MAPS) + len(SCALAR_KEYS)
 
 
 def test_downscale_non_square_keeps_aspect() -> None:

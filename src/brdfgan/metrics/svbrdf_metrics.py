@@ -48,6 +48,15 @@ Definitions (``pred`` and ``true`` in the 8-channel layout of :mod:`brdfgan.core
   other pixels. A model whose maps carry a mark where the highlight was in the photo scores > 1;
   an error spread evenly scores 1. Highlight positions come from the batch metadata
   (:func:`hotspot_centres`).
+
+- **Base-colour saturation ratio** (:class:`SaturationRatio`, :func:`saturation_ratio`):
+  ``Σ S(p) / Σ S(t)`` over every texel of the dataset, ``S`` the HSV saturation of the stored sRGB
+  base colour (:func:`basecolor_hsv`). 1 = the right colourfulness, < 1 = greyed (0: a grey
+  prediction), > 1 = oversaturated.
+
+- **Base-colour hue error** (:class:`HueError`, :func:`hue_error_deg`): the circular HSV hue
+  difference in degrees (0–180) per texel, averaged over the dataset with the weights
+  ``min(S(p), S(t))`` (hue is undefined for greys).
 """
 
 from __future__ import annotations
@@ -56,6 +65,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
+import kornia.color
 import torch
 import torch.nn.functional as F
 from torch import Tensor
@@ -71,6 +81,7 @@ from brdfgan.core.sampling import (
 )
 from brdfgan.core.svbrdf import (
     check_map_pair,
+    check_map_shape,
     diffuse_albedo,
     linear_to_srgb,
     normalize_normal,
@@ -263,6 +274,172 @@ class NormalAngularError(Metric):
 
     def compute(self) -> Tensor:
         return self.sum_deg / self.pixels
+
+
+# ---------------------------------------------------------------- base-colour hue and saturation
+#
+# Why HSV of the stored sRGB base colour: it is the colour space in which the training data varies
+# colour (brdfgan.data.materials.recolor rotates the HSV hue and scales the HSV saturation) and in
+# which brdfgan.data.statistics reports a dataset's colourfulness, so the metrics read on the same
+# scale as those. HSV saturation ``(max − min) / max`` does not depend on brightness (a dark and a
+# light teal are equally saturated); its weak point, the hue and saturation of near-black texels,
+# matters little here: dielectric base colours are at least ~0.15 sRGB-encoded (0.02 linear,
+# brdfgan.data.materials.albedo) and metals are bright.
+#
+# Aggregation: the saturation ratio is a ratio of sums over every texel of the dataset, not a mean
+# of per-sample ratios. A mean of ratios divides by each sample's own mean saturation, which a
+# grey truth (concrete, steel: S ≈ 0) makes ~0, so one grey sample would dominate the mean. The
+# ratio of sums equals the mean of the per-sample ratios ``r_i = S̄(p_i) / S̄(t_i)`` weighted by
+# ``N_i · S̄(t_i)`` (texels × true saturation): each sample counts as much as it has colour, a grey
+# one almost not at all, and it is exact whatever the batch split (two summed states). It is NaN
+# only when the whole dataset's truth is exactly grey (no colour to compare with).
+#
+# The hue error weights each texel's circular hue difference with ``min(S(p), S(t))``: 0 when
+# either colour is grey (kornia gives greys hue 0, an arbitrary red), small when either is nearly
+# grey (its hue is mostly noise). A prediction that keeps the truth's hue at a lower saturation
+# keeps its hue error; the saturation ratio reports the lost saturation. Hue angles of HSV are not
+# perceptually uniform (CIELAB's a*b* hue angle is closer), but they are the angles the recolour
+# augmentation rotates. NaN when every weight is 0 (e.g. an exactly grey prediction).
+
+
+def basecolor_hsv(maps: Tensor) -> Tensor:
+    """HSV of the stored (sRGB-encoded) base colour, clamped to [0, 1] first — the definition of a
+    base colour's hue and saturation behind :func:`saturation_ratio` and :func:`hue_error_deg`
+    (``kornia.color.rgb_to_hsv``, as :mod:`brdfgan.data.statistics` and the recolour augmentation).
+
+    Shape:
+        - maps: ``(*, 8, H, W)``
+        - output: ``(*, 3, H, W)``: hue in radians in [0, 2π) (0 for greys), saturation and value
+          in [0, 1] (saturation 0 for greys and black)
+    """
+    check_map_shape(maps)
+    return kornia.color.rgb_to_hsv(split_maps(maps).basecolor.clamp(0.0, 1.0))
+
+
+def hue_difference_deg(hue_a: Tensor, hue_b: Tensor) -> Tensor:
+    """Circular difference of two hue angles in radians, in degrees in [0, 180].
+
+    Shape:
+        - hue_a, hue_b: ``(*)`` (broadcastable)
+        - output: the broadcast shape
+    """
+    difference = torch.remainder(hue_a - hue_b, 2.0 * math.pi)
+    return torch.rad2deg(torch.minimum(difference, 2.0 * math.pi - difference))
+
+
+def _saturation_sums(pred: Tensor, true: Tensor) -> tuple[Tensor, Tensor]:
+    """``(Σ S(pred), Σ S(true))`` over every texel, float64 scalars."""
+    return (
+        basecolor_hsv(pred)[..., 1, :, :].sum(dtype=torch.float64),
+        basecolor_hsv(true)[..., 1, :, :].sum(dtype=torch.float64),
+    )
+
+
+def _hue_error_sums(pred: Tensor, true: Tensor) -> tuple[Tensor, Tensor]:
+    """``(Σ w · Δhue, Σ w)`` over every texel, ``w = min(S(pred), S(true))``, Δhue in degrees."""
+    hsv_pred, hsv_true = basecolor_hsv(pred), basecolor_hsv(true)
+    weight = torch.minimum(hsv_pred[..., 1, :, :], hsv_true[..., 1, :, :])
+    difference = hue_difference_deg(hsv_pred[..., 0, :, :], hsv_true[..., 0, :, :])
+    return (weight * difference).sum(dtype=torch.float64), weight.sum(dtype=torch.float64)
+
+
+def _ratio(numerator: Tensor, denominator: Tensor) -> Tensor:
+    """``numerator / denominator``, NaN where the denominator is not positive (no 0/0, no inf)."""
+    safe = torch.where(denominator > 0, denominator, torch.ones_like(denominator))
+    return torch.where(denominator > 0, numerator / safe, torch.full_like(numerator, math.nan))
+
+
+def saturation_ratio(pred: Tensor, true: Tensor) -> Tensor:
+    """Predicted over true base-colour saturation, ``Σ S(pred) / Σ S(true)`` over every texel of
+    every sample (HSV saturation, :func:`basecolor_hsv`). 1: the right colourfulness; < 1: greyed
+    (0 for a grey prediction); > 1: oversaturated. NaN when every true texel is grey.
+
+    A ratio of sums, not a mean of per-sample ratios: it equals the mean of the per-sample ratios
+    ``S̄(pred_i) / S̄(true_i)`` weighted by ``N_i · S̄(true_i)`` (texels × mean true saturation), so
+    a grey truth (``S̄ ≈ 0``), which would blow up a plain mean of ratios, weighs almost nothing.
+
+    Shape:
+        - pred, true: ``(*, 8, H, W)``
+        - output: float64 scalar
+    """
+    check_map_pair(pred, true)
+    return _ratio(*_saturation_sums(pred, true))
+
+
+def hue_error_deg(pred: Tensor, true: Tensor) -> Tensor:
+    """Mean circular hue difference in degrees between predicted and true base colour, over every
+    texel of every sample, weighted by ``min(S(pred), S(true))`` (HSV, :func:`basecolor_hsv`).
+    0: the same hues; 180: opposite hues. NaN when every weight is 0 (grey truth or grey
+    prediction everywhere: no hue to compare).
+
+    Shape:
+        - pred, true: ``(*, 8, H, W)``
+        - output: float64 scalar
+    """
+    check_map_pair(pred, true)
+    return _ratio(*_hue_error_sums(pred, true))
+
+
+class SaturationRatio(Metric):
+    """:func:`saturation_ratio` over a whole dataset: both saturation sums accumulate over the
+    updates, the ratio is taken in ``compute``.
+
+    Shape:
+        - pred, true: ``(B, 8, H, W)`` or ``(8, H, W)``
+        - compute: float64 scalar (NaN before any update or for an all-grey truth)
+    """
+
+    is_differentiable = False
+    higher_is_better = None  # 1 is best
+    full_state_update = False
+
+    sum_pred: Tensor
+    sum_true: Tensor
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.add_state("sum_pred", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("sum_true", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum")
+
+    def update(self, pred: Tensor, true: Tensor) -> None:
+        pred, true = _as_batch(pred, true)
+        sum_pred, sum_true = _saturation_sums(pred, true)
+        self.sum_pred += sum_pred
+        self.sum_true += sum_true
+
+    def compute(self) -> Tensor:
+        return _ratio(self.sum_pred, self.sum_true)
+
+
+class HueError(Metric):
+    """:func:`hue_error_deg` over a whole dataset: the weighted sum of hue differences and the sum
+    of the weights accumulate over the updates, the mean is taken in ``compute``.
+
+    Shape:
+        - pred, true: ``(B, 8, H, W)`` or ``(8, H, W)``
+        - compute: float64 scalar in degrees (NaN before any update or when every weight is 0)
+    """
+
+    is_differentiable = False
+    higher_is_better = False
+    full_state_update = False
+
+    sum_weighted_deg: Tensor
+    sum_weight: Tensor
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.add_state("sum_weighted_deg", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("sum_weight", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum")
+
+    def update(self, pred: Tensor, true: Tensor) -> None:
+        pred, true = _as_batch(pred, true)
+        weighted, weight = _hue_error_sums(pred, true)
+        self.sum_weighted_deg += weighted
+        self.sum_weight += weight
+
+    def compute(self) -> Tensor:
+        return _ratio(self.sum_weighted_deg, self.sum_weight)
 
 
 def fixed_render_configs(configs: int = 16, seed: int = 0, plane_half_size: float = 1.0) -> RenderConfigs:
@@ -563,7 +740,9 @@ class SVBRDFMetrics(MetricCollection):
     Keys of ``compute()`` (float64 scalars, with the collection's optional ``prefix``):
     ``rmse/{diffuse,specular,normal,roughness,basecolor,metallic}``, the same under
     ``rmse{downscale_to}/`` (e.g. ``rmse256/…``; absent when ``downscale_to`` is ``None`` or every
-    input was already that small), ``normal_angle_deg``, ``rerender_rmse`` and, with ``hotspot``,
+    input was already that small), ``normal_angle_deg``, ``rerender_rmse``,
+    ``basecolor_saturation_ratio`` (:class:`SaturationRatio`, 1 = right, < 1 = greyed),
+    ``basecolor_hue_error_deg`` (:class:`HueError`) and, with ``hotspot``,
     ``hotspot/<map>`` (:class:`HotspotError`; with ``hotspot_rmse`` also ``hotspot/<map>/inside``
     and ``/outside``). Log them with
     ``log_dict(metrics.compute())`` — Lightning's ``log_dict(metrics)`` expects scalar metrics.
@@ -612,6 +791,8 @@ class SVBRDFMetrics(MetricCollection):
             )
         metrics["normal_angle_deg"] = NormalAngularError(**kw)
         metrics["rerender_rmse"] = RerenderError(configs=rerender_configs, seed=seed, **kw)
+        metrics["basecolor_saturation_ratio"] = SaturationRatio(**kw)
+        metrics["basecolor_hue_error_deg"] = HueError(**kw)
         if hotspot:
             metrics["hotspot"] = HotspotError(
                 hotspot_radius_fraction, albedo_space=albedo_space, rmse=hotspot_rmse, prefix="hotspot/", **kw
