@@ -89,6 +89,13 @@ def _positive_float(text: str) -> float:
     return _number(text, minimum=0.0, inclusive=False)
 
 
+def _field_of_view(text: str) -> float:
+    value = _number(text, minimum=0.0, inclusive=False)
+    if value >= 180.0:
+        raise argparse.ArgumentTypeError(f"expected a field of view in degrees below 180, got {text!r}")
+    return value
+
+
 def _predict_device(choice: str) -> torch.device:
     """``--device``: ``auto`` takes CUDA when there is a device; ``cuda`` without one is an error."""
     import torch
@@ -144,6 +151,22 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="X,Y,SIZE",
         help="use this square (top-left x, y and side, in pixels of the upright photo) "
         "instead of finding the flash hotspot",
+    )
+    field_of_view = predict.add_mutually_exclusive_group()
+    field_of_view.add_argument(
+        "--fov",
+        type=_field_of_view,
+        metavar="DEG",
+        help="the photo's horizontal field of view in degrees, for photos without EXIF focal length "
+        "(screenshots, exported PNGs, rectified crops); the crop's follows from it (default: EXIF, "
+        "else 57.5° across the crop)",
+    )
+    field_of_view.add_argument(
+        "--focal-length-35mm",
+        type=_positive_float,
+        metavar="MM",
+        help="the 35 mm equivalent focal length, as EXIF FocalLengthIn35mmFilm states it (a phone's "
+        "main camera: ~24-28); the crop's field of view follows as from EXIF",
     )
     predict.add_argument(
         "--input-colorspace",
@@ -323,6 +346,53 @@ def build_parser() -> argparse.ArgumentParser:
         "--scanned", type=Path, default=None, metavar="DIR", help="scanned sets to compare with"
     )
     stats.set_defaults(run=dataset_stats_command, interrupted="interrupted")
+
+    captures = commands.add_parser(
+        "eval-captures",
+        help="real multi-view flash captures (MaterialGAN layout) → relit-view RMSE per model "
+        "(captures.md/.csv)",
+        description="Predict each capture's maps from its first view (00.png, whole, auto-exposed, "
+        "flash frame from the calibration), re-render every other view at its calibrated camera and "
+        "flash, and compare with the photos (sRGB RMSE; with one gain fitted on the input view, and "
+        "with the calibrated flash power). The weights are compared with the photo-as-base-colour and "
+        "de-lit references; writes OUT/captures.md and OUT/captures.csv (per view) and prints the table.",
+    )
+    captures.add_argument(
+        "captures",
+        nargs="+",
+        type=Path,
+        metavar="DIR",
+        help="a capture folder (00.png, 01.png, … with parameters.json, or MaterialGAN's camera_pos.txt, "
+        "image_size.txt, light_power.txt [, light_pos.txt]) or a folder of capture folders",
+    )
+    captures.add_argument(
+        "--weights", type=Path, metavar="PATH", help="a .safetensors weights file (default: the shipped one)"
+    )
+    captures.add_argument(
+        "--references",
+        type=Path,
+        metavar="DIR",
+        help="folder of photo_basecolor.safetensors and de_lit.safetensors (default: the shipped "
+        "references); a missing file is a warning and its row is left out",
+    )
+    captures.add_argument(
+        "--refine",
+        nargs="?",
+        const=DEFAULT_REFINE_STEPS,
+        type=_positive,
+        metavar="STEPS",
+        help="also score the weights followed by predict's --refine (a row <model>+refine<STEPS>; "
+        f"default {DEFAULT_REFINE_STEPS} steps when given bare)",
+    )
+    captures.add_argument(
+        "--resolution",
+        type=_positive,
+        metavar="N",
+        help="the side the input view is resized to for the models (default: each model's training "
+        "resolution); the maps are resized back to the capture's",
+    )
+    captures.add_argument("--out", type=Path, default=None, metavar="DIR", help="default: the first DIR")
+    captures.set_defaults(run=eval_captures_command, interrupted="interrupted: no table was written")
     return parser
 
 
@@ -330,6 +400,7 @@ def predict_command(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from brdfgan.errors import interrupts_raise
+    from brdfgan.inference.intake.lens import FieldOfView
     from brdfgan.inference.model.memory import check_memory
     from brdfgan.inference.model.tiling import TilingConfig
     from brdfgan.inference.model.weights import load_model
@@ -364,6 +435,7 @@ def predict_command(args: argparse.Namespace) -> int:
         preview=not args.no_preview,
         animate=args.animate,
         refine=None if args.refine is None else RefineConfig(steps=args.refine),
+        field_of_view=FieldOfView(args.fov, args.focal_length_35mm),
     )
     model = load_model(args.weights)
     model.generator.to(device)
@@ -495,6 +567,28 @@ def dataset_stats_command(args: argparse.Namespace) -> int:
     if args.scanned is not None:
         stats.append(scanned_statistics(args.scanned))
     print(statistics_table(stats), end="")
+    return 0
+
+
+def eval_captures_command(args: argparse.Namespace) -> int:
+    from brdfgan.evaluation.captures import (
+        capture_models,
+        evaluate_captures,
+        find_captures,
+        write_capture_results,
+    )
+    from brdfgan.inference.refine import RefineConfig
+
+    captures = find_captures(args.captures)  # every folder checked before any model runs
+    refine = None if args.refine is None else RefineConfig(steps=args.refine)
+    models = capture_models(args.weights, args.references, refine=refine, resolution=args.resolution)
+    print(
+        f"{len(captures)} capture(s), {len(models)} model(s): {', '.join(m.name for m in models)}",
+        file=sys.stderr,
+    )
+    results = evaluate_captures(captures, models)
+    markdown, _ = write_capture_results(results, args.out or args.captures[0])
+    print(markdown.read_text(encoding="utf-8"), end="")
     return 0
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from torch import nn
 
@@ -32,11 +33,11 @@ def write_reference_weights(data_dir: Path, out: Path, only: Sequence[str] = REF
         datamodule.setup("test")
         return datamodule
 
-    models: dict[str, tuple[nn.Module, dict[str, object]]] = {}
+    models: dict[str, tuple[nn.Module, dict[str, Any]]] = {}
     if {"mean_maps", "photo_basecolor"} & set(only):
         mean = mean_maps(train_batches().test_dataloader())
-        extra = {"train_mean": [round(float(v), 6) for v in mean]}
-        models.update({name: (model, extra) for name, model in reference_models(mean).items()})
+        averaged: dict[str, Any] = {"train_mean": [round(float(v), 6) for v in mean]}
+        models.update({name: (model, averaged) for name, model in reference_models(mean).items()})
     if "de_lit" in only:
         delit = fit_delit_reference(train_batches().test_dataloader())
         models["de_lit"] = (delit, {name: round(float(b), 6) for name, b in delit.named_buffers()})
