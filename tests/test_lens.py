@@ -85,3 +85,71 @@ def test_the_lens_is_read_from_jpeg_and_png_exif(tmp_path: Path, suffix: str) ->
     assert read_photo(path).lens is None
     image.save(path, exif=_exif(unit=2).tobytes())
     assert read_photo(path).lens is None
+
+
+def test_the_user_given_field_of_view_follows_the_crop_like_the_exif() -> None:
+    from brdfgan.inference.intake.lens import FieldOfView
+
+    # 26 mm on a 4:3 phone photo: 67.3° across its width (the full frame's diagonal 43.27 mm).
+    exif = crop_field_of_view(Lens(focal_length_35mm=26.0), 4032, 3024, 1512)
+    given = crop_field_of_view(None, 4032, 3024, 1512, FieldOfView(focal_length_35mm=26.0))
+    assert given == (exif[0], "--focal-length-35mm")
+    photo_fov = math.degrees(2 * math.atan(4032 * math.hypot(36, 24) / math.hypot(4032, 3024) / 52.0))
+    assert photo_fov == pytest.approx(67.30, abs=0.01)
+    by_fov = crop_field_of_view(None, 4032, 3024, 1512, FieldOfView(photo_fov_deg=photo_fov))
+    assert by_fov[1] == "--fov" and by_fov[0] == pytest.approx(exif[0], abs=1e-9)
+    # The crop spanning the whole width has the photo's own field of view; the user wins over EXIF.
+    assert crop_field_of_view(Lens(focal_length_35mm=13.0), 800, 800, 800, FieldOfView(23.0)) == (
+        pytest.approx(23.0),
+        "--fov",
+    )
+    with pytest.raises(ValueError, match="not both"):
+        FieldOfView(40.0, 26.0)
+    with pytest.raises(ValueError, match=r"\(0, 180\)"):
+        FieldOfView(180.0)
+
+
+def test_predict_records_the_field_of_view_given_on_the_command_line(tmp_path: Path) -> None:
+    import json
+
+    import torch
+
+    from brdfgan.cli import main
+    from brdfgan.models.generator import Generator
+    from brdfgan.runs import save_weights
+
+    torch.manual_seed(0)
+    generator = Generator(width=4, residual_blocks=1)
+    weights = save_weights(tmp_path / "w.safetensors", generator, target="brdfgan.models.generator.Generator",
+                           config=generator.config(), model_id="tiny", extra={"resolution": 64})  # fmt: skip
+    image = Image.fromarray(np.random.default_rng(0).integers(20, 235, (60, 80, 3), dtype=np.uint8))
+    image.save(tmp_path / "exif.jpg", exif=_exif(f35=26).tobytes())
+    image.save(tmp_path / "plain.png")
+
+    def recorded(photo: str, *flags: str) -> dict:
+        out = tmp_path / "out" / photo.replace(".", "_")
+        args = ["predict", str(tmp_path / photo), "--out", str(out), "--weights", str(weights), "--quiet",
+                "--no-preview", "--crop", "10,0,60", *flags]  # fmt: skip
+        assert main(args) == 0
+        return json.loads((out / Path(photo).stem / "material.json").read_text())["field_of_view"]
+
+    from_exif = recorded("exif.jpg")
+    assert from_exif["source"] == "exif 35 mm equivalent"
+    from_flag = recorded("plain.png", "--focal-length-35mm", "26")
+    assert from_flag == {
+        "degrees": pytest.approx(from_exif["degrees"], abs=1e-9),
+        "source": "--focal-length-35mm",
+    }
+    photo_fov = math.degrees(2 * math.atan(80 * math.hypot(36, 24) / 100.0 / 52.0))  # 80 x 60: diagonal 100
+    from_fov = recorded("plain.png", "--fov", f"{photo_fov!r}")
+    assert from_fov == {"degrees": pytest.approx(from_exif["degrees"], abs=1e-6), "source": "--fov"}
+    assert recorded("plain.png")["source"] == "training default"
+    for bad in (
+        ["--fov", "180"],
+        ["--fov", "-3"],
+        ["--focal-length-35mm", "0"],
+        ["--fov", "40", "--focal-length-35mm", "26"],
+    ):
+        with pytest.raises(SystemExit) as exit_info:
+            main(["predict", str(tmp_path / "plain.png"), "--out", str(tmp_path / "x"), *bad])
+        assert exit_info.value.code == 2

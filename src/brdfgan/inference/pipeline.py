@@ -34,7 +34,7 @@ from torch import Tensor
 
 from brdfgan.core.seamless import make_seamless, wrap_ratios
 from brdfgan.errors import UserError, disk_full_message, is_disk_full, one_line
-from brdfgan.inference.intake.lens import crop_field_of_view
+from brdfgan.inference.intake.lens import FieldOfView, crop_field_of_view
 from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, read_photo
 from brdfgan.inference.intake.preprocess import Crop, CropSized, preprocess
 from brdfgan.inference.model.tiling import TilingConfig, predict_direct, predict_tiled
@@ -69,6 +69,7 @@ class PredictOptions:
     refine: RefineConfig | None = None  # None: the network's maps as they are
     tileable: bool = False  # blend the maps into a seamless tile (brdfgan.core.seamless)
     prefix_files: bool = False  # texture files named <material>_<map>.<ext> for engines' importers
+    field_of_view: FieldOfView = field(default_factory=FieldOfView)  # --fov / --focal-length-35mm
 
 
 @dataclass(frozen=True)
@@ -200,7 +201,9 @@ def predict_photo(
         photo = read_photo(path, options.colorspace)
     with clock("preprocess"):
         prepared = preprocess(photo, predictor.resolution, options.crop)
-    fov_deg, fov_source = crop_field_of_view(photo.lens, photo.width, photo.height, prepared.crop.size)
+    fov_deg, fov_source = crop_field_of_view(
+        photo.lens, photo.width, photo.height, prepared.crop.size, options.field_of_view
+    )
     flash_frame = prepared.flash_frame(fov_deg)
     with clock("network"):
         maps = predictor.maps(prepared.photo, flash_frame)

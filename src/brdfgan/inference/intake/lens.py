@@ -14,6 +14,11 @@ the photo is the *horizontal field of view across the crop square*:
   ``PixelXDimension`` it states): ``fov = 2 atan(s / pixels_per_mm / (2 f))``.
 - else the training default, :data:`DEFAULT_FOV_DEG`.
 
+A photo without EXIF (a screenshot, an exported PNG, a rectified crop) can be given either by the
+user instead (``brdfgan predict --fov DEG | --focal-length-35mm MM``, :class:`FieldOfView`): the
+photo's horizontal field of view, of which a crop of side ``s`` spans
+``2 atan(tan(fov/2) · s / width)``, or the 35 mm equivalent focal length, used as the EXIF one.
+
 The crop is assumed to face the camera (the flash near its centre, as :func:`preprocess
 <brdfgan.inference.intake.preprocess.preprocess>` chooses it), so its angle of view is that of a
 centred crop of the same size.
@@ -40,7 +45,30 @@ PIXEL_X_DIMENSION = 0xA002
 # written by some cameras although the standard stops at 3).
 _MM_PER_UNIT = {1: 25.4, 2: 25.4, 3: 10.0, 4: 1.0, 5: 1e-3}
 
-FovSource = Literal["exif 35 mm equivalent", "exif focal length and sensor", "training default"]
+FovSource = Literal[
+    "--fov",
+    "--focal-length-35mm",
+    "exif 35 mm equivalent",
+    "exif focal length and sensor",
+    "training default",
+]
+
+
+@dataclass(frozen=True)
+class FieldOfView:
+    """What the user says of the camera, overriding the EXIF: the photo's horizontal field of view
+    in degrees (``photo_fov_deg``), or its 35 mm equivalent focal length in mm; at most one."""
+
+    photo_fov_deg: float | None = None
+    focal_length_35mm: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.photo_fov_deg is not None and self.focal_length_35mm is not None:
+            raise ValueError("give the field of view or the 35 mm focal length, not both")
+        if self.photo_fov_deg is not None and not 0.0 < self.photo_fov_deg < 180.0:
+            raise ValueError(f"field of view must lie in (0, 180) degrees, got {self.photo_fov_deg}")
+        if self.focal_length_35mm is not None and not self.focal_length_35mm > 0.0:
+            raise ValueError(f"35 mm focal length must be positive, got {self.focal_length_35mm}")
 
 
 @dataclass(frozen=True)
@@ -88,11 +116,20 @@ def lens_from_exif(exif: Any, stored_width: int) -> Lens | None:
     return Lens(focal_length_mm=focal, focal_length_35mm=focal_35, pixels_per_mm=pixels_per_mm)
 
 
-def crop_field_of_view(lens: Lens | None, width: int, height: int, crop_size: int) -> tuple[float, FovSource]:
+def crop_field_of_view(
+    lens: Lens | None, width: int, height: int, crop_size: int, given: FieldOfView = FieldOfView()
+) -> tuple[float, FovSource]:
     """Horizontal field of view in degrees across a ``crop_size``² crop of a ``width`` × ``height``
-    photo (pixels of the photo as read), and where it came from (module docstring)."""
+    photo (pixels of the photo as read), and where it came from (module docstring): what the user
+    ``given``, else the EXIF ``lens``, else the training default."""
     if width < 1 or height < 1 or not 0 < crop_size <= max(width, height):
         raise ValueError(f"crop of {crop_size} px does not fit a {width}x{height} photo")
+    if given.photo_fov_deg is not None:
+        half_tangent = math.tan(math.radians(given.photo_fov_deg) / 2.0) * crop_size / width
+        return math.degrees(2.0 * math.atan(half_tangent)), "--fov"
+    if given.focal_length_35mm is not None:
+        span_mm = crop_size * FULL_FRAME_DIAGONAL_MM / math.hypot(width, height)
+        return _fov(span_mm, given.focal_length_35mm), "--focal-length-35mm"
     if lens is not None and lens.focal_length_35mm is not None:
         span_mm = crop_size * FULL_FRAME_DIAGONAL_MM / math.hypot(width, height)
         return _fov(span_mm, lens.focal_length_35mm), "exif 35 mm equivalent"
