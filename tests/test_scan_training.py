@@ -116,3 +116,19 @@ def test_held_out_sets_can_be_named(scan_root: Path) -> None:
         _scans(scan_root, val_sets=["set1"], test_sets=["set1"])
     mixed = split_scan_sets(tiny_spec(scans=_scans(scan_root, val_sets=2, test_sets=["set0"])))
     assert mixed["test"] == (0,) and len(mixed["val"]) == 2 and 0 not in mixed["val"]
+
+
+def test_a_contact_sheet_of_the_scans_alone(scan_root: Path, tmp_path: Path) -> None:
+    from brdfgan.cli import main
+    from brdfgan.data.contact_sheet import pick_samples
+
+    spec = tiny_spec(materials=16, scans=_scans(scan_root, fraction=0.5))
+    run_generation(spec, tmp_path / "data", progress=False, photographer=torch_photographer)
+    scans = pick_samples(tmp_path / "data", "train", rows=100, family="scanned/")
+    everything = pick_samples(tmp_path / "data", "train", rows=100)
+    assert scans and all(s.meta["family"].startswith("scanned/") for s in scans)
+    assert len(scans) < len(everything)
+    sheet = tmp_path / "scans.png"
+    assert main(["contact-sheet", str(tmp_path / "data"), "--family", "scanned/", "--out", str(sheet)]) == 0
+    assert sheet.is_file()
+    assert main(["contact-sheet", str(tmp_path / "data"), "--family", "nothing/", "--out", str(sheet)]) == 2

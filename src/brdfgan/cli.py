@@ -285,6 +285,12 @@ def build_parser() -> argparse.ArgumentParser:
     sheet.add_argument(
         "--tile", type=int, default=None, metavar="PX", help="resize every panel to PX² (small sheets)"
     )
+    sheet.add_argument(
+        "--family",
+        default=None,
+        metavar="PREFIX",
+        help="only samples whose family starts with PREFIX (e.g. scanned/ for the real scans mixed in)",
+    )
     sheet.set_defaults(run=contact_sheet_command, interrupted="interrupted: no contact sheet was written")
 
     convert = commands.add_parser(
@@ -336,12 +342,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     stats = commands.add_parser(
         "dataset-stats",
-        help="a dataset split (and scanned sets) → coverage statistics: families, metallic, HSV, relief",
-        description="Print a markdown table of the maps' distribution in DATA_DIR's split and, with "
-        "--scanned, in a folder of scanned sets (e.g. the out-of-distribution benchmark).",
+        help="dataset splits (and scanned sets) → coverage statistics: families, metallic, HSV, relief, "
+        "capture conditions",
+        description="Print a markdown table of the maps' distribution in DATA_DIR's splits (a split "
+        "mixing scanned sets in also by part: procedural, scans) and, with --scanned, in a folder of "
+        "scanned sets (e.g. the out-of-distribution benchmark); then a table of each split's capture "
+        "conditions (field of view, flash offset, tilt, exposure error, flash temperature, crop "
+        "scale, mirrored, recoloured and mixed shares) from the samples' metadata.",
     )
     stats.add_argument("data_dir", type=Path, metavar="DATA_DIR")
-    stats.add_argument("--split", default="train", help="default: train")
+    stats.add_argument(
+        "--split", nargs="+", default=["train"], metavar="SPLIT", help="one or more splits; default: train"
+    )
     stats.add_argument(
         "--scanned", type=Path, default=None, metavar="DIR", help="scanned sets to compare with"
     )
@@ -518,7 +530,13 @@ def contact_sheet_command(args: argparse.Namespace) -> int:
         raise UserError(f"--tile={args.tile}: must be at least 8 pixels")
     print(
         write_contact_sheet(
-            args.data_dir, args.split, rows=args.rows, seed=args.seed, out=args.out, tile=args.tile
+            args.data_dir,
+            args.split,
+            rows=args.rows,
+            seed=args.seed,
+            out=args.out,
+            tile=args.tile,
+            family=args.family,
         )
     )
     return 0
@@ -561,12 +579,9 @@ def references_command(args: argparse.Namespace) -> int:
 
 
 def dataset_stats_command(args: argparse.Namespace) -> int:
-    from brdfgan.data.statistics import dataset_statistics, scanned_statistics, statistics_table
+    from brdfgan.data.statistics import dataset_report
 
-    stats = [dataset_statistics(args.data_dir, args.split)]
-    if args.scanned is not None:
-        stats.append(scanned_statistics(args.scanned))
-    print(statistics_table(stats), end="")
+    print(dataset_report(args.data_dir, args.split, args.scanned), end="")
     return 0
 
 

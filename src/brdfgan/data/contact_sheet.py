@@ -2,6 +2,7 @@
 roughness | metallic — so a person can judge the realism of generated data at a glance.
 
     brdfgan contact-sheet DATA_DIR [--split train] [--rows 16] [--seed 0] [--tile PX] [--out PATH]
+                                   [--family PREFIX]
 
 The input photo is linear LDR and is shown sRGB-encoded, as a phone would display it; base color
 is stored sRGB and shown as is; normals as (n+1)/2 (OpenGL, the usual blue-ish look); roughness
@@ -26,14 +27,19 @@ from brdfgan.io.images import write_image
 COLUMNS = ("input", "basecolor", "normal", "roughness", "metallic")
 
 
-def pick_samples(data_dir: str | Path, split: str, rows: int, seed: int = 0) -> list[Sample]:
-    """``rows`` samples drawn uniformly from the split's shards (reservoir sampling, seeded)."""
+def pick_samples(
+    data_dir: str | Path, split: str, rows: int, seed: int = 0, family: str | None = None
+) -> list[Sample]:
+    """``rows`` samples drawn uniformly from the split's shards (reservoir sampling, seeded);
+    with ``family``, from the samples whose family starts with it (``scanned/``: the scans)."""
     shards = list_shards(data_dir, split)
     rng = random.Random(seed)
     chosen: list[Sample] = []
     seen = 0
     for shard in shards:
         for sample in iter_shard(shard):
+            if family is not None and not str(sample.meta.get("family", "")).startswith(family):
+                continue
             seen += 1
             if len(chosen) < rows:
                 chosen.append(sample)
@@ -97,7 +103,11 @@ def write_contact_sheet(
     seed: int = 0,
     out: str | Path | None = None,
     tile: int | None = None,
+    family: str | None = None,
 ) -> Path:
     """Write the contact sheet PNG (default ``DATA_DIR/contact_sheet_<split>.png``)."""
     path = Path(out) if out else Path(data_dir) / f"contact_sheet_{split}.png"
-    return write_image(path, contact_sheet(pick_samples(data_dir, split, rows, seed), tile))
+    samples = pick_samples(data_dir, split, rows, seed, family)
+    if family is not None and not samples:
+        raise UserError(f"{data_dir}: no {split} samples of a family starting with {family!r}")
+    return write_image(path, contact_sheet(samples, tile))
