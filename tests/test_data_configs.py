@@ -53,6 +53,8 @@ def test_data_configs_instantiate_a_datamodule(name: str) -> None:
     # The prepare hook generates exactly the dataset generate.py makes for the same name.
     prepare = module._prepare
     assert prepare is not None and prepare.keywords["out_dir"] == f"./data/{name}"
+    # Generated on first use there, inside paths.data_dir; nowhere else unless data.prepare.generate=true.
+    assert prepare.keywords["generate_under"] == "./data" and prepare.keywords["generate"] is False
     generated = hydra.utils.instantiate(_compose([f"dataset_spec={name}"]).dataset_spec, _convert_="all")
     assert prepare.keywords["spec"] == generated
 

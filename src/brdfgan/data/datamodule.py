@@ -577,7 +577,7 @@ class ShardDataModule(L.LightningDataModule):
         prefetch_factor: int | None = None,
         epoch_samples: int | None = None,
         train_crop: int | None = None,
-        prepare: Callable[[], None] | None = None,
+        prepare: Callable[[], object] | None = None,
         sensor: SensorEffects | None = None,
         sensor_splits: Sequence[str] = ("train",),
         eval_sensor: SensorEffects | None = None,

@@ -828,10 +828,57 @@ def dataset_ready(spec: DatasetSpec, out_dir: str | os.PathLike[str]) -> bool:
         return False
 
 
-def ensure_dataset(spec: DatasetSpec, out_dir: str | os.PathLike[str], *, progress: bool = True) -> Path:
+def ensure_dataset(
+    spec: DatasetSpec,
+    out_dir: str | os.PathLike[str],
+    *,
+    generate: bool = True,
+    generate_under: str | os.PathLike[str] | None = None,
+    progress: bool = True,
+) -> Path:
     """Generate the dataset into ``out_dir`` unless it is already complete (used to create the
-    embedded default dataset on a fresh clone's first ``train.py``/``evaluate.py``)."""
-    if not dataset_ready(spec, out_dir):
-        log.info("dataset %s is missing or incomplete: generating it", out_dir)
-        log.info("%s", run_generation(spec, out_dir, progress=progress).describe())
+    embedded default dataset on a fresh clone's first ``train.py``/``evaluate.py``).
+
+    A missing or incomplete dataset is generated only when ``generate`` is true or ``out_dir``
+    lies inside ``generate_under``. The data configs pass ``generate: false`` and
+    ``generate_under: ${paths.data_dir}``: the project's own data folder fills itself on first
+    use, while a mistyped ``data.data_dir`` anywhere else is a :class:`DatasetConfigError` naming
+    it, raised before anything is written. A complete dataset is used wherever it is.
+    """
+    if dataset_ready(spec, out_dir):
+        return Path(out_dir)
+    if not generate and not (generate_under is not None and _inside(out_dir, generate_under)):
+        home = f" (only paths.data_dir={generate_under} fills itself on first use)" if generate_under else ""
+        raise DatasetConfigError(f"data.data_dir={out_dir}: {_not_ready(spec, Path(out_dir))}{home}")
+    log.info("dataset %s is missing or incomplete: generating it", out_dir)
+    log.info("%s", run_generation(spec, out_dir, progress=progress).describe())
     return Path(out_dir)
+
+
+def _inside(path: str | os.PathLike[str], root: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` lies strictly inside ``root``: as written (made absolute, ``..`` folded)
+    or with every symlink resolved on both sides. So a relative and an absolute spelling agree, a
+    data folder that is a link to another disk counts, and so does a dataset folder linked from
+    inside it."""
+    pairs = (
+        (Path(os.path.abspath(path)), Path(os.path.abspath(root))),
+        (Path(path).resolve(), Path(root).resolve()),
+    )
+    return any(inner != outer and inner.is_relative_to(outer) for inner, outer in pairs)
+
+
+def _not_ready(spec: DatasetSpec, root: Path) -> str:
+    """Why ``root`` does not hold the complete dataset of ``spec``, and what to do about it."""
+    try:
+        recorded = _identity(json.loads((root / SPEC_FILE).read_text()))
+    except (OSError, ValueError):
+        recorded = None
+    if recorded is None:
+        return "no dataset there; correct the path, or pass data.prepare.generate=true to generate one there"
+    wanted = _identity(spec.to_json())
+    if recorded != wanted:
+        return (
+            f"holds a dataset made with a different config ({_first_difference(recorded, wanted)} differs); "
+            "choose the data config it was made with, or data.prepare=null to read it as it is"
+        )
+    return "the dataset there is incomplete; pass data.prepare.generate=true to finish it"
