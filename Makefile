@@ -82,16 +82,23 @@ data: setup
 	$(PY) generate.py
 
 # The out-of-distribution benchmark: real scanned materials (../shared/ood/ambientcg, or
-# BRDFGAN_OOD_DIR) photographed like the test split into data/ood (generated when absent), then
-# the shipped weights and the two trivial references evaluated on it: OOD_OUT/metrics.{md,json}.
+# BRDFGAN_OOD_DIR) photographed like the test split into data/ood, and the same 7 sets at close
+# range (crops spanning 20-30 deg, phone-processed photos) into data/ood_close (each generated when
+# absent); the shipped weights and the three trivial references evaluated on both:
+# OOD_OUT/{standard,close}/metrics.{md,json}.
 OOD_OUT ?= outputs/ood
 REFERENCES := src/brdfgan/weights/references
+OOD_MODELS := 'ckpt={shipped: src/brdfgan/weights/default.safetensors, mean_maps: $(REFERENCES)/mean_maps.safetensors, photo_basecolor: $(REFERENCES)/photo_basecolor.safetensors, de_lit: $(REFERENCES)/de_lit.safetensors}'
 ood: setup
 	$(PY) generate.py dataset_spec=ood progress=false contact_sheet=8
-	$(PY) evaluate.py data=ood hydra.run.dir=$(OOD_OUT) \
-		'ckpt={shipped: src/brdfgan/weights/default.safetensors, mean_maps: $(REFERENCES)/mean_maps.safetensors, photo_basecolor: $(REFERENCES)/photo_basecolor.safetensors}'
-	@echo "shipped = $$($(PY) -c 'import json; print(json.load(open("src/brdfgan/weights/default.json"))["model_id"])'); table: $(OOD_OUT)/metrics.md"
-	@cat $(OOD_OUT)/metrics.md
+	$(PY) generate.py dataset_spec=ood_close progress=false contact_sheet=8
+	$(PY) evaluate.py data=ood hydra.run.dir=$(OOD_OUT)/standard $(OOD_MODELS)
+	$(PY) evaluate.py data=ood_close hydra.run.dir=$(OOD_OUT)/close $(OOD_MODELS)
+	@echo "shipped = $$($(PY) -c 'import json; print(json.load(open("src/brdfgan/weights/default.json"))["model_id"])')"
+	@echo "standard (FOV 40-75 deg, predict's intake): $(OOD_OUT)/standard/metrics.md"
+	@cat $(OOD_OUT)/standard/metrics.md
+	@echo "close range (FOV 20-30 deg, phone-processed): $(OOD_OUT)/close/metrics.md"
+	@cat $(OOD_OUT)/close/metrics.md
 
 clean:
 	rm -rf $(VENV) .node outputs multirun .pytest_cache .ruff_cache src/*.egg-info

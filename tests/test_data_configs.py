@@ -18,6 +18,15 @@ from brdfgan.data.datamodule import ShardDataModule
 from brdfgan.data.generation import DatasetConfigError, DatasetSpec, plan_shards, spec_from_config
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
+# The configs that mix in the real scans need them (../shared/scans, as the configs default to).
+SCANS = Path(__file__).resolve().parents[2] / "shared" / "scans"
+OOD = Path(__file__).resolve().parents[2] / "shared" / "ood" / "ambientcg"
+NEEDS_SCANS = pytest.mark.skipif(
+    not (SCANS.is_dir() and OOD.is_dir()),
+    reason="the scanned materials (../shared/scans, ../shared/ood) are not here",
+)
+WITH_SCANS = pytest.param("procedural_and_scans", marks=NEEDS_SCANS)
+CLOSE_OOD = pytest.param("ood_close", marks=NEEDS_SCANS)
 
 
 def _compose(overrides: list[str], config_name: str = "generate"):  # type: ignore[no-untyped-def]
@@ -25,7 +34,7 @@ def _compose(overrides: list[str], config_name: str = "generate"):  # type: igno
         return compose(config_name=config_name, overrides=overrides)
 
 
-@pytest.mark.parametrize("name", ["default", "tiny", "paper"])
+@pytest.mark.parametrize("name", ["default", "tiny", "paper", WITH_SCANS, CLOSE_OOD])
 def test_every_dataset_config_builds_a_valid_spec(name: str) -> None:
     spec = hydra.utils.instantiate(_compose([f"dataset_spec={name}"]).dataset_spec, _convert_="all")
     assert isinstance(spec, DatasetSpec)
@@ -42,7 +51,7 @@ def test_paper_dataset_follows_the_paper_protocol() -> None:
     assert abs(train_samples - 40544) / 40544 < 0.01  # the paper's training-set size
 
 
-@pytest.mark.parametrize("name", ["default", "tiny", "paper", "deschaintre"])
+@pytest.mark.parametrize("name", ["default", "tiny", "paper", "deschaintre", WITH_SCANS, CLOSE_OOD])
 def test_data_configs_instantiate_a_datamodule(name: str) -> None:
     cfg = _compose([f"data={name}"], config_name="train")
     module = hydra.utils.instantiate(cfg.data, _convert_="all")
@@ -141,3 +150,23 @@ def test_other_instantiation_errors_keep_hydras_message() -> None:
     cfg.dataset_spec.flash.no_such_key = 1
     with pytest.raises(InstantiationException, match="no_such_key"):
         spec_from_config(cfg.dataset_spec)
+
+
+@NEEDS_SCANS
+def test_the_phone_delivered_data_configs() -> None:
+    # Training photos and their validation/test photos go through the phone's white balance and
+    # look; the close-range OOD benchmark's test photos too, its standard variant keeps predict's
+    # intake alone (its numbers stay comparable with earlier models').
+    scans = hydra.utils.instantiate(_compose(["data=procedural_and_scans"], "train").data, _convert_="all")
+    assert scans.sensor.auto_white_balance and scans.sensor.tone_curve_probability > 0
+    assert scans.eval_sensor.auto_white_balance and scans.eval_sensor.noise_probability == 0
+    spec = scans._prepare.keywords["spec"]
+    assert spec.scans.enabled and (spec.capture.fov_min_deg, spec.capture.fov_max_deg) == (20.0, 75.0)
+    close = hydra.utils.instantiate(_compose(["data=ood_close"], "train").data, _convert_="all")
+    standard = hydra.utils.instantiate(_compose(["data=ood"], "train").data, _convert_="all")
+    assert close.eval_sensor == scans.eval_sensor and not standard.eval_sensor.auto_white_balance
+    close_spec, standard_spec = close._prepare.keywords["spec"], standard._prepare.keywords["spec"]
+    assert (close_spec.capture.fov_min_deg, close_spec.capture.fov_max_deg) == (20.0, 30.0)
+    assert (
+        dataclasses.replace(close_spec, capture=standard_spec.capture) == standard_spec
+    )  # only the FOV differs
