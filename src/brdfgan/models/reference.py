@@ -76,52 +76,40 @@ class PhotoAsBasecolor(nn.Module):
     def config(self) -> dict[str, Any]:
         return {}
 
+    def basecolor(self, photo: Tensor, flash: Tensor | None) -> Tensor:
+        """The linear base colour of the photo. Shape: ``(B, 3, H, W)`` → same."""
+        return photo
+
     def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
-        """Shape: photo ``(B, 3, H, W)`` linear LDR → maps ``(B, 8, H, W)``; ``flash`` is unused."""
+        """Shape: photo ``(B, 3, H, W)`` linear LDR, flash ``(B, 3)`` or ``None`` → maps ``(B, 8, H, W)``."""
         batch, _, height, width = photo.shape
         maps = photo.new_zeros(batch, NUM_CHANNELS, height, width)
-        maps[:, BASECOLOR] = linear_to_srgb(photo.clamp(0.0, 1.0))
+        maps[:, BASECOLOR] = linear_to_srgb(self.basecolor(photo, flash).clamp(0.0, 1.0))
         maps[:, NORMAL.start + 2] = 1.0
         maps[:, ROUGHNESS] = self.roughness.to(photo.dtype)
         maps[:, METALLIC] = self.metallic.to(photo.dtype)
         return maps
 
 
-class DeLitPhoto(nn.Module):
+class DeLitPhoto(PhotoAsBasecolor):
     """Base colour = ``gain`` × the de-lit photo, sRGB-encoded; flat normal; constant roughness
     and metallic. The flash frame says where the hotspot is and the field of view; without one
     the photo is taken as centred on its hotspot with the default field of view (as
     ``brdfgan predict`` assumes without EXIF)."""
 
-    size_multiple = 1
     gain: Tensor  # () buffer: exposure gain from the de-lit photo to linear base colour
-    roughness: Tensor  # () buffer
-    metallic: Tensor  # () buffer
 
     def __init__(self) -> None:
         super().__init__()
         self.register_buffer("gain", torch.tensor(1.0))
-        self.register_buffer("roughness", torch.tensor(0.5))
-        self.register_buffer("metallic", torch.tensor(0.0))
 
-    def config(self) -> dict[str, Any]:
-        return {}
-
-    def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
-        """Shape: photo ``(B, 3, H, W)`` linear LDR, flash ``(B, 3)`` or ``None`` → maps ``(B, 8, H, W)``."""
+    def basecolor(self, photo: Tensor, flash: Tensor | None) -> Tensor:
         batch, _, height, width = photo.shape
-        frame = flash
-        if frame is None:
-            frame = centred_flash_frame(
+        if flash is None:
+            flash = centred_flash_frame(
                 batch, height, width, DEFAULT_FOV_DEG, device=photo.device, dtype=photo.dtype
             )
-        maps = photo.new_zeros(batch, NUM_CHANNELS, height, width)
-        delit = delit_photo(photo, frame.to(photo.dtype))
-        maps[:, BASECOLOR] = linear_to_srgb((self.gain.to(photo.dtype) * delit).clamp(0.0, 1.0))
-        maps[:, NORMAL.start + 2] = 1.0
-        maps[:, ROUGHNESS] = self.roughness.to(photo.dtype)
-        maps[:, METALLIC] = self.metallic.to(photo.dtype)
-        return maps
+        return self.gain.to(photo.dtype) * delit_photo(photo, flash.to(photo.dtype))
 
 
 def fit_delit_reference(batches: Any, stride: int = 4) -> DeLitPhoto:
