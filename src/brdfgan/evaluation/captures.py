@@ -99,6 +99,7 @@ from brdfgan.core.svbrdf import check_map_shape, linear_to_srgb, resize_maps
 from brdfgan.errors import UserError
 from brdfgan.inference.intake.photo import Photo, read_photo
 from brdfgan.inference.intake.preprocess import SATURATION_LEVEL, Crop, preprocess
+from brdfgan.inference.pipeline import unique_names
 from brdfgan.inference.refine import RefineConfig, refine_maps
 from brdfgan.io.atomic import write_text_atomic
 
@@ -214,19 +215,10 @@ def _capture_names(folders: Sequence[Path]) -> list[str]:
     """The folders' names, with the parent's name added where two are alike, then numbered."""
     names = [folder.resolve().name or "capture" for folder in folders]
     counts = {name: names.count(name) for name in names}
-    names = [
+    return unique_names(
         f"{folder.resolve().parent.name}/{name}" if counts[name] > 1 else name
         for folder, name in zip(folders, names, strict=True)
-    ]
-    taken: set[str] = set()
-    unique: list[str] = []
-    for name in names:
-        candidate, counter = name, 2
-        while candidate in taken:
-            candidate, counter = f"{name}-{counter}", counter + 1
-        taken.add(candidate)
-        unique.append(candidate)
-    return unique
+    )
 
 
 def read_capture(folder: str | os.PathLike[str], name: str | None = None) -> Capture:

@@ -24,7 +24,7 @@ import logging
 import os
 import re
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -151,16 +151,22 @@ def collect_photos(inputs: Sequence[str | os.PathLike[str]]) -> list[Path]:
 
 def output_names(photos: Sequence[Path]) -> list[str]:
     """One output folder name per photo: the file stem, made unique within the batch."""
-    names: list[str] = []
+    return unique_names(
+        re.sub(r"[^A-Za-z0-9._-]+", "_", photo.stem).strip("._") or "photo" for photo in photos
+    )
+
+
+def unique_names(names: Iterable[str]) -> list[str]:
+    """The names in order, a repeated one numbered ``name-2``, ``name-3``, …"""
+    unique: list[str] = []
     taken: set[str] = set()
-    for photo in photos:
-        base = re.sub(r"[^A-Za-z0-9._-]+", "_", photo.stem).strip("._") or "photo"
+    for base in names:
         name, counter = base, 2
         while name in taken:
             name, counter = f"{base}-{counter}", counter + 1
         taken.add(name)
-        names.append(name)
-    return names
+        unique.append(name)
+    return unique
 
 
 RefineProgress = Callable[[Path, int, int], None]  # (photo, step, of steps)
