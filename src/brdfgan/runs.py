@@ -44,6 +44,7 @@ NETWORK_CLASSES: dict[str, tuple[str, str]] = {
     "brdfgan.models.reference.ConstantMaps": ("brdfgan.models.reference", "ConstantMaps"),
     "brdfgan.models.reference.PhotoAsBasecolor": ("brdfgan.models.reference", "PhotoAsBasecolor"),
     "brdfgan.models.reference.DeLitPhoto": ("brdfgan.models.reference", "DeLitPhoto"),
+    "brdfgan.models.anchored.AnchoredUNet": ("brdfgan.models.anchored", "AnchoredUNet"),
 }
 # Hydra flags that may sit in a stored network node; they change how Hydra would call the
 # class, and we call it ourselves, so they are dropped (``_partial_``: the discriminator).

@@ -21,9 +21,12 @@ showed to relight better than the v3 network (docs: issue 31).
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import Tensor
 
+from brdfgan.core.brdf import evaluate_brdf
 from brdfgan.core.exposure import luminance
 from brdfgan.core.flash_geometry import check_flash_frame, flash_offset_channels
 
@@ -44,6 +47,28 @@ def flat_flash_falloff(frame: Tensor, height: int, width: int) -> Tensor:
     """
     offsets = flash_offset_channels(frame, height, width)
     return (1.0 + offsets.square().sum(dim=1, keepdim=True)).pow(-1.5)
+
+
+def flat_flash_render(basecolor_linear: Tensor, roughness: Tensor, metallic: Tensor, frame: Tensor) -> Tensor:
+    """The flash photo of a *flat* surface with these maps, relative to the flash's irradiance at
+    the hotspot: ``π f(l, v) (1 + |o|²)^(−3/2)`` with the flash at the lens (``l = v``, from each
+    pixel towards the flash: ``(−o, 1)/√(1 + |o|²)``), so a white Lambertian surface gives the
+    falloff itself and 1 at the hotspot. The photo divided by it is the **shading image**: what the
+    surface's relief (and light the flash model does not explain) did to the photo.
+
+    Shape:
+        - basecolor_linear: ``(B, 3, H, W)``; roughness, metallic: ``(B, 1, H, W)``
+        - frame: ``(B, 3)``
+        - output: ``(B, 3, H, W)``
+    """
+    height, width = basecolor_linear.shape[-2:]
+    offsets = flash_offset_channels(frame.to(basecolor_linear.dtype), height, width)
+    towards_flash = torch.cat([-offsets, torch.ones_like(offsets[:, :1])], dim=1)
+    towards_flash = towards_flash / towards_flash.norm(dim=1, keepdim=True)
+    flat = torch.zeros_like(towards_flash)
+    flat[:, 2] = 1.0
+    brdf = evaluate_brdf(basecolor_linear, flat, roughness, metallic, towards_flash, towards_flash)
+    return math.pi * brdf * (1.0 + offsets.square().sum(dim=1, keepdim=True)).pow(-1.5)
 
 
 def clip_hotspot(
@@ -92,4 +117,5 @@ __all__ = [
     "clip_hotspot",
     "delit_photo",
     "flat_flash_falloff",
+    "flat_flash_render",
 ]

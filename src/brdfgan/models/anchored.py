@@ -1,0 +1,228 @@
+"""A photo-anchored U-Net with two decoders that reads relief from shading (issue 32: the CPU
+default's generator from v4; the paper's :class:`~brdfgan.models.generator.Generator` stays for GPUs).
+
+Designed for a budget of ~1/40 000 of the paper's compute, at which v3 learned each map's level
+but not the photo's content (hue lost, detail blurred, a period-2 checkerboard, flat normals):
+
+- **Anchored on the de-lit photo.** The base colour is a correction of
+  :func:`~brdfgan.core.delit.delit_photo` (the photo over the flat-surface flash falloff, hotspot
+  clipped) times a learnt global exposure gain: per pixel and channel a log-gain and a bounded
+  residual, ``b = clamp(g · d · exp(γ) + 0.25 tanh(ρ), 0, 1)`` in linear light. The output layers
+  start at zero, so an untrained network returns ``g · d`` — the photo's hue, detail and
+  resolution — and training spends its steps on exposure, highlight and environment-light
+  removal. ``anchored=False`` keeps the de-lit photo as an input only (the base colour then comes
+  from a sigmoid, as in v3): the comparison the issue asks for.
+- **Detail and no checkerboard.** Skip connections at every scale (a U-Net: Deschaintre et al.
+  2018's was the best same-budget model here on diffuse albedo) and resize-convolution
+  upsampling (bilinear ×2, then a 3×3 convolution) instead of transposed convolutions.
+- **Two decoders.** One for (base colour, metallic), one for (normal, roughness): with one shared
+  decoder lighting bakes into the diffuse map and normals come out flat (SVBRDF-GAN's author; CAD,
+  SIGGRAPH Asia 2024).
+- **Normals from shading.** The surface decoder also reads the shading image, ``log(photo) −
+  log(flat render)`` of the material decoder's base colour, metallic and a provisional roughness
+  under the photo's flash (:func:`~brdfgan.core.delit.flat_flash_render`; Chord 2025, Li et al.
+  2018's cascade), pooled to every scale, beside the flash-offset channels: relief with the albedo
+  divided out. ``shading``: ``"detached"`` (no gradient into the material decoder through it),
+  ``"gradient"``, or ``"none"`` (not read).
+
+Inputs per pixel: ``log`` of the photo and of the anchor ``g · d``, and the four flash side
+channels (:func:`~brdfgan.core.flash_geometry.flash_side_channels`). Normalisation is
+``InstanceNorm2d`` (``affine=False``), so whole-photo inference tiles with frozen statistics as
+for the other generators (:mod:`brdfgan.inference.model.tiling`). The normal head is
+``normalize(x, y, 1)`` (slopes; the v3 finding), roughness and metallic sigmoids.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from brdfgan.core.delit import delit_photo, flat_flash_render
+from brdfgan.core.flash_geometry import (
+    DEFAULT_FOV_DEG,
+    FLASH_CHANNELS,
+    centred_flash_frame,
+    check_flash_frame,
+    flash_side_channels,
+)
+from brdfgan.core.svbrdf import join_maps, linear_to_srgb, normalize_normal
+
+Shading = Literal["detached", "gradient", "none"]
+SHADINGS: tuple[str, ...] = ("detached", "gradient", "none")
+# The de-lit photo's exposure gain fitted on the procedural_and_scans train split (the de_lit
+# reference, src/brdfgan/weights/references/de_lit.safetensors): the anchor's starting level.
+DEFAULT_ANCHOR_GAIN = 2.13
+LOG_EPS = 1e-3  # log(x + eps) of linear values: 1e-3 is below an 8-bit sRGB code's step near black
+RESIDUAL_SCALE = 0.25  # the base colour's additive correction is bounded by ±this (linear)
+LOG_GAIN_LIMIT = 4.0  # the per-pixel log-gain is clamped to ±this (×0.018 … ×55)
+METALLIC_BIAS = -3.0  # an untrained network's metallic: sigmoid(−3) ≈ 0.05
+MATERIAL_OUTPUTS = 8  # log-gain 3, residual 3, metallic logit 1, provisional roughness logit 1
+SURFACE_OUTPUTS = 3  # slope x, slope y, roughness logit
+INPUT_CHANNELS = 3 + 3 + FLASH_CHANNELS
+
+
+def _conv_block(in_channels: int, out_channels: int) -> nn.Sequential:
+    """Two 3×3 convolutions (reflection padding), each followed by InstanceNorm and LeakyReLU(0.2).
+    No conv bias: the InstanceNorm after it would cancel it."""
+    layers: list[nn.Module] = []
+    for channels_in in (in_channels, out_channels):
+        layers += [
+            nn.Conv2d(channels_in, out_channels, 3, padding=1, padding_mode="reflect", bias=False),
+            nn.InstanceNorm2d(out_channels, affine=False),
+            nn.LeakyReLU(0.2, inplace=True),
+        ]
+    return nn.Sequential(*layers)
+
+
+class _Decoder(nn.Module):
+    """Resize-convolution decoder over the encoder's features ``skips[0]`` (full size) …
+    ``skips[-1]`` (the bottleneck); ``extra`` channels (e.g. the shading image, pooled) join the
+    skip at every level. A zero-initialised 1×1 head gives ``out_channels``."""
+
+    def __init__(self, widths: list[int], extra: int, out_channels: int) -> None:
+        super().__init__()
+        self.blocks = nn.ModuleList(
+            _conv_block(widths[level + 1] + widths[level] + extra, widths[level])
+            for level in range(len(widths) - 1)
+        )
+        self.head = nn.Conv2d(widths[0], out_channels, 1)
+        nn.init.zeros_(self.head.weight)
+        nn.init.zeros_(self.head_bias)
+
+    @property
+    def head_bias(self) -> Tensor:
+        """The output layer's bias (its start values: a network's outputs before any training)."""
+        assert self.head.bias is not None  # built with bias=True
+        return self.head.bias
+
+    def forward(self, skips: list[Tensor], extras: list[Tensor] | None = None) -> Tensor:
+        x = skips[-1]
+        for level in reversed(range(len(self.blocks))):
+            x = F.interpolate(x, size=skips[level].shape[-2:], mode="bilinear", align_corners=False)
+            parts = [x, skips[level]] + ([extras[level]] if extras is not None else [])
+            x = self.blocks[level](torch.cat(parts, dim=1))
+        return self.head(x)
+
+
+class AnchoredUNet(nn.Module):
+    """The photo-anchored two-decoder U-Net (module docstring).
+
+    Args:
+        width: channels at full resolution; each level doubles them, up to 8 × width.
+        depth: downsamplings (2×2 average pooling); H and W must be multiples of ``2**depth``.
+        shading: how the surface decoder reads the shading image: ``"detached"``, ``"gradient"``
+            or ``"none"``.
+        anchored: predict the base colour as a correction of the de-lit photo (``False``: the
+            de-lit photo is an input only, the base colour a sigmoid).
+        anchor_gain: the de-lit photo's starting exposure gain (a learnt scalar from there).
+
+    Shape:
+        - photo: ``(B, 3, H, W)`` linear LDR in [0, 1]
+        - flash: ``(B, 3)`` flash frames (optional: the photo centred on its hotspot, 57.5°)
+        - output: ``(B, 8, H, W)`` maps
+    """
+
+    def __init__(
+        self,
+        width: int = 16,
+        depth: int = 4,
+        shading: Shading = "detached",
+        anchored: bool = True,
+        anchor_gain: float = DEFAULT_ANCHOR_GAIN,
+    ) -> None:
+        super().__init__()
+        if width < 1 or depth < 1:
+            raise ValueError(f"width and depth must be positive, got {width=}, {depth=}")
+        if shading not in SHADINGS:
+            raise ValueError(f"shading={shading!r}: must be one of {', '.join(SHADINGS)}")
+        if not anchor_gain > 0:
+            raise ValueError(f"anchor_gain must be positive, got {anchor_gain}")
+        self.width, self.depth = int(width), int(depth)
+        self.shading: Shading = shading
+        self.anchored = bool(anchored)
+        self.anchor_gain = float(anchor_gain)
+        widths = [width * 2 ** min(level, 3) for level in range(depth + 1)]
+        self.encoder = nn.ModuleList(
+            _conv_block(INPUT_CHANNELS if level == 0 else widths[level - 1], widths[level])
+            for level in range(depth + 1)
+        )
+        self.material = _Decoder(widths, 0, MATERIAL_OUTPUTS)
+        self.surface = _Decoder(widths, 3 if shading != "none" else 0, SURFACE_OUTPUTS)
+        with torch.no_grad():
+            self.material.head_bias[6] = METALLIC_BIAS
+        self.log_anchor_gain = nn.Parameter(torch.tensor(math.log(anchor_gain)))
+
+    def config(self) -> dict[str, Any]:
+        """The constructor arguments (stored with the weights)."""
+        return {
+            "width": self.width,
+            "depth": self.depth,
+            "shading": self.shading,
+            "anchored": self.anchored,
+            "anchor_gain": self.anchor_gain,
+        }
+
+    @property
+    def size_multiple(self) -> int:
+        """H and W must be multiples of this (and at least twice it)."""
+        return 2**self.depth
+
+    def check_input(self, photo: Tensor) -> None:
+        """Raise ``ValueError`` unless ``photo`` is ``(B, 3, H, W)`` of a supported size."""
+        if photo.ndim != 4 or photo.shape[1] != 3:
+            raise ValueError(f"AnchoredUNet expects a photo of shape (B, 3, H, W), got {tuple(photo.shape)}")
+        height, width = photo.shape[-2:]
+        multiple = self.size_multiple
+        if height % multiple or width % multiple or min(height, width) < 2 * multiple:
+            raise ValueError(
+                f"AnchoredUNet input height and width must be multiples of {multiple} (2**depth, "
+                f"depth={self.depth}) and at least {2 * multiple}; got {height}×{width}"
+            )
+
+    def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        self.check_input(photo)
+        batch, _, height, width = photo.shape
+        if flash is None:
+            flash = centred_flash_frame(batch, height, width, DEFAULT_FOV_DEG, device=photo.device)
+        check_flash_frame(flash, batch)
+        frame = flash.to(device=photo.device, dtype=photo.dtype)
+        photo = photo.clamp(0.0, 1.0)
+        anchor = self.log_anchor_gain.exp().to(photo.dtype) * delit_photo(photo, frame)
+        x = torch.cat(
+            [(photo + LOG_EPS).log(), (anchor + LOG_EPS).log(), flash_side_channels(frame, height, width)],
+            dim=1,
+        )
+        skips = []
+        for level, block in enumerate(self.encoder):
+            x = block(x if level == 0 else F.avg_pool2d(x, 2))
+            skips.append(x)
+
+        material = self.material(skips)
+        if self.anchored:
+            log_gain = material[:, 0:3].clamp(-LOG_GAIN_LIMIT, LOG_GAIN_LIMIT)
+            basecolor = anchor * log_gain.exp() + RESIDUAL_SCALE * torch.tanh(material[:, 3:6])
+        else:
+            basecolor = torch.sigmoid(material[:, 0:3] + material[:, 3:6])
+        basecolor = basecolor.clamp(0.0, 1.0)
+        metallic = torch.sigmoid(material[:, 6:7])
+
+        extras = None
+        if self.shading != "none":
+            provisional = torch.sigmoid(material[:, 7:8])
+            flat = flat_flash_render(basecolor, provisional, metallic, frame)
+            shading = (photo + LOG_EPS).log() - (flat + LOG_EPS).log()
+            if self.shading == "detached":
+                shading = shading.detach()
+            extras = [
+                shading if level == 0 else F.avg_pool2d(shading, 2**level) for level in range(self.depth)
+            ]
+        surface = self.surface(skips, extras)
+        normal = normalize_normal(torch.cat([surface[:, 0:2], torch.ones_like(surface[:, 2:3])], dim=1))
+        return join_maps(linear_to_srgb(basecolor), normal, torch.sigmoid(surface[:, 2:3]), metallic)
+
+
+__all__ = ["DEFAULT_ANCHOR_GAIN", "SHADINGS", "AnchoredUNet", "Shading"]
