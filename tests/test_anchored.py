@@ -160,3 +160,16 @@ def test_model_anchored_trains_and_validates_in_the_platform(tiny_data: Path) ->
     moved = [not torch.equal(a, b) for a, b in zip(before, module.generator.parameters(), strict=True)]
     assert all(moved[-4:])  # the output heads and the anchor gain learnt
     assert math.isfinite(float(trainer.callback_metrics["val/loss"]))
+
+
+def test_experiment_anchored_composes_the_model_data_and_v3_losses(tmp_path: Path) -> None:
+    from brdfgan.config_check import check_config
+    from tests.conftest import compose_train
+    from tests.test_config_check import CHECKED_GROUPS
+
+    cfg = compose_train(["experiment=anchored"], tmp_path)
+    check_config(cfg, CHECKED_GROUPS)
+    assert cfg.model.generator._target_ == "brdfgan.models.anchored.AnchoredUNet"
+    assert "normal_head" not in cfg.model.generator  # the v3 experiment's key would not fit it
+    assert cfg.data.data_dir.endswith("procedural_and_scans") and cfg.data.sensor.auto_white_balance
+    assert cfg.loss.metallic_loss == "bce" and not cfg.loss.switches.adversarial
