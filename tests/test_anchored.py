@@ -164,8 +164,8 @@ def test_model_anchored_trains_and_validates_in_the_platform(tiny_data: Path) ->
 
 def test_experiment_anchored_composes_the_model_data_and_v3_losses(tmp_path: Path) -> None:
     from brdfgan.config_check import check_config
+    from brdfgan.training.run import CHECKED_GROUPS
     from tests.conftest import compose_train
-    from tests.test_config_check import CHECKED_GROUPS
 
     cfg = compose_train(["experiment=anchored"], tmp_path)
     check_config(cfg, CHECKED_GROUPS)
