@@ -20,7 +20,7 @@ from brdfgan.core.svbrdf import flat_maps
 from brdfgan.evaluation.evaluator import evaluate_models, markdown_table, write_results
 from brdfgan.inference.model.export_weights import tested_checkpoint as checkpoint_tested_by_train
 from brdfgan.inference.model.weights import load_model
-from brdfgan.metrics import SVBRDFMetrics
+from brdfgan.metrics import SVBRDFMetrics, period2_floor
 from brdfgan.models.generator import Generator
 from brdfgan.report import (
     ReportError,
@@ -277,6 +277,52 @@ def test_evaluator_tables_report_base_colour_saturation_and_hue(tmp_path: Path) 
     assert {"basecolor_saturation_ratio", "basecolor_hue_error_deg"} <= set(names)
     assert float(csv_greyed.split(",")[names.index("basecolor_hue_error_deg")]) == pytest.approx(
         150.0, rel=1e-5
+    )
+
+
+class CheckeredRoughness(nn.Module):
+    """Predicts flat maps with a ±amplitude checkerboard (−1)^(i+j) on roughness."""
+
+    def __init__(self, amplitude: float) -> None:
+        super().__init__()
+        self.amplitude = amplitude
+
+    def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        maps = flat_maps(*photo.shape[-2:], batch=(photo.shape[0],))
+        rows, cols = torch.meshgrid(torch.arange(maps.shape[-2]), torch.arange(maps.shape[-1]), indexing="ij")
+        maps[:, 6] += self.amplitude * (1 - 2 * ((rows + cols) % 2))
+        return maps
+
+
+def test_evaluator_table_reports_checkerboard_ratios(tmp_path: Path) -> None:
+    truth = flat_maps(8, 8, batch=(3,))
+    batches = [{"photo": torch.rand(3, 3, 8, 8), "maps": truth}]
+    models = {"flat": CheckeredRoughness(0.0), "checkered": CheckeredRoughness(0.01)}
+    results = evaluate_models(models, batches, partial(SVBRDFMetrics, downscale_to=None, rerender_configs=2))
+    floor = period2_floor(8, 8)["roughness"]  # flat truth: the 8-bit quantisation floor only
+    assert results["checkered"]["checkerboard/roughness"] == pytest.approx(
+        (0.01**2 + floor) / floor, rel=1e-4
+    )
+    for model in models:
+        for name in ("basecolor", "normal", "metallic"):
+            assert results[model][f"checkerboard/{name}"] == pytest.approx(1.0, abs=1e-6)
+    assert results["flat"]["checkerboard/roughness"] == pytest.approx(1.0, abs=1e-6)
+
+    header, rule, flat, checkered = markdown_table(results).splitlines()
+    columns = [cell.strip() for cell in header.strip("|").split("|")]
+    checker_columns = ["chk base", "chk normal", "chk rough", "chk metal"]
+    start = columns.index("chk base")
+    assert columns[start : start + 4] == checker_columns and start == columns.index("hue °") + 1
+    assert rule.count("---") == len(columns)
+    cells = [cell.strip() for cell in checkered.strip("|").split("|")]
+    assert float(cells[columns.index("chk rough")]) == pytest.approx(740.6, rel=1e-3)  # (1e-4 + f) / f
+    assert cells[columns.index("chk base")] == "1.0000"
+    cells = [cell.strip() for cell in flat.strip("|").split("|")]
+    assert [cells[columns.index(label)] for label in checker_columns] == ["1.0000"] * 4
+    write_results(results, tmp_path)
+    stored = json.loads((tmp_path / "metrics.json").read_text())
+    assert {f"checkerboard/{name}" for name in ("basecolor", "normal", "roughness", "metallic")} <= set(
+        stored["checkered"]
     )
 
 

@@ -12,7 +12,9 @@ from torch import Tensor
 
 from brdfgan.core.svbrdf import InvalidMapsError, flat_maps, join_maps, split_maps
 from brdfgan.metrics import (
+    CHECKERBOARD_MAPS,
     RMSE_MAPS,
+    CheckerboardRatio,
     HueError,
     MapRMSE,
     NormalAngularError,
@@ -20,17 +22,30 @@ from brdfgan.metrics import (
     SaturationRatio,
     SVBRDFMetrics,
     basecolor_hsv,
+    checkerboard_ratio,
     compared_maps,
     fixed_render_configs,
     hue_difference_deg,
     hue_error_deg,
+    period2_amplitudes,
+    period2_floor,
+    period2_power,
     saturation_ratio,
 )
 from tests.conftest import random_maps
 
 SRGB_HALF_LINEAR = ((0.5 + 0.055) / 1.055) ** 2.4  # sRGB 0.5 decoded: 0.21404…
 # The collection's keys besides the per-map RMSE (without hotspot).
-SCALAR_KEYS = ("normal_angle_deg", "rerender_rmse", "basecolor_saturation_ratio", "basecolor_hue_error_deg")
+CHECKERBOARD_KEYS = tuple(
+    f"checkerboard/{name}{kind}" for name in CHECKERBOARD_MAPS for kind in ("", "/pooled")
+)
+SCALAR_KEYS = (
+    "normal_angle_deg",
+    "rerender_rmse",
+    "basecolor_saturation_ratio",
+    "basecolor_hue_error_deg",
+    *CHECKERBOARD_KEYS,
+)
 
 
 def normal_maps(normal: tuple[float, float, float], size: int = 4, batch: int = 1) -> Tensor:
@@ -244,6 +259,147 @@ def test_colour_metric_input_checks() -> None:
         HueError().update(maps, maps[:2])
 
 
+# ---------------------------------------------------------------- period-2 (checkerboard) power
+
+
+def alternating(size: int, rows: bool = True, cols: bool = True) -> Tensor:
+    """``(−1)^i``, ``(−1)^j`` or ``(−1)^(i+j)`` on a ``size²`` grid (i the row), float64."""
+    i, j = torch.meshgrid(torch.arange(size), torch.arange(size), indexing="ij")
+    return (1 - 2 * ((i * rows + j * cols) % 2)).to(torch.float64)
+
+
+def smooth_maps(size: int = 16, batch: int = 1) -> Tensor:
+    """Maps of low-frequency periodic cosines (1–2 cycles per image): no period-2 power at all
+    under the periodic Hann window, whose spectrum spreads a frequency only to its neighbours — but
+    for the renormalised normals, whose high harmonics are ~1e-17, far below the 8-bit floor."""
+    index = torch.arange(size, dtype=torch.float64)
+    i, j = torch.meshgrid(index, index, indexing="ij")
+    wave = torch.cos(2 * math.pi * (i + 2 * j) / size)
+    maps = flat_maps(size, size, basecolor=(0.5, 0.4, 0.3), batch=(batch,), dtype=torch.float64)
+    maps[:, 0:3] += 0.1 * wave
+    maps[:, 3] += 0.2 * wave  # tilted normals, renormalised by the metric
+    maps[:, 6] += 0.1 * wave
+    return maps
+
+
+def quantisation_floor(size: int, channels: int, step: float = 1 / 255) -> float:
+    """By hand: 3 bins × channels × step²/12 × Σw_i² Σw_j² / (Σw_i Σw_j)², where the periodic
+    Hann window of even n >= 4 has Σw = n/2 and Σw² = 3n/8: 3 C step² / 12 · 9 / (4 n²)."""
+    return 3 * channels * step**2 / 12 * 9 / (4 * size**2)
+
+
+def test_period2_power_of_a_checkerboard_by_hand() -> None:
+    smooth = smooth_maps()
+    smooth_power = period2_power(smooth)
+    assert smooth_power.pop("normal").item() < 1e-15
+    assert all(power.item() < 1e-28 for power in smooth_power.values())
+    a, b = 0.1, 0.02
+    pred, true = smooth.clone(), smooth.clone()
+    pred[:, 6] += a * alternating(16)  # ±a checkerboard on roughness
+    true[:, 6] += b * alternating(16)
+    amplitudes = period2_amplitudes(pred[:, 6:7])[0, 0]  # (H/2, 0), (0, W/2), (H/2, W/2)
+    torch.testing.assert_close(
+        amplitudes, torch.tensor([0.0, 0.0, a], dtype=torch.float64), atol=1e-15, rtol=0
+    )
+    power = period2_power(pred)
+    assert power["roughness"].item() == pytest.approx(a**2, rel=1e-12)
+    assert power["basecolor"].item() < 1e-28 and power["metallic"].item() == 0.0
+    floor = period2_floor(16, 16)
+    assert floor["roughness"] == pytest.approx(quantisation_floor(16, 1), rel=1e-12)
+    assert floor["normal"] == pytest.approx(quantisation_floor(16, 3, step=2 / 255), rel=1e-12)
+    ratio = checkerboard_ratio(pred, true)
+    f = quantisation_floor(16, 1)
+    assert ratio["roughness"].item() == pytest.approx((a**2 + f) / (b**2 + f), rel=1e-12)  # ≈ 25
+    assert ratio["roughness/pooled"].item() == pytest.approx((a**2 + f) / (b**2 + f), rel=1e-12)
+    for name in ("basecolor", "normal", "metallic"):
+        assert ratio[name].item() == pytest.approx(1.0, abs=1e-12), name
+        assert ratio[f"{name}/pooled"].item() == pytest.approx(1.0, abs=1e-12), name
+    # Two samples: the geometric mean of the per-sample ratios vs the ratio of the summed powers.
+    c = 0.002  # a nearly smooth second truth: its ratio is large, its weight in the pooled one small
+    pair_true = torch.cat([true, smooth + 0.0])
+    pair_true[1, 6] += c * alternating(16)
+    pair = checkerboard_ratio(torch.cat([pred, pred]), pair_true)
+    first, second = (a**2 + f) / (b**2 + f), (a**2 + f) / (c**2 + f)
+    assert pair["roughness"].item() == pytest.approx(math.sqrt(first * second), rel=1e-12)  # ≈ 250
+    assert pair["roughness/pooled"].item() == pytest.approx(2 * (a**2 + f) / (b**2 + c**2 + 2 * f), rel=1e-12)
+    # Stripes on every base-colour channel: (−1)^i and (−1)^j, amplitude a each, 3 channels.
+    striped = smooth.clone()
+    striped[:, 0:3] += a * alternating(16, cols=False) + a * alternating(16, rows=False)
+    assert period2_power(striped)["basecolor"].item() == pytest.approx(3 * 2 * a**2, rel=1e-12)
+
+
+def test_period2_power_ignores_the_mean_and_ramps() -> None:
+    # The periodic Hann window: no leakage of a constant or a linear ramp into the period-2 bins,
+    # where an unwindowed sum would read a ramp of slope s per texel as a checkerboard of s / 2.
+    index = torch.arange(32, dtype=torch.float64)
+    i, j = torch.meshgrid(index, index, indexing="ij")
+    maps = flat_maps(32, 32, basecolor=(0.9, 0.1, 0.5), roughness=0.7, metallic=1.0, dtype=torch.float64)
+    maps[6] = 0.2 + 0.01 * i + 0.005 * j
+    maps[0] = 0.8 - 0.02 * j
+    assert all(power.item() < 1e-28 for power in period2_power(maps).values())
+    unwindowed = (maps[6] * alternating(32, cols=False)).mean().square().item()
+    assert unwindowed == pytest.approx((0.01 / 2) ** 2)
+
+
+def test_blurred_prediction_scores_below_one_and_identity_one() -> None:
+    true = random_maps(32, 32, seed=1, batch=(4,))
+    identity = checkerboard_ratio(true, true)
+    assert {f"checkerboard/{key}": value.item() for key, value in identity.items()} == dict.fromkeys(
+        CHECKERBOARD_KEYS, 1.0
+    )
+    blurred = torch.nn.functional.avg_pool2d(true, 3, stride=1, padding=1, count_include_pad=False)
+    for key, value in checkerboard_ratio(blurred, true).items():
+        assert 0.0 < value.item() < 0.2, key  # measured 0.06–0.10
+
+
+def test_flat_maps_are_finite() -> None:
+    flat_true = flat_maps(16, 16, basecolor=(0.2, 0.3, 0.4), roughness=0.3, batch=(2,))
+    flat_pred = flat_maps(16, 16, basecolor=(0.6, 0.5, 0.4), roughness=0.8, metallic=1.0, batch=(2,))
+    for value in checkerboard_ratio(flat_pred.double(), flat_true.double()).values():
+        assert value.item() == pytest.approx(1.0, abs=1e-12)  # both at the 8-bit floor
+    for value in checkerboard_ratio(flat_pred, flat_true).values():
+        assert value.item() == pytest.approx(1.0, abs=1e-6)  # float32 rounding: measured 2e-9
+    a = 0.01
+    checkered = flat_true.double()
+    checkered[:, 6] += a * alternating(16)
+    ratio = checkerboard_ratio(checkered, flat_true.double())
+    f = quantisation_floor(16, 1)
+    for key in ("roughness", "roughness/pooled"):
+        value = ratio[key].item()
+        assert math.isfinite(value) and value == pytest.approx((a**2 + f) / f, rel=1e-9)  # ≈ 3·10⁴
+
+
+def test_checkerboard_ratio_accumulates_exactly_and_handles_sizes() -> None:
+    true = random_maps(9, 11, seed=3, batch=(5,), dtype=torch.float64)  # odd: last row/column ignored
+    pred = true.clone()
+    pred[:, 6] += 0.05 * torch.rand(5, 9, 11, generator=torch.Generator().manual_seed(4), dtype=torch.float64)
+    metric = CheckerboardRatio(prefix="chk/")
+    for part in (slice(0, 1), slice(1, 4), slice(4, 5)):  # uneven batches
+        metric.update(pred[part], true[part])
+    whole = checkerboard_ratio(pred, true)
+    assert whole["roughness"] > 1.0
+    computed = metric.compute()
+    assert computed.keys() == {f"chk/{key}" for key in whole} and len(whole) == 2 * len(CHECKERBOARD_MAPS)
+    for key, value in whole.items():
+        torch.testing.assert_close(computed[f"chk/{key}"], value, rtol=1e-12, atol=0.0)
+    cropped = checkerboard_ratio(pred[..., :8, :10], true[..., :8, :10])
+    for key, value in whole.items():
+        torch.testing.assert_close(value, cropped[key], rtol=1e-12, atol=0.0)
+    unbatched = CheckerboardRatio()
+    unbatched.update(pred[0], true[0])
+    torch.testing.assert_close(unbatched.compute(), checkerboard_ratio(pred[:1], true[:1]))
+    metric.reset()
+    with pytest.warns(UserWarning, match="called before the ``update``"):
+        assert all(math.isnan(value.item()) for value in metric.compute().values())  # nothing accumulated
+    tiny = random_maps(3, 8, seed=5, batch=(1,))
+    metric.update(tiny, tiny)  # fewer than 4 rows: skipped
+    assert all(math.isnan(value.item()) for value in metric.compute().values())
+    with pytest.raises(ValueError, match="even size >= 4"):
+        checkerboard_ratio(tiny, tiny)
+    with pytest.raises(ValueError, match="same shape"):
+        checkerboard_ratio(tiny, tiny[..., :2])
+
+
 # ---------------------------------------------------------------- accumulation
 
 
@@ -274,6 +430,8 @@ def test_reset() -> None:
     after = metric.compute()
     assert before["rmse/roughness"] > 0
     assert after.pop("basecolor_saturation_ratio").item() == pytest.approx(1.0, abs=1e-6)
+    for key in CHECKERBOARD_KEYS:
+        assert after.pop(key).item() == 1.0, key  # identical maps: the same period-2 power
     for key, value in after.items():
         assert value.item() == pytest.approx(0.0, abs=1e-5), key
 

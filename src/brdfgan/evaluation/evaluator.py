@@ -40,6 +40,8 @@ PAPER_MAPS = ("diffuse", "specular", "normal", "roughness")
 ALL_MAPS = (*PAPER_MAPS, "basecolor", "metallic")
 # The predicted maps whose hotspot ratio the table shows (metrics.json/.csv hold all of them).
 HOTSPOT_COLUMNS = {"basecolor": "basecolor", "normal": "normal", "roughness": "rough", "metallic": "metal"}
+# The maps whose checkerboard ratio (predicted / true period-2 power) the table shows.
+CHECKERBOARD_COLUMNS = {"basecolor": "base", "normal": "normal", "roughness": "rough", "metallic": "metal"}
 
 
 @torch.no_grad()
@@ -94,12 +96,14 @@ def write_results(results: Mapping[str, Mapping[str, float]], out_dir: str | os.
 
 def markdown_table(results: Mapping[str, Mapping[str, float]]) -> str:
     """Per-map RMSE at full and downscaled resolution, angular and re-render error, the base
-    colour's saturation ratio (predicted / true: 1 right, < 1 greyed) and hue error (degrees), and
+    colour's saturation ratio (predicted / true: 1 right, < 1 greyed) and hue error (degrees), the
+    checkerboard ratios (predicted / true period-2 power per map: 1 right, ≫ 1 a checkerboard), and
     the hotspot ratios of the predicted maps (RMSE near the flash highlight / elsewhere), per
     model."""
     columns = [(f"rmse/{m}", f"{m}") for m in ALL_MAPS] + [(f"rmse256/{m}", f"{m} ↓256") for m in PAPER_MAPS]
     columns += [("normal_angle_deg", "normal °"), ("rerender_rmse", "re-render")]
     columns += [("basecolor_saturation_ratio", "sat ratio"), ("basecolor_hue_error_deg", "hue °")]
+    columns += [(f"checkerboard/{m}", f"chk {label}") for m, label in CHECKERBOARD_COLUMNS.items()]
     columns += [(f"hotspot/{m}", f"hot {label}") for m, label in HOTSPOT_COLUMNS.items()]
     present = [(key, label) for key, label in columns if any(key in v for v in results.values())]
     lines = ["| model | " + " | ".join(label for _, label in present) + " |"]

@@ -1,14 +1,17 @@
 """Evaluation metrics (paper §6.2) as DDP-correct torchmetrics: per-map RMSE at full and
 downscaled resolution, normal angular error, a fixed-configuration re-rendering error, the
-base colour's saturation ratio and hue error, and the error near the flash highlight relative to
-elsewhere.
+base colour's saturation ratio and hue error, the period-2 (checkerboard) power relative to the
+truth's, and the error near the flash highlight relative to elsewhere.
 Definitions in :mod:`brdfgan.metrics.svbrdf_metrics`.
 """
 
 from brdfgan.metrics.svbrdf_metrics import (
     ALBEDO_SPACE,
+    CHECKERBOARD_MAPS,
+    CHECKERBOARD_QUANTISATION,
     HOTSPOT_RADIUS_FRACTION,
     RMSE_MAPS,
+    CheckerboardRatio,
     HotspotError,
     HueError,
     MapRMSE,
@@ -19,6 +22,7 @@ from brdfgan.metrics.svbrdf_metrics import (
     area_downscale,
     basecolor_hsv,
     check_hotspot_radius,
+    checkerboard_ratio,
     compared_maps,
     downscaled_size,
     fixed_render_configs,
@@ -26,14 +30,21 @@ from brdfgan.metrics.svbrdf_metrics import (
     hotspot_disk,
     hue_difference_deg,
     hue_error_deg,
+    period2_amplitudes,
+    period2_floor,
+    period2_power,
+    period2_weights,
     saturation_ratio,
     stored_photo_size,
 )
 
 __all__ = [
     "ALBEDO_SPACE",
+    "CHECKERBOARD_MAPS",
+    "CHECKERBOARD_QUANTISATION",
     "HOTSPOT_RADIUS_FRACTION",
     "RMSE_MAPS",
+    "CheckerboardRatio",
     "HotspotError",
     "HueError",
     "MapRMSE",
@@ -44,6 +55,7 @@ __all__ = [
     "area_downscale",
     "basecolor_hsv",
     "check_hotspot_radius",
+    "checkerboard_ratio",
     "compared_maps",
     "downscaled_size",
     "fixed_render_configs",
@@ -51,6 +63,10 @@ __all__ = [
     "hotspot_disk",
     "hue_difference_deg",
     "hue_error_deg",
+    "period2_amplitudes",
+    "period2_floor",
+    "period2_power",
+    "period2_weights",
     "saturation_ratio",
     "stored_photo_size",
 ]
