@@ -34,7 +34,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import kornia.color
 import torch
 from torch import Tensor
 
@@ -42,6 +41,7 @@ from brdfgan.core.svbrdf import split_maps
 from brdfgan.data.scanned import read_scanned_material, scanned_material_folders
 from brdfgan.data.shards import iter_shard, list_shards
 from brdfgan.errors import UserError
+from brdfgan.metrics.svbrdf_metrics import basecolor_hsv
 
 HUE_SECTORS = 6
 COLOURED_SATURATION = 0.2
@@ -99,7 +99,7 @@ class MapStatistics:
             raise UserError(f"{self.name}: no samples")
         texels = torch.cat(self._texels, dim=1)
         parts = split_maps(texels.view(8, 1, -1))
-        hsv = kornia.color.rgb_to_hsv(parts.basecolor.clamp(0.0, 1.0)[None])[0].view(3, -1)
+        hsv = basecolor_hsv(texels.view(8, 1, -1)).view(3, -1)  # the evaluator's hue and saturation
         hue, saturation, value = hsv[0], hsv[1], hsv[2]
         coloured = saturation > COLOURED_SATURATION
         sectors = torch.floor(hue[coloured] / (2 * math.pi) * HUE_SECTORS).clamp(0, HUE_SECTORS - 1)
