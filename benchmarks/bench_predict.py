@@ -1,9 +1,11 @@
-"""`brdfgan predict` end to end at 512², 1024², 2048², 4096² and at its default resolution (the
-crop's side, capped at 2048²): wall time, peak memory, generator share.
+"""`brdfgan predict` end to end at 256², 512², 1024², 2048², 4096² and at its default resolution
+(the crop's side, capped at 2048²): wall time, peak memory, generator share; and against v3's
+architecture at 256², 1024², 2048².
 
 Each resolution runs in a fresh subprocess (so its peak RSS is its own) on a synthetic 4000×3000
 flash photo (JPEG), with the shipped default weights when they are installed, else a randomly
-initialised generator of the same architecture (timings do not depend on the values). Above 1024²
+initialised generator of the same architecture (timings do not depend on the values); v3's
+architecture (the paper's generator at width 16) always randomly initialised. Above 1024²
 the generator runs tiled (1024² tiles, frozen statistics), so its memory stays that of one tile.
 The generator's share is the time spent inside ``Predictor.maps``; the rest is decoding, hotspot
 search, resizing, encoding seven textures, the .glb and the preview.
@@ -11,7 +13,7 @@ search, resizing, encoding seven textures, the .glb and the preview.
 It also measures the sgemm rate of this machine (4096³ fp32 matmul) and reports the paper
 generator's 512² forward against the floor that rate implies (424 GFLOP, docs/conventions.md#generator-cost).
 
-    python -m benchmarks.bench_predict [--sizes 512 1024 2048 4096 default]
+    python -m benchmarks.bench_predict [--sizes 256 512 … default] [--v3-sizes 256 1024 2048]
 """
 
 from __future__ import annotations
@@ -53,16 +55,31 @@ def _weights(directory: Path) -> Path:
     shipped = default_weights_path()
     if shipped.is_file():
         return shipped
+    from brdfgan.models.anchored import AnchoredUNet
+
+    return _random_weights(
+        directory / "random.safetensors", AnchoredUNet(), "brdfgan.models.anchored.AnchoredUNet"
+    )
+
+
+def _v3_weights(directory: Path) -> Path:
+    """v3's architecture (the paper's generator at width 16, 3 downsamplings, 4 residual blocks,
+    the unit-z normal head), randomly initialised: the timings do not depend on the values."""
     from brdfgan.models.generator import Generator
+
+    generator = Generator(width=16, downsamplings=3, residual_blocks=4, normal_head="unit_z")
+    return _random_weights(directory / "v3.safetensors", generator, "brdfgan.models.generator.Generator")
+
+
+def _random_weights(path: Path, generator: torch.nn.Module, target: str) -> Path:
     from brdfgan.runs import save_weights
 
-    generator = Generator(width=16, residual_blocks=4)
     return save_weights(
-        directory / "random.safetensors",
+        path,
         generator,
-        target="brdfgan.models.generator.Generator",
-        config=generator.config(),
-        model_id="random CPU preset",
+        target=target,
+        config=generator.config(),  # type: ignore[operator]
+        model_id=f"{path.stem} architecture, random weights",
         extra={"resolution": 256},
     )
 
@@ -123,9 +140,34 @@ def paper_forward_512() -> float:
     return time.perf_counter() - start
 
 
+def _child(photo: Path, weights: Path, size: str, directory: Path) -> dict[str, Any] | None:
+    """One predict call in a fresh subprocess (its own peak RSS); None when it failed."""
+    command = [
+        sys.executable,
+        "-m",
+        "benchmarks.bench_predict",
+        "--child",
+        str(photo),
+        str(weights),
+        size,
+        str(directory),
+    ]
+    result = subprocess.run(command, capture_output=True, text=True, check=False)
+    if result.returncode != 0:
+        print(f"{size}² ({weights.name}): failed: {result.stderr.strip().splitlines()[-1:]}")
+        return None
+    return json.loads(result.stdout.strip().splitlines()[-1])
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", nargs="+", default=["512", "1024", "2048", "4096", "default"])
+    parser.add_argument("--sizes", nargs="+", default=["256", "512", "1024", "2048", "4096", "default"])
+    parser.add_argument(
+        "--v3-sizes",
+        nargs="*",
+        default=["256", "1024", "2048"],
+        help="also time v3's architecture at these sizes (random weights)",
+    )
     parser.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
@@ -138,27 +180,16 @@ def main() -> None:
         return
     with tempfile.TemporaryDirectory() as tmp:
         directory = Path(tmp)
-        photo, weights = _photo(directory / "flash.jpg"), _weights(directory)
-        rows = []
-        for size in args.sizes:
-            command = [
-                sys.executable,
-                "-m",
-                "benchmarks.bench_predict",
-                "--child",
-                str(photo),
-                str(weights),
-                size,
-                str(directory),
-            ]
-            result = subprocess.run(command, capture_output=True, text=True, check=False)
-            if result.returncode != 0:
-                print(f"{size}²: failed: {result.stderr.strip().splitlines()[-1:]}")
-                continue
-            rows.append((size, json.loads(result.stdout.strip().splitlines()[-1])))
+        photo = _photo(directory / "flash.jpg")
+        weights, v3 = _weights(directory), _v3_weights(directory)
+        rows = [(size, row) for size in args.sizes if (row := _child(photo, weights, size, directory))]
+        v3_rows = {size: row for size in args.v3_sizes if (row := _child(photo, v3, size, directory))}
     threads = torch.get_num_threads()
     model = rows[0][1]["model"] if rows else "?"
-    print(f"\nbrdfgan predict on a 4000×3000 JPEG, model: {model}, {threads} threads; ratios against 512²\n")
+    print(
+        f"\nbrdfgan predict on a 4000×3000 JPEG, model: {model}, {threads} threads; "
+        "ratios against the first size\n"
+    )
     print(
         "| resolution | wall s | generator s | generator share | peak RSS MiB | time ratio | memory ratio "
         "| output MiB | index.html MiB |"
@@ -178,6 +209,23 @@ def main() -> None:
             f"{row['page_mib']:.1f}",
         ]
         print("| " + " | ".join(cells) + " |")
+    if v3_rows:
+        print(f"\nAgainst v3's architecture (random weights, same photo and options): {model} / v3\n")
+        header = ["resolution", "wall s", "v3 wall s", "wall ratio", "generator s", "v3 generator s",
+                  "generator ratio", "peak RSS MiB", "v3 peak RSS MiB"]  # fmt: skip
+        print("| " + " | ".join(header) + " |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        for size, row in rows:
+            old = v3_rows.get(size)
+            if old is None:
+                continue
+            cells = [
+                f"{row['side']}²", f"{row['total']:.1f}", f"{old['total']:.1f}",
+                f"{row['total'] / old['total']:.2f}×", f"{row['generator']:.2f}", f"{old['generator']:.2f}",
+                f"{row['generator'] / old['generator']:.2f}×",
+                f"{row['peak_mib']:.0f}", f"{old['peak_mib']:.0f}",
+            ]  # fmt: skip
+            print("| " + " | ".join(cells) + " |")
     rate = sgemm_gflops()
     forward = paper_forward_512()
     floor = PAPER_GFLOP_512 / rate

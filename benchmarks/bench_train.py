@@ -14,7 +14,9 @@ Variants: ``before`` is the step as it was (the direct vector-field renderer of
 ``tests/render_reference.py``, eager, Adam's default loop); ``eager`` the factored renderer without
 compilation; ``after`` the training configs' defaults (the compiled loss, fused Adam), and rows
 with one option changed each (Adam not fused, ``channels_last``) so each option's effect is
-measured in the same run. Last, the shard loader's samples/s per worker at 512² for both formats.
+measured in the same run. Recipes: the default GAN step, v3's supervised step, v4's (the
+photo-anchored U-Net of ``experiment=anchored``; its rendering-loss share against the 10 % goal),
+the paper's width. Last, the shard loader's samples/s per worker at 512² for both formats.
 
     python -m benchmarks.bench_train [--steps N] [--quick]
 """
@@ -51,6 +53,8 @@ class Case:
 DEFAULT_RECIPE = ("experiment=default_model", "loss=full")
 # The step v3 was trained with: the same without discriminators (loss=supervised).
 V3_RECIPE = ("experiment=default_model",)
+# v4's step: the photo-anchored two-decoder U-Net (model=anchored), supervised, same crops and batch.
+V4_RECIPE = ("experiment=anchored",)
 PAPER_WIDTH = ("experiment=default_model", "loss=full", "model=paper")  # the paper's networks (45.6 M + 2 D)
 
 VARIANT_OVERRIDES: dict[str, tuple[str, ...]] = {
@@ -67,9 +71,11 @@ def _cases(quick: bool) -> list[Case]:
     default = [Case(gan, v, DEFAULT_RECIPE, 128, 4) for v in VARIANT_OVERRIDES]
     supervised = "v3 recipe, supervised (128², batch 4)"
     v3 = [Case(supervised, v, V3_RECIPE, 128, 4) for v in ("before", "after (defaults)")]
+    anchored = "v4 recipe, anchored U-Net, supervised (128², batch 4)"
+    v4 = [Case(anchored, v, V4_RECIPE, 128, 4) for v in ("before", "after (defaults)")]
     paper_variants = ("before", "after (defaults)") if quick else ("before", "eager", "after (defaults)")
     paper = [Case("paper width (256², batch 2)", v, PAPER_WIDTH, 256, 2) for v in paper_variants]
-    return default + v3 + paper
+    return default + v3 + v4 + paper
 
 
 def _synthetic_batches(count: int, batch: int, size: int) -> list[dict[str, torch.Tensor]]:

@@ -22,8 +22,9 @@ but not the photo's content (hue lost, detail blurred, a period-2 checkerboard, 
   log(flat render)`` of the material decoder's base colour, metallic and a provisional roughness
   under the photo's flash (:func:`~brdfgan.core.delit.flat_flash_render`; Chord 2025, Li et al.
   2018's cascade), pooled to every scale, beside the flash-offset channels: relief with the albedo
-  divided out. ``shading``: ``"detached"`` (no gradient into the material decoder through it),
-  ``"gradient"``, or ``"none"`` (not read).
+  divided out. ``shading``: ``"detached"`` (rendered without gradient into the material decoder;
+  the provisional roughness then keeps its start value, 0.5), ``"gradient"``, or ``"none"`` (not
+  read).
 
 Inputs per pixel: ``log`` of the photo and of the anchor ``g · d``, and the four flash side
 channels (:func:`~brdfgan.core.flash_geometry.flash_side_channels`). Normalisation is
@@ -212,11 +213,11 @@ class AnchoredUNet(nn.Module):
 
         extras = None
         if self.shading != "none":
-            provisional = torch.sigmoid(material[:, 7:8])
-            flat = flat_flash_render(basecolor, provisional, metallic, frame)
-            shading = (photo + LOG_EPS).log() - (flat + LOG_EPS).log()
-            if self.shading == "detached":
-                shading = shading.detach()
+            # Detached: rendered without a graph (the same values; no autograd bookkeeping).
+            with torch.set_grad_enabled(torch.is_grad_enabled() and self.shading == "gradient"):
+                provisional = torch.sigmoid(material[:, 7:8])
+                flat = flat_flash_render(basecolor, provisional, metallic, frame)
+                shading = (photo + LOG_EPS).log() - (flat + LOG_EPS).log()
             extras = [
                 shading if level == 0 else F.avg_pool2d(shading, 2**level) for level in range(self.depth)
             ]
