@@ -7,11 +7,14 @@ but not the photo's content (hue lost, detail blurred, a period-2 checkerboard, 
 - **Anchored on the de-lit photo.** The base colour is a correction of
   :func:`~brdfgan.core.delit.delit_photo` (the photo over the flat-surface flash falloff, hotspot
   clipped) times a learnt global exposure gain: per pixel and channel a log-gain and a bounded
-  residual, ``b = clamp(g · d · exp(γ) + 0.25 tanh(ρ), 0, 1)`` in linear light. The output layers
-  start at zero, so an untrained network returns ``g · d`` — the photo's hue, detail and
-  resolution — and training spends its steps on exposure, highlight and environment-light
-  removal. ``anchored=False`` keeps the de-lit photo as an input only (the base colour then comes
-  from a sigmoid, as in v3): the comparison the issue asks for.
+  residual, ``b = clamp(g · d · exp(γ) + 0.25 tanh(ρ), 0, 1)`` in linear light, blended toward a
+  free metal colour by the metallic map (a metal's base colour is its specular colour, which the
+  de-lit photo does not hold: after 1 600 steps without the blend the network had not learnt to
+  call a brushed-metal validation scan metal, metallic 0.1 against 1). The output layers start
+  at zero and the metallic at 0.7 %, so an untrained network returns ``g · d`` — the photo's hue,
+  detail and resolution — and training spends its steps on exposure, highlight and
+  environment-light removal. ``anchored=False`` keeps the de-lit photo as an input only (the
+  base colour then comes from a sigmoid, as in v3): the comparison the issue asks for.
 - **Detail and no checkerboard.** Skip connections at every scale (a U-Net: Deschaintre et al.
   2018's was the best same-budget model here on diffuse albedo) and resize-convolution
   upsampling (bilinear ×2, then a 3×3 convolution) instead of transposed convolutions.
@@ -60,8 +63,12 @@ DEFAULT_ANCHOR_GAIN = 2.13
 LOG_EPS = 1e-3  # log(x + eps) of linear values: 1e-3 is below an 8-bit sRGB code's step near black
 RESIDUAL_SCALE = 0.25  # the base colour's additive correction is bounded by ±this (linear)
 LOG_GAIN_LIMIT = 4.0  # the per-pixel log-gain is clamped to ±this (×0.018 … ×55)
-METALLIC_BIAS = -3.0  # an untrained network's metallic: sigmoid(−3) ≈ 0.05
-MATERIAL_OUTPUTS = 8  # log-gain 3, residual 3, metallic logit 1, provisional roughness logit 1
+# An untrained network's metallic: sigmoid(−5) ≈ 0.007, so its base colour is the de-lit photo's
+# within 0.7 % of the way to the metal colour's start (0.5). Metallic is learnt through a
+# cross-entropy on its logit, which does not saturate there.
+METALLIC_BIAS = -5.0
+# log-gain 3, residual 3, metallic logit 1, provisional roughness logit 1, metal colour logits 3
+MATERIAL_OUTPUTS = 11
 SURFACE_OUTPUTS = 3  # slope x, slope y, roughness logit
 INPUT_CHANNELS = 3 + 3 + FLASH_CHANNELS
 
@@ -203,13 +210,17 @@ class AnchoredUNet(nn.Module):
             skips.append(x)
 
         material = self.material(skips)
+        metallic = torch.sigmoid(material[:, 6:7])
         if self.anchored:
             log_gain = material[:, 0:3].clamp(-LOG_GAIN_LIMIT, LOG_GAIN_LIMIT)
-            basecolor = anchor * log_gain.exp() + RESIDUAL_SCALE * torch.tanh(material[:, 3:6])
+            dielectric = (anchor * log_gain.exp() + RESIDUAL_SCALE * torch.tanh(material[:, 3:6])).clamp(
+                0.0, 1.0
+            )
+            # A metal's base colour is its specular colour, which the de-lit photo does not hold
+            # (dark away from the highlight): a free colour, blended in by the metallic map.
+            basecolor = torch.lerp(dielectric, torch.sigmoid(material[:, 8:11]), metallic)
         else:
             basecolor = torch.sigmoid(material[:, 0:3] + material[:, 3:6])
-        basecolor = basecolor.clamp(0.0, 1.0)
-        metallic = torch.sigmoid(material[:, 6:7])
 
         extras = None
         if self.shading != "none":
@@ -226,4 +237,4 @@ class AnchoredUNet(nn.Module):
         return join_maps(linear_to_srgb(basecolor), normal, torch.sigmoid(surface[:, 2:3]), metallic)
 
 
-__all__ = ["DEFAULT_ANCHOR_GAIN", "SHADINGS", "AnchoredUNet", "Shading"]
+__all__ = ["DEFAULT_ANCHOR_GAIN", "METALLIC_BIAS", "SHADINGS", "AnchoredUNet", "Shading"]
