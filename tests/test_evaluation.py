@@ -387,6 +387,17 @@ def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> 
     assert training_summary(tmp_path / "other", other, None)["init_from"] == {"checkpoint": str(weights)}
 
 
+def test_the_summary_records_the_share_of_scanned_materials(tmp_path: Path) -> None:
+    from brdfgan.inference.model.export_weights import training_summary
+
+    v4 = _fake_training_run(tmp_path / "v4", ["experiment=anchored"], epoch=0, step=10)
+    scans = training_summary(tmp_path / "v4", v4, None)["dataset"]["scans"]
+    assert 0.0 < scans["fraction"] < 1.0
+    assert len(scans["val_sets"]) == len(scans["test_sets"]) == 3 and "Metal012" in scans["val_sets"]
+    v3 = _fake_training_run(tmp_path / "v3", ["experiment=default_model"], epoch=0, step=10)
+    assert "scans" not in training_summary(tmp_path / "v3", v3, None)["dataset"]
+
+
 def test_exported_test_metrics_belong_to_the_exported_checkpoint(tmp_path: Path) -> None:
     from brdfgan.inference.model.export_weights import evaluation_metrics, training_summary
 

@@ -115,6 +115,9 @@ def training_summary(
         "hardware": hardware or f"{platform.machine()} CPU, {torch.get_num_threads()} threads",
         "exported": datetime.now().astimezone().isoformat(timespec="seconds"),
     }
+    scans = spec.get("scans")
+    if isinstance(scans, dict) and scans.get("fraction"):  # the share painted from scans, sets held out
+        summary["dataset"]["scans"] = {key: scans.get(key) for key in ("fraction", "val_sets", "test_sets")}
     if test_metrics is None:
         test_metrics = run_test_metrics(run_dir, checkpoint, state, str(config.get("monitor", "val/loss")))
     if test_metrics is not None:
