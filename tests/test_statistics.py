@@ -264,3 +264,28 @@ def test_a_generated_dataset_with_scans_has_every_capture_record(tmp_path: Path)
         assert -1.5 <= row["exposure_ev"][0] <= row["exposure_ev"][-1] <= 1.0
     text = dataset_report(tmp_path / "data", ["train", "val", "test"])
     assert "| data/train |" in text and "| data/test |" in text
+
+
+def test_source_subsets_splits_a_split_into_its_scanned_and_procedural_photos(
+    mixed_dataset: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from scripts import source_subsets
+
+    from brdfgan.data.shards import iter_shard, list_shards
+
+    monkeypatch.setattr("sys.argv", ["source_subsets", str(mixed_dataset), "--split", "train"])
+    source_subsets.main()
+    original = {s.key: s for shard in list_shards(mixed_dataset, "train") for s in iter_shard(shard)}
+    parts = {}
+    for name in ("scans", "procedural"):
+        folder = mixed_dataset.with_name(f"mixed_train_{name}")
+        parts[name] = [s for shard in list_shards(folder, "test") for s in iter_shard(shard)]
+        for sample in parts[name]:  # copied as they were
+            assert (
+                torch.equal(sample.maps, original[sample.key].maps)
+                and sample.meta == original[sample.key].meta
+            )
+    assert len(parts["scans"]) == 3 and len(parts["procedural"]) == 8
+    assert all(str(s.meta["family"]).startswith("scanned/") for s in parts["scans"])
+    assert not any(str(s.meta["family"]).startswith("scanned/") for s in parts["procedural"])
+    assert not list(mixed_dataset.parent.glob(".*partial"))  # no temporary folder left

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, resize_image, split_maps
+from brdfgan.data.material_source import SCANNED_PREFIX
 from brdfgan.data.shards import Sample, iter_shard, list_shards
 from brdfgan.errors import UserError
 from brdfgan.figures import caption, with_column_header
@@ -71,7 +72,7 @@ def sample_row(sample: Sample, tile: int | None = None) -> torch.Tensor:
 
 def row_label(sample: Sample) -> str:
     """What a row shows: the family, ``+partner`` for a mixed material, ``recol.`` if recoloured."""
-    label = str(sample.meta.get("family", sample.key)).removeprefix("scanned/")
+    label = str(sample.meta.get("family", sample.key)).removeprefix(SCANNED_PREFIX)
     mix = sample.meta.get("mix")
     if isinstance(mix, dict):
         label += f" + {mix.get('partner_family', '?')}"

@@ -30,6 +30,12 @@ from brdfgan.data.scanned import read_scanned_material
 from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, ordered
 
 SCANS_KEY = "dataset_spec.scans"
+SCANNED_PREFIX = "scanned/"  # the family of a scanned set: scanned/<folder name>
+
+
+def is_scanned(family: str) -> bool:
+    """Whether ``family`` is a scanned set's (``scanned/<name>``) rather than a procedural one."""
+    return family.startswith(SCANNED_PREFIX)
 
 
 @dataclass(frozen=True)
@@ -195,7 +201,15 @@ def paint_scanned(
         maps = maps.clone()
         maps[BASECOLOR] = recolor_basecolor(maps[BASECOLOR], maps[METALLIC], draw)
         extra["recolor"] = draw.to_json()
-    return PaintedMaterial(maps, f"scanned/{folder.name}", {}, extra, crop)
+    return PaintedMaterial(maps, f"{SCANNED_PREFIX}{folder.name}", {}, extra, crop)
 
 
-__all__ = ["PaintedMaterial", "ScanSampling", "family_draw", "paint_procedural", "paint_scanned"]
+__all__ = [
+    "SCANNED_PREFIX",
+    "PaintedMaterial",
+    "ScanSampling",
+    "family_draw",
+    "is_scanned",
+    "paint_procedural",
+    "paint_scanned",
+]

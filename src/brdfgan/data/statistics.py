@@ -38,6 +38,7 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.svbrdf import split_maps
+from brdfgan.data.material_source import SCANNED_PREFIX, is_scanned
 from brdfgan.data.scanned import read_scanned_material, scanned_material_folders
 from brdfgan.data.shards import iter_shard, list_shards
 from brdfgan.errors import UserError
@@ -45,15 +46,9 @@ from brdfgan.metrics.svbrdf_metrics import basecolor_hsv
 
 HUE_SECTORS = 6
 COLOURED_SATURATION = 0.2
-SCANNED_PREFIX = "scanned/"  # the family of a scanned set: scanned/<folder name>
 MISSING = "–"
 _STRIDE = 4  # every 4th texel along each axis
 GROUPS = ("procedural", "scans")  # the parts of a split, by family
-
-
-def is_scanned(family: str) -> bool:
-    """Whether ``family`` is a scanned set's (``scanned/<name>``) rather than a procedural one."""
-    return family.startswith(SCANNED_PREFIX)
 
 
 @dataclass

@@ -1,0 +1,58 @@
+"""Split one split of a dataset that mixes scanned sets in (``dataset_spec.scans``) into its scanned
+and its procedural photos, each written as the ``test`` split of a dataset of its own, so that
+``evaluate.py`` scores the two apart (the v4 tables: the scan test set beside the procedural one).
+
+    python -m scripts.source_subsets data/procedural_and_scans --split test
+    # -> data/procedural_and_scans_test_scans/test, data/procedural_and_scans_test_procedural/test
+    python evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_test_scans \\
+        data.prepare=null ckpt=...
+
+The shards are copied sample by sample (same keys, same 16-bit payload); each output folder is
+written under a temporary name and renamed when complete.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+
+from brdfgan.data.material_source import is_scanned
+from brdfgan.data.shards import Sample, iter_shard, list_shards, shard_path, write_shard
+
+SAMPLES_PER_SHARD = 64
+
+
+def write_subset(samples: list[Sample], out: Path) -> None:
+    """``samples`` as ``out/test`` (temporary folder, then renamed over any earlier one)."""
+    partial = out.with_name(f".{out.name}.partial")
+    shutil.rmtree(partial, ignore_errors=True)
+    (partial / "test").mkdir(parents=True)
+    for start in range(0, len(samples), SAMPLES_PER_SHARD):
+        chunk: Iterator[Sample] = iter(samples[start : start + SAMPLES_PER_SHARD])
+        write_shard(shard_path(partial, "test", start // SAMPLES_PER_SHARD), chunk, shard_format="u16z")
+    shutil.rmtree(out, ignore_errors=True)
+    partial.rename(out)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("data_dir", type=Path)
+    parser.add_argument("--split", default="test")
+    args = parser.parse_args()
+    shards = list_shards(args.data_dir, args.split)
+    if not shards:
+        raise SystemExit(f"error: {args.data_dir}/{args.split}: no shards")
+    samples = [sample for shard in shards for sample in iter_shard(shard)]
+    flags = [is_scanned(str(sample.meta.get("family", ""))) for sample in samples]
+    scanned = [sample for sample, flag in zip(samples, flags, strict=True) if flag]
+    procedural = [sample for sample, flag in zip(samples, flags, strict=True) if not flag]
+    for name, subset in (("scans", scanned), ("procedural", procedural)):
+        out = args.data_dir.with_name(f"{args.data_dir.name}_{args.split}_{name}")
+        write_subset(subset, out)
+        print(f"{out}: {len(subset)} photos")
+
+
+if __name__ == "__main__":
+    main()
