@@ -54,6 +54,19 @@ def test_an_untrained_network_returns_the_delit_photo() -> None:
     assert (model(photo, centred_flash_frame(2, 64, 64, 40.0))[:, :3] - maps[:, :3]).abs().max() > 1e-3
 
 
+def test_the_metallic_gain_keeps_the_start_and_scales_the_logits_step() -> None:
+    photo = _photo()
+    plain, fast = AnchoredUNet(width=4, depth=3), AnchoredUNet(width=4, depth=3, metallic_gain=10.0)
+    torch.testing.assert_close(fast(photo)[:, 7], plain(photo)[:, 7])  # both start at sigmoid(−5)
+    for model in (plain, fast):
+        with torch.no_grad():
+            model.material.head_bias[6] += 0.1  # one step's worth of change to the head
+    with torch.no_grad():
+        logit = torch.logit(torch.stack([plain(photo)[:, 7].mean(), fast(photo)[:, 7].mean()]).double())
+    assert logit[0] == pytest.approx(METALLIC_BIAS + 0.1, abs=1e-4)
+    assert logit[1] == pytest.approx(METALLIC_BIAS + 1.0, abs=1e-4)
+
+
 def test_a_metal_takes_the_free_metal_colour_not_the_delit_photo() -> None:
     model = AnchoredUNet(width=4, depth=3)
     with torch.no_grad():
@@ -95,7 +108,7 @@ def test_without_shading_the_surface_decoder_ignores_the_albedo_path() -> None:
 
 def test_sizes_configs_and_weights_round_trip(tmp_path: Path) -> None:
     torch.manual_seed(2)
-    model = AnchoredUNet(width=4, depth=3, shading="gradient", anchor_gain=1.5)
+    model = AnchoredUNet(width=4, depth=3, shading="gradient", anchor_gain=1.5, metallic_gain=8.0)
     with torch.no_grad():
         for parameter in model.parameters():
             parameter.add_(0.05 * torch.randn_like(parameter))
@@ -116,6 +129,7 @@ def test_sizes_configs_and_weights_round_trip(tmp_path: Path) -> None:
         "shading": "gradient",
         "anchored": True,
         "anchor_gain": 1.5,
+        "metallic_gain": 8.0,
     }
     photo = _photo()
     torch.testing.assert_close(loaded(photo), model(photo))
