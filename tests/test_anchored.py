@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from brdfgan.core.delit import delit_photo, flat_flash_render
+from brdfgan.core.filtering import binomial_blur
 from brdfgan.core.flash_geometry import centred_flash_frame, crop_flash_frame
 from brdfgan.core.render import FlashCapture, render_flash
 from brdfgan.core.svbrdf import linear_to_srgb, srgb_to_linear, validate_maps
@@ -52,6 +53,22 @@ def test_an_untrained_network_returns_the_delit_photo() -> None:
     assert torch.allclose(maps[:, 6], torch.tensor(0.5)) and torch.allclose(maps[:, 7], metallic)
     # The anchor follows the flash frame: another hotspot gives another base colour.
     assert (model(photo, centred_flash_frame(2, 64, 64, 40.0))[:, :3] - maps[:, :3]).abs().max() > 1e-3
+
+
+def test_the_blurred_anchor_is_the_binomially_blurred_delit_photo_without_its_checkerboard() -> None:
+    photo = _photo()
+    frame = centred_flash_frame(2, 64, 64, 40.0)
+    maps = AnchoredUNet(width=4, depth=3, anchor_blur=True)(photo, frame)
+    anchor = binomial_blur(DEFAULT_ANCHOR_GAIN * delit_photo(photo, frame)).clamp(0.0, 1.0)
+    expected = torch.lerp(anchor, torch.full_like(anchor, 0.5), torch.sigmoid(torch.tensor(METALLIC_BIAS)))
+    torch.testing.assert_close(maps[:, :3], linear_to_srgb(expected), atol=1e-5, rtol=1e-5)
+    # A checkerboard on the photo does not reach the base colour.
+    checker = (-1.0) ** torch.arange(64).view(1, 1, 1, 64) * (-1.0) ** torch.arange(64).view(1, 1, 64, 1)
+    patterned = (photo * (1.0 + 0.2 * checker)).clamp(0.0, 1.0)
+    base = AnchoredUNet(width=4, depth=3, anchor_blur=True)(patterned, frame)[:, :3]
+    plain = AnchoredUNet(width=4, depth=3)(patterned, frame)[:, :3]
+    period_2 = lambda image: (image * checker).mean().abs()  # noqa: E731
+    assert period_2(base) < 0.05 * period_2(plain)
 
 
 def test_the_metallic_gain_keeps_the_start_and_scales_the_logits_step() -> None:
@@ -130,6 +147,7 @@ def test_sizes_configs_and_weights_round_trip(tmp_path: Path) -> None:
         "anchored": True,
         "anchor_gain": 1.5,
         "metallic_gain": 8.0,
+        "anchor_blur": False,
     }
     photo = _photo()
     torch.testing.assert_close(loaded(photo), model(photo))

@@ -1,4 +1,4 @@
-"""brdfgan.core.filtering: the shared Gaussian blur."""
+"""brdfgan.core.filtering: the shared Gaussian and binomial blurs."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from brdfgan.core.filtering import gaussian_blur
+from brdfgan.core.filtering import binomial_blur, gaussian_blur
 
 
 def test_reflect_keeps_a_constant_and_zeros_darkens_the_border() -> None:
@@ -29,3 +29,14 @@ def test_an_impulse_spreads_into_the_normal_density() -> None:
     assert ratio == pytest.approx(math.exp(-9 / (2 * sigma**2)), rel=1e-4)
     with pytest.raises(ValueError, match="sigma"):
         gaussian_blur(image, 0.0)
+
+
+def test_the_binomial_blur_flattens_every_period_2_pattern_and_keeps_smooth_images() -> None:
+    rows, columns = torch.meshgrid(torch.arange(9.0), torch.arange(12.0), indexing="ij")
+    for pattern in ((-1) ** columns, (-1) ** rows, (-1) ** (rows + columns)):
+        image = (0.5 + 0.25 * pattern).expand(2, 3, 9, 12)
+        torch.testing.assert_close(binomial_blur(image), torch.full_like(image, 0.5))  # borders too
+    ramp = (0.1 * rows + 0.05 * columns).expand(1, 1, 9, 12)  # linear: kept inside the borders
+    torch.testing.assert_close(binomial_blur(ramp)[..., 1:-1, 1:-1], ramp[..., 1:-1, 1:-1])
+    with pytest.raises(ValueError, match="H, W >= 2"):
+        binomial_blur(torch.zeros(1, 3, 1, 8))

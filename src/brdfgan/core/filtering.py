@@ -1,4 +1,5 @@
-"""Image filters shared by the inference stages (the hotspot detector, test-time refinement)."""
+"""Image filters shared by the inference stages (the hotspot detector, test-time refinement) and
+the photo-anchored generator (its anchor, :mod:`brdfgan.models.anchored`)."""
 
 from __future__ import annotations
 
@@ -39,3 +40,23 @@ def gaussian_blur(image: Tensor, sigma: float, border: Border = "zeros") -> Tens
     columns = kernel.view(1, 1, -1, 1).expand(channels, 1, -1, 1)
     image = F.conv2d(F.pad(image, (radius, radius, 0, 0), mode=mode), rows, groups=channels)
     return F.conv2d(F.pad(image, (0, 0, radius, radius), mode=mode), columns, groups=channels)
+
+
+def binomial_blur(image: Tensor) -> Tensor:
+    """The 3 × 3 binomial filter ``[1, 2, 1] ⊗ [1, 2, 1] / 16`` of every channel, mirrored at the
+    edges: the smallest blur whose response is zero at the period-2 frequencies (a checkerboard,
+    or alternating rows or columns, becomes flat, also at the borders) and ~0.8 at a quarter of
+    the sampling rate.
+
+    Shape:
+        - image: ``(B, C, H, W)``, H and W >= 2
+        - output: same
+    """
+    if image.ndim != 4 or min(image.shape[-2:]) < 2:
+        raise ValueError(f"expected (B, C, H, W) images with H, W >= 2, got {tuple(image.shape)}")
+    channels = image.shape[1]
+    kernel = torch.tensor([0.25, 0.5, 0.25], dtype=image.dtype, device=image.device)
+    rows = kernel.view(1, 1, 1, 3).expand(channels, 1, 1, 3)
+    columns = kernel.view(1, 1, 3, 1).expand(channels, 1, 3, 1)
+    image = F.conv2d(F.pad(image, (1, 1, 0, 0), mode="reflect"), rows, groups=channels)
+    return F.conv2d(F.pad(image, (0, 0, 1, 1), mode="reflect"), columns, groups=channels)
