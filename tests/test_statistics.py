@@ -289,3 +289,24 @@ def test_source_subsets_splits_a_split_into_its_scanned_and_procedural_photos(
     assert all(str(s.meta["family"]).startswith("scanned/") for s in parts["scans"])
     assert not any(str(s.meta["family"]).startswith("scanned/") for s in parts["procedural"])
     assert not list(mixed_dataset.parent.glob(".*partial"))  # no temporary folder left
+
+
+def test_source_subsets_writes_a_dataset_with_a_chosen_share_of_scans(
+    mixed_dataset: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from scripts import source_subsets
+
+    from brdfgan.data.shards import iter_shard, list_shards
+
+    monkeypatch.setattr(
+        "sys.argv", ["source_subsets", str(mixed_dataset), "--split", "train", "--scan-share", "0.6"]
+    )
+    source_subsets.main()
+    out = mixed_dataset.with_name("mixed_scans60")
+    train = [s for shard in list_shards(out, "train") for s in iter_shard(shard)]
+    scanned = [s for s in train if str(s.meta["family"]).startswith("scanned/")]
+    assert len(scanned) == 3 and len(train) == 5  # every scan, and 2 of the 8 procedural photos
+    assert (out / "val").is_symlink() and (out / "val").resolve() == (mixed_dataset / "val").resolve()
+    monkeypatch.setattr("sys.argv", ["source_subsets", str(mixed_dataset), "--scan-share", "1.5"])
+    with pytest.raises(SystemExit, match=r"--scan-share 1\.5"):
+        source_subsets.main()
