@@ -219,10 +219,8 @@ class AnchoredUNet(nn.Module):
         anchor = self.log_anchor_gain.exp().to(photo.dtype) * delit_photo(photo, frame)
         if self.anchor_blur:
             anchor = binomial_blur(anchor)
-        x = torch.cat(
-            [(photo + LOG_EPS).log(), (anchor + LOG_EPS).log(), flash_side_channels(frame, height, width)],
-            dim=1,
-        )
+        log_photo = (photo + LOG_EPS).log()  # an input, and the shading image's numerator
+        x = torch.cat([log_photo, (anchor + LOG_EPS).log(), flash_side_channels(frame, height, width)], dim=1)
         skips = []
         for level, block in enumerate(self.encoder):
             x = block(x if level == 0 else F.avg_pool2d(x, 2))
@@ -247,7 +245,7 @@ class AnchoredUNet(nn.Module):
             with torch.set_grad_enabled(torch.is_grad_enabled() and self.shading == "gradient"):
                 provisional = torch.sigmoid(material[:, 7:8])
                 flat = flat_flash_render(basecolor, provisional, metallic, frame)
-                shading = (photo + LOG_EPS).log() - (flat + LOG_EPS).log()
+                shading = log_photo - (flat + LOG_EPS).log()
             extras = [
                 shading if level == 0 else F.avg_pool2d(shading, 2**level) for level in range(self.depth)
             ]
