@@ -156,7 +156,9 @@ def test_without_shading_the_surface_decoder_ignores_the_albedo_path() -> None:
 
 def test_sizes_configs_and_weights_round_trip(tmp_path: Path) -> None:
     torch.manual_seed(2)
-    model = AnchoredUNet(width=4, depth=3, shading="gradient", anchor_gain=1.5, head_gain=8.0)
+    model = AnchoredUNet(
+        width=4, depth=3, shading="gradient", anchor_gain=1.5, head_gain=8.0, global_features=True
+    )
     with torch.no_grad():
         for parameter in model.parameters():
             parameter.add_(0.05 * torch.randn_like(parameter))
@@ -179,6 +181,7 @@ def test_sizes_configs_and_weights_round_trip(tmp_path: Path) -> None:
         "anchor_gain": 1.5,
         "head_gain": 8.0,
         "anchor_blur": False,
+        "global_features": True,
     }
     photo = _photo()
     torch.testing.assert_close(loaded(photo), model(photo))

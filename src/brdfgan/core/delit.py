@@ -71,24 +71,42 @@ def flat_flash_render(basecolor_linear: Tensor, roughness: Tensor, metallic: Ten
     return math.pi * brdf * (1.0 + offsets.square().sum(dim=1, keepdim=True)).pow(-1.5)
 
 
-def clip_hotspot(
+def hotspot_cap(
     image: Tensor, factor: float = HOTSPOT_CLIP_FACTOR, quantile: float = HOTSPOT_CLIP_QUANTILE
 ) -> Tensor:
-    """Scale down every pixel whose luminance exceeds ``factor`` × the image's ``quantile`` of
-    luminance to that level, keeping its chromaticity (a clipped highlight stays the albedo's
-    hue rather than turning white).
+    """``factor`` × the image's ``quantile`` of luminance: the level :func:`clip_hotspot` caps at.
 
     Shape:
         - image: ``(B, 3, H, W)`` linear RGB, non-negative
-        - output: same
+        - output: ``(B,)``
     """
     if image.ndim != 4 or image.shape[1] != 3:
         raise ValueError(f"expected a (B, 3, H, W) image, got {tuple(image.shape)}")
     if not factor > 0 or not 0.0 < quantile <= 1.0:
         raise ValueError(f"need factor > 0 and 0 < quantile <= 1, got {factor=}, {quantile=}")
+    return factor * torch.quantile(luminance(image).flatten(1).float(), quantile, dim=1).to(image.dtype)
+
+
+def clip_hotspot(
+    image: Tensor,
+    factor: float = HOTSPOT_CLIP_FACTOR,
+    quantile: float = HOTSPOT_CLIP_QUANTILE,
+    *,
+    cap: Tensor | None = None,
+) -> Tensor:
+    """Scale down every pixel whose luminance exceeds ``factor`` × the image's ``quantile`` of
+    luminance (or a given ``cap``: a tile of a photo uses the whole photo's) to that level,
+    keeping its chromaticity (a clipped highlight stays the albedo's hue rather than turning white).
+
+    Shape:
+        - image: ``(B, 3, H, W)`` linear RGB, non-negative
+        - cap: ``(B,)`` or ``(B, 1)``, optional
+        - output: same as image
+    """
+    if cap is None:
+        cap = hotspot_cap(image, factor, quantile)
     lum = luminance(image)  # (B, 1, H, W)
-    cap = factor * torch.quantile(lum.flatten(1).float(), quantile, dim=1).to(image.dtype)
-    cap = cap.view(-1, 1, 1, 1)
+    cap = cap.to(image.dtype).reshape(-1, 1, 1, 1)
     scale = torch.where(lum > cap, cap / lum.clamp_min(torch.finfo(image.dtype).tiny), torch.ones_like(lum))
     return image * scale
 
@@ -118,4 +136,5 @@ __all__ = [
     "delit_photo",
     "flat_flash_falloff",
     "flat_flash_render",
+    "hotspot_cap",
 ]

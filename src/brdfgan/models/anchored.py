@@ -45,7 +45,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from brdfgan.core.delit import delit_photo, flat_flash_render
+from brdfgan.core.delit import clip_hotspot, delit_photo, flat_flash_render
 from brdfgan.core.filtering import binomial_blur
 from brdfgan.core.flash_geometry import (
     DEFAULT_FOV_DEG,
@@ -55,6 +55,7 @@ from brdfgan.core.flash_geometry import (
     flash_side_channels,
 )
 from brdfgan.core.svbrdf import join_maps, linear_to_srgb, normalize_normal
+from brdfgan.models.image_statistics import HotspotCap, ImageMoments
 
 Shading = Literal["detached", "gradient", "none"]
 SHADINGS: tuple[str, ...] = ("detached", "gradient", "none")
@@ -72,6 +73,7 @@ METALLIC_BIAS = -5.0
 MATERIAL_OUTPUTS = 11
 SURFACE_OUTPUTS = 3  # slope x, slope y, roughness logit
 INPUT_CHANNELS = 3 + 3 + FLASH_CHANNELS
+GLOBAL_HIDDEN = 64  # the global track's hidden width
 
 
 def _conv_block(in_channels: int, out_channels: int) -> nn.Sequential:
@@ -139,6 +141,13 @@ class AnchoredUNet(nn.Module):
             phone photo's noise, demosaicing and JPEG put ~100× the truth's power at the period-2
             frequencies into the de-lit photo (the evaluator's checkerboard ratio), which an
             anchored base colour would copy; the blur removes exactly those frequencies.
+        global_features: a global track: the per-image mean and log standard deviation of every
+            encoder level's first convolution (before its InstanceNorm removes them;
+            :class:`~brdfgan.models.image_moments.ImageMoments`, frozen in tiles like the norms)
+            go through a small MLP whose zero-initialised output is added to both heads' outputs:
+            a per-image level for every map (roughness, metal share, exposure), which a network of
+            affine-free instance norms cannot otherwise see but through spatial patterns
+            (Deschaintre et al. 2018's reason for their track).
 
     Shape:
         - photo: ``(B, 3, H, W)`` linear LDR in [0, 1]
@@ -155,6 +164,7 @@ class AnchoredUNet(nn.Module):
         anchor_gain: float = DEFAULT_ANCHOR_GAIN,
         head_gain: float = 1.0,
         anchor_blur: bool = False,
+        global_features: bool = False,
     ) -> None:
         super().__init__()
         if width < 1 or depth < 1:
@@ -171,6 +181,7 @@ class AnchoredUNet(nn.Module):
         self.anchor_gain = float(anchor_gain)
         self.head_gain = float(head_gain)
         self.anchor_blur = bool(anchor_blur)
+        self.global_features = bool(global_features)
         widths = [width * 2 ** min(level, 3) for level in range(depth + 1)]
         self.encoder = nn.ModuleList(
             _conv_block(INPUT_CHANNELS if level == 0 else widths[level - 1], widths[level])
@@ -181,6 +192,16 @@ class AnchoredUNet(nn.Module):
         with torch.no_grad():
             self.material.head_bias[6] = METALLIC_BIAS / self.head_gain
         self.log_anchor_gain = nn.Parameter(torch.tensor(math.log(anchor_gain)))
+        self.hotspot_cap = HotspotCap()  # a module, so that tiles share the whole photo's cap
+        self.moments = nn.ModuleList(ImageMoments() for _ in widths) if global_features else None
+        self.global_track: nn.Sequential | None = None
+        if global_features:
+            output = nn.Linear(GLOBAL_HIDDEN, MATERIAL_OUTPUTS + SURFACE_OUTPUTS)
+            nn.init.zeros_(output.weight)
+            nn.init.zeros_(output.bias)
+            self.global_track = nn.Sequential(
+                nn.Linear(2 * sum(widths), GLOBAL_HIDDEN), nn.LeakyReLU(0.2, inplace=True), output
+            )
 
     def config(self) -> dict[str, Any]:
         """The constructor arguments (stored with the weights)."""
@@ -192,6 +213,7 @@ class AnchoredUNet(nn.Module):
             "anchor_gain": self.anchor_gain,
             "head_gain": self.head_gain,
             "anchor_blur": self.anchor_blur,
+            "global_features": self.global_features,
         }
 
     @property
@@ -219,17 +241,30 @@ class AnchoredUNet(nn.Module):
         check_flash_frame(flash, batch)
         frame = flash.to(device=photo.device, dtype=photo.dtype)
         photo = photo.clamp(0.0, 1.0)
-        anchor = self.log_anchor_gain.exp().to(photo.dtype) * delit_photo(photo, frame)
+        delit = delit_photo(photo, frame, clip=False)
+        anchor = self.log_anchor_gain.exp().to(photo.dtype) * clip_hotspot(delit, cap=self.hotspot_cap(delit))
         if self.anchor_blur:
             anchor = binomial_blur(anchor)
         log_photo = (photo + LOG_EPS).log()  # an input, and the shading image's numerator
         x = torch.cat([log_photo, (anchor + LOG_EPS).log(), flash_side_channels(frame, height, width)], dim=1)
-        skips = []
+        skips, moments = [], []
         for level, block in enumerate(self.encoder):
-            x = block(x if level == 0 else F.avg_pool2d(x, 2))
+            x = x if level == 0 else F.avg_pool2d(x, 2)
+            if self.moments is not None:
+                x = block[0](x)  # the first convolution: its moments, before the norm removes them
+                moments.append(self.moments[level](x))
+                x = block[1:](x)
+            else:
+                x = block(x)
             skips.append(x)
+        levels = None  # per image and output channel: the global track's addition to the heads
+        if self.global_track is not None:
+            levels = self.global_track(torch.cat(moments, dim=1))[:, :, None, None]
 
-        material = self.head_gain * self.material(skips)
+        material = self.material(skips)
+        if levels is not None:
+            material = material + levels[:, :MATERIAL_OUTPUTS]
+        material = self.head_gain * material
         metallic = torch.sigmoid(material[:, 6:7])
         if self.anchored:
             log_gain = material[:, 0:3].clamp(-LOG_GAIN_LIMIT, LOG_GAIN_LIMIT)
@@ -252,7 +287,10 @@ class AnchoredUNet(nn.Module):
             extras = [
                 shading if level == 0 else F.avg_pool2d(shading, 2**level) for level in range(self.depth)
             ]
-        surface = self.head_gain * self.surface(skips, extras)
+        surface = self.surface(skips, extras)
+        if levels is not None:
+            surface = surface + levels[:, MATERIAL_OUTPUTS:]
+        surface = self.head_gain * surface
         normal = normalize_normal(torch.cat([surface[:, 0:2], torch.ones_like(surface[:, 2:3])], dim=1))
         return join_maps(linear_to_srgb(basecolor), normal, torch.sigmoid(surface[:, 2:3]), metallic)
 

@@ -33,11 +33,15 @@ paper architecture, whose 26 chained norms compound the deviation; at 256 the me
 the default ``stats_resolution`` of 1024: photos up to 1024 px on their longer side get exact
 statistics.
 
-**Limitation: other global operations.** Only ``InstanceNorm2d`` is frozen. A model with other
-image-wide operations — :class:`brdfgan.models.deschaintre2018.Deschaintre2018`'s global track reads
-per-level feature means — sees each tile's own means in tiled mode, so its tiles can disagree. Tiled
-inference still runs on it (and its affine instance norms are frozen), but for seam-free results run
-such a model directly (raise ``max_direct_pixels``) or at a resolution that fits.
+**Image statistics.** An :class:`~brdfgan.models.image_statistics.ImageStatistic` module (a per-image
+vector: the de-lit anchor's hotspot cap, a feature map's moments) has its output recorded in the
+same pass and replayed in every tile: every tile gets the whole photo's values.
+
+**Limitation: other global operations.** Only ``InstanceNorm2d`` and ``ImageStatistic`` are frozen. A
+model with other image-wide operations — :class:`brdfgan.models.deschaintre2018.Deschaintre2018`'s
+global track reads per-level feature means — sees each tile's own means in tiled mode, so its tiles
+can disagree. Tiled inference still runs on it (and its affine instance norms are frozen), but for
+seam-free results run such a model directly (raise ``max_direct_pixels``) or at a resolution that fits.
 
 **Blending.** Tiles overlap by ``overlap = 2 * margin + ramp`` pixels. Each tile is weighted by a
 separable window (:func:`blend_window`): 0 in a ``margin`` band at every inner tile edge, where the
@@ -69,11 +73,13 @@ from brdfgan.core.flash_geometry import (
 from brdfgan.core.svbrdf import NORMAL, NUM_CHANNELS, normalize_normal
 from brdfgan.errors import UserError
 from brdfgan.models.heads import PHOTO_CHANNELS
+from brdfgan.models.image_statistics import ImageStatistic
 
 ProgressCallback = Callable[[int, int], None]
 # Per InstanceNorm2d (by module name): one (mean, biased variance) pair of shape (C,) per call in a
-# forward pass, in call order (a module used twice in a forward gets two entries).
-NormStatistics = dict[str, list[tuple[Tensor, Tensor]]]
+# forward pass, in call order (a module used twice in a forward gets two entries); per
+# ImageStatistic: its output (1, K), one 1-tuple per call.
+NormStatistics = dict[str, list[tuple[Tensor, ...]]]
 
 
 class TilingError(UserError):
@@ -164,7 +170,7 @@ def _uses_input_statistics(module: nn.Module) -> bool:
 
 def norm_statistics(model: nn.Module, photo: Tensor, flash: Tensor | None = None) -> NormStatistics:
     """Run ``model`` once on ``photo`` (with its flash frame ``flash``, when given) and record the
-    input statistics of every ``InstanceNorm2d``.
+    input statistics of every ``InstanceNorm2d`` and the output of every ``ImageStatistic``.
 
     The forward runs under ``torch.inference_mode()``; its output is discarded. Hooks are removed
     afterwards, also on exceptions.
@@ -172,7 +178,7 @@ def norm_statistics(model: nn.Module, photo: Tensor, flash: Tensor | None = None
     Shape:
         - photo: ``(1, C, H, W)``, a size the model accepts
         - output: per module name, a list with one ``(mean, var)`` pair of shape ``(C_norm,)`` per call
-          (biased variance, as the norm uses)
+          (biased variance, as the norm uses), or one ``(value,)`` of shape ``(1, K)`` per call
     """
     if photo.ndim != 4 or photo.shape[0] != 1:
         raise ValueError(f"norm_statistics expects one photo (1, C, H, W), got {tuple(photo.shape)}")
@@ -188,10 +194,18 @@ def norm_statistics(model: nn.Module, photo: Tensor, flash: Tensor | None = None
 
         return hook
 
+    def record_output(name: str) -> Callable[[nn.Module, tuple[Tensor, ...], Tensor], None]:
+        def hook(_module: nn.Module, _args: tuple[Tensor, ...], output: Tensor) -> None:
+            stats.setdefault(name, []).append((output.detach().clone(),))
+
+        return hook
+
     try:
         for name, module in model.named_modules():
             if _uses_input_statistics(module):
                 handles.append(module.register_forward_pre_hook(record(name)))
+            elif isinstance(module, ImageStatistic):
+                handles.append(module.register_forward_hook(record_output(name)))
         with torch.inference_mode():
             model(photo, flash)
     finally:
@@ -200,7 +214,7 @@ def norm_statistics(model: nn.Module, photo: Tensor, flash: Tensor | None = None
     return stats
 
 
-def _frozen_forward(module: nn.InstanceNorm2d, entries: list[tuple[Tensor, Tensor]]) -> Callable:
+def _frozen_forward(module: nn.InstanceNorm2d, entries: list[tuple[Tensor, ...]]) -> Callable:
     calls = 0
 
     def forward(x: Tensor) -> Tensor:
@@ -220,6 +234,18 @@ def _frozen_forward(module: nn.InstanceNorm2d, entries: list[tuple[Tensor, Tenso
             eps=module.eps,
         )
         return out if x.ndim == 4 else out.squeeze(0)
+
+    return forward
+
+
+def _replayed_output(entries: list[tuple[Tensor, ...]]) -> Callable:
+    calls = 0
+
+    def forward(x: Tensor) -> Tensor:
+        nonlocal calls
+        (value,) = entries[calls % len(entries)]  # in call order, as for the norms
+        calls += 1
+        return value.to(device=x.device, dtype=x.dtype).expand(x.shape[0], -1)
 
     return forward
 
@@ -246,12 +272,17 @@ def frozen_instance_norm(model: nn.Module, stats: NormStatistics) -> Iterator[No
     try:
         for name, entries in stats.items():
             module = modules[name]
-            if not isinstance(module, nn.InstanceNorm2d) or not entries:
-                raise ValueError(f"statistics for {name!r} do not belong to an InstanceNorm2d")
+            if not entries or not isinstance(module, nn.InstanceNorm2d | ImageStatistic):
+                raise ValueError(f"statistics for {name!r} belong to no InstanceNorm2d or ImageStatistic")
             # An instance attribute shadows the class's forward; remember any existing one.
             saved.append((module, module.__dict__.get("forward", _MISSING)))
+            replayed = (
+                _replayed_output(entries)
+                if isinstance(module, ImageStatistic)
+                else _frozen_forward(module, entries)
+            )
             # Replacing a method on one instance is the point here (and what mypy warns about).
-            module.forward = _frozen_forward(module, entries)  # type: ignore[method-assign]
+            module.forward = replayed  # type: ignore[method-assign]
         yield
     finally:
         for module, previous in reversed(saved):
