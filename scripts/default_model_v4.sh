@@ -20,13 +20,14 @@ BUDGET_S=480  # training seconds per comparison run
 # at this length (docs/default_model.md keeps the first table, from before the gain, and says why
 # its width, crop, scan-share and learning-rate rows were not rerun).
 declare -A STEP_S=([A_base]=0.73 [B_input_only]=0.73 [C_no_shading]=0.66 [D_gradient]=0.75
-                   [E_adversarial]=0.81)
+                   [E_adversarial]=0.81 [G_global]=0.74)
 declare -A VARIANT=(
   [A_base]=""
   [B_input_only]="model.generator.anchored=false"
   [C_no_shading]="model.generator.shading=none"
   [D_gradient]="model.generator.shading=gradient"
   [E_adversarial]="loss=full"
+  [G_global]="model.generator.global_features=true"
 )
 
 resume() {  # the checkpoint to resume a run folder from, if any

@@ -29,6 +29,13 @@ but not the photo's content (hue lost, detail blurred, a period-2 checkerboard, 
   the provisional roughness then keeps its start value, 0.5), ``"gradient"``, or ``"none"`` (not
   read).
 
+- **A global track** (``global_features``): affine-free instance norms remove every feature map's
+  per-image level, so the network could see a whole surface's roughness or metal share only
+  through spatial patterns. The per-image mean and log standard deviation of every encoder level's
+  first convolution (:class:`~brdfgan.models.image_statistics.ImageMoments`) go through a small MLP
+  whose zero-initialised output is added to both heads (Deschaintre et al. 2018's reason for their
+  track; tiling replays the whole photo's moments in every tile, as it does the norms' statistics).
+
 Inputs per pixel: ``log`` of the photo and of the anchor ``g · d``, and the four flash side
 channels (:func:`~brdfgan.core.flash_geometry.flash_side_channels`). Normalisation is
 ``InstanceNorm2d`` (``affine=False``), so whole-photo inference tiles with frozen statistics as
