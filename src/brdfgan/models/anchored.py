@@ -46,7 +46,7 @@ for the other generators (:mod:`brdfgan.inference.model.tiling`). The normal hea
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 import torch
 import torch.nn.functional as F
@@ -258,9 +258,10 @@ class AnchoredUNet(nn.Module):
         for level, block in enumerate(self.encoder):
             x = x if level == 0 else F.avg_pool2d(x, 2)
             if self.moments is not None:
-                x = block[0](x)  # the first convolution: its moments, before the norm removes them
+                layers = cast(nn.Sequential, block)  # built by _conv_block
+                x = layers[0](x)  # the first convolution: its moments, before the norm removes them
                 moments.append(self.moments[level](x))
-                x = block[1:](x)
+                x = layers[1:](x)
             else:
                 x = block(x)
             skips.append(x)
