@@ -27,7 +27,7 @@ declare -A VARIANT=(
   [C_no_shading]="model.generator.shading=none"
   [D_gradient]="model.generator.shading=gradient"
   [E_adversarial]="loss=full"
-  [G_global]="model.generator.global_features=true"
+  [G_global]="model.generator.global_features=true"  # (later in the command line: wins over =false)
 )
 
 resume() {  # the checkpoint to resume a run folder from, if any
@@ -41,8 +41,10 @@ compare() {
     # loss=full takes two optimizer steps (D, G) per batch; the schedule counts generator steps.
     local optimizer_steps=$steps
     [ "$name" = E_adversarial ] && steps=$((steps / 2)) && optimizer_steps=$((2 * steps))
+    # The comparison's base is the recipe without the global track (G adds it; it won and is on in
+    # the config now).
     # shellcheck disable=SC2086
-    $PY train.py experiment=anchored ${VARIANT[$name]} trainer.max_steps=$optimizer_steps \
+    $PY train.py experiment=anchored model.generator.global_features=false ${VARIANT[$name]} trainer.max_steps=$optimizer_steps \
       model.total_steps=$steps trainer.max_epochs=1000 test=false seed=0 \
       hydra.run.dir=$OUT/compare/$name $(resume $OUT/compare/$name)
   done
@@ -53,7 +55,7 @@ compare() {
   done
 }
 
-final() {  # the chosen recipe (conf/experiment/anchored.yaml), two seeds, 5 200 batches each, ~65 min each
+final() {  # the chosen recipe (conf/experiment/anchored.yaml), two seeds, 4 800 batches each, ~76 min each
   for seed in 0 1; do
     $PY train.py experiment=anchored test=false seed=$seed data.seed=$seed hydra.run.dir=$OUT/seed$seed \
       $(resume $OUT/seed$seed)
