@@ -4,7 +4,8 @@
 # procedural and scan test sets and on both OOD variants beside v3 and the trivial references,
 # the export into the package. One training at a time on the two threads.
 #
-#   scripts/default_model_v4.sh [compare|final|evaluate|export_weights]...   (default: all, in order)
+#   scripts/default_model_v4.sh [compare|final|evaluate|refine|check_refine|export_weights]...
+#   (default: compare final evaluate export_weights, in order)
 #
 # Long trainings resume: rerunning a stage continues each unfinished run from its last.ckpt.
 set -euo pipefail
@@ -63,7 +64,9 @@ final() {  # the chosen recipe (conf/experiment/anchored.yaml), two seeds, 4 800
 }
 
 evaluate() {  # procedural and scan test sets, both OOD variants: v4 (two seeds), v3, the references
-  local models="v4: $OUT/seed0/checkpoints/last.ckpt, v4_seed1: $OUT/seed1/checkpoints/last.ckpt, v3: $V3"
+  local models="v4: $OUT/seed0/checkpoints/last.ckpt, v3: $V3"
+  # seed 1 when it has finished (the first evaluation ran before it had)
+  [ -f $OUT/seed1/checkpoints/last.ckpt ] && models="$models, v4_seed1: $OUT/seed1/checkpoints/last.ckpt"
   models="$models, mean_maps: $REF/mean_maps.safetensors, photo_basecolor: $REF/photo_basecolor.safetensors"
   models="$models, de_lit: $REF/de_lit.safetensors"
   # Grid samples fixed before v4 was evaluated on the test split: the first crop of the first
@@ -79,6 +82,36 @@ evaluate() {  # procedural and scan test sets, both OOD variants: v4 (two seeds)
   $PY generate.py dataset_spec=ood_close progress=false
   $PY evaluate.py data=ood hydra.run.dir=$OUT/eval_ood_standard "ckpt={$models}"
   $PY evaluate.py data=ood_close hydra.run.dir=$OUT/eval_ood_close "ckpt={$models}"
+}
+
+refine() {  # test-time refinement re-chosen for v4 on the validation split's two parts
+  # (the rule: the largest novel-light gain that raises no map's RMSE by more than 5 %), then the
+  # chosen variant checked on the scan test set and both OOD variants.
+  local v4=$OUT/seed0/checkpoints/last.ckpt
+  declare -A REFINE=(
+    [default]="refine_steps=[20,60]"
+    [no_roughness]="refine_steps=[60] refine.fit_roughness=false refine.learning_rate=0.05"
+    [roughness_nuisance]="refine_steps=[60] refine.roughness_nuisance=true refine.learning_rate=0.05"
+  )
+  for variant in "${!REFINE[@]}"; do
+    for part in procedural scans; do
+      # shellcheck disable=SC2086
+      $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_val_$part data.prepare=null \
+        grid_samples=0 hydra.run.dir=$OUT/refine/${variant}_val_$part "ckpt={v4: $v4}" ${REFINE[$variant]}
+    done
+  done
+}
+
+check_refine() {  # REFINE_CHOSEN="<evaluate.py overrides>" on the scan test set and both OOD variants
+  : "${REFINE_CHOSEN:?set REFINE_CHOSEN to the evaluate.py overrides of the chosen variant}"
+  local v4=$OUT/seed0/checkpoints/last.ckpt
+  # shellcheck disable=SC2086
+  $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_test_scans data.prepare=null \
+    grid_samples=0 hydra.run.dir=$OUT/refine/chosen_test_scans "ckpt={v4: $v4}" $REFINE_CHOSEN
+  for variant in ood ood_close; do
+    # shellcheck disable=SC2086
+    $PY evaluate.py data=$variant grid_samples=0 hydra.run.dir=$OUT/refine/chosen_$variant "ckpt={v4: $v4}" $REFINE_CHOSEN
+  done
 }
 
 export_weights() {
