@@ -150,7 +150,7 @@ class AnchoredUNet(nn.Module):
             anchored base colour would copy; the blur removes exactly those frequencies.
         global_features: a global track: the per-image mean and log standard deviation of every
             encoder level's first convolution (before its InstanceNorm removes them;
-            :class:`~brdfgan.models.image_moments.ImageMoments`, frozen in tiles like the norms)
+            :class:`~brdfgan.models.image_statistics.ImageMoments`, frozen in tiles like the norms)
             go through a small MLP whose zero-initialised output is added to both heads' outputs:
             a per-image level for every map (roughness, metal share, exposure), which a network of
             affine-free instance norms cannot otherwise see but through spatial patterns
