@@ -68,7 +68,7 @@ sys.exit(main(sys.argv[2:]))
 """
 
 
-def predict(out: Path, *extra: str, photos: list[Path] = PHOTOS) -> list[str]:
+def predict(out: Path, *extra: str, photos: list[Path] = PHOTOS, quiet: bool = True) -> list[str]:
     return [
         BRDFGAN,
         "predict",
@@ -77,7 +77,7 @@ def predict(out: Path, *extra: str, photos: list[Path] = PHOTOS) -> list[str]:
         str(out),
         "--resolution",
         "128",
-        "--quiet",
+        *(["--quiet"] if quiet else []),
         *extra,
     ]
 
@@ -99,9 +99,9 @@ def complete(folder: Path) -> bool:
     return all((folder / name).is_file() for name in document["files"])
 
 
-def finish(out: Path, *extra: str) -> str:
+def finish(out: Path, *extra: str, quiet: bool = True) -> str:
     """Rerun into the same folder: exit 0, every result complete, nothing hidden left."""
-    result = run(predict(out, *extra))
+    result = run(predict(out, *extra, quiet=quiet))
     if result.returncode != 0:
         raise ScenarioFailed(f"rerun failed (exit {result.returncode}): {tail(result.stderr)}")
     leftovers = hidden_leftovers(out)
@@ -184,7 +184,8 @@ def kill_between_renames(workdir: Path) -> str:
     if (out / NAMES[0]).exists():
         raise ScenarioFailed("the kill did not land between the renames")
     retired = [p.name for p in out.glob(f".{NAMES[0]}.*.old")]
-    stderr = finish(out, "--no-preview")
+    # Not --quiet: the restore is a warning, and --quiet leaves errors only.
+    stderr = finish(out, "--no-preview", quiet=False)
     restored = [line for line in stderr.splitlines() if "restored the previous result" in line]
     if not retired or not restored:
         raise ScenarioFailed(f"no restore reported (retired: {retired}): {tail(stderr)}")
