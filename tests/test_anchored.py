@@ -253,3 +253,23 @@ def test_experiment_anchored_composes_the_model_data_and_v3_losses(tmp_path: Pat
     assert "normal_head" not in cfg.model.generator  # the v3 experiment's key would not fit it
     assert cfg.data.data_dir.endswith("procedural_and_scans") and cfg.data.sensor.auto_white_balance
     assert cfg.loss.metallic_loss == "bce" and not cfg.loss.switches.adversarial
+
+
+def test_the_global_track_sets_levels_but_never_tilts_the_normals() -> None:
+    # A surface's mean tilt is not an image-wide level: the track feeds every material output and
+    # the roughness, not the slopes (with them a trained network tilted every validation photo).
+    torch.manual_seed(4)
+    # Without the shading image, through which a changed base colour would reach the normals.
+    model = AnchoredUNet(width=4, depth=3, shading="none", global_features=True)
+    with torch.no_grad():
+        for head in (model.material.head, model.surface.head):
+            head.weight.normal_(0.0, 0.1)
+    photo = _photo()
+    before = model(photo)
+    assert model.global_track is not None
+    with torch.no_grad():
+        model.global_track[-1].bias.fill_(2.0)
+    after = model(photo)
+    torch.testing.assert_close(after[:, 3:6], before[:, 3:6])  # normals untouched
+    assert (after[:, 6] - before[:, 6]).abs().min() > 0.01  # roughness moved everywhere
+    assert (after[:, 7] - before[:, 7]).abs().min() > 1e-4  # metallic too
