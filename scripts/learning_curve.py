@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import os
 import sys
 from pathlib import Path
 
@@ -20,6 +19,8 @@ import matplotlib
 
 matplotlib.use("Agg")  # files only; no display on a server or in CI
 import matplotlib.pyplot as plt  # after choosing the backend
+
+from brdfgan.io.atomic import atomic_replace, write_text_atomic
 
 
 def validation_curve(run_dir: Path, metric: str) -> dict[int, float]:
@@ -66,10 +67,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"learning_curve: {error}", file=sys.stderr)
         return 2
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    table = args.out.with_suffix(".md")
-    partial = table.with_name(f".{table.name}.partial")
-    partial.write_text(markdown_table(curves, args.metric))
-    os.replace(partial, table)
+    table = write_text_atomic(args.out.with_suffix(".md"), markdown_table(curves, args.metric))
     figure, axes = plt.subplots(figsize=(6, 4), dpi=100)
     for name, curve in curves.items():
         steps = sorted(curve)
@@ -79,11 +77,9 @@ def main(argv: list[str] | None = None) -> int:
     axes.grid(alpha=0.3)
     axes.legend()
     figure.tight_layout()
-    image = args.out.with_suffix(".png")
-    partial_image = image.with_name(f".{image.stem}.partial.png")
-    figure.savefig(partial_image)
+    with atomic_replace(args.out.with_suffix(".png"), keep_suffix=True) as image:
+        figure.savefig(image)  # the format from the temporary name's .png suffix
     plt.close(figure)
-    os.replace(partial_image, image)
     print(table.read_text(), end="")
     return 0
 

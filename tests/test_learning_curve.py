@@ -36,6 +36,7 @@ def test_the_script_writes_a_table_and_a_plot_and_refuses_bad_runs(
     assert main([f"shading={run}", "--out", str(out)]) == 0
     assert "| 799 | 7.5 |" in out.with_suffix(".md").read_text()
     assert Image.open(out.with_suffix(".png")).size == (600, 400)
+    assert sorted(path.name for path in out.parent.iterdir()) == ["curve.md", "curve.png"]  # no temporaries
     assert main([f"none={tmp_path / 'missing'}", "--out", str(out)]) == 2
     assert main([f"shading={run}", "--metric", "val/nothing", "--out", str(out)]) == 2
     assert main([str(run), "--out", str(out)]) == 2
