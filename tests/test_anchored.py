@@ -72,6 +72,35 @@ def test_the_blurred_anchor_is_the_binomially_blurred_delit_photo_without_its_ch
     assert checkerboard[0] < 0.05 * checkerboard[1]
 
 
+def test_a_checkerboard_in_the_corrections_does_not_reach_the_base_colour() -> None:
+    # A trained decoder's corrections (log-gain, residual, metal colour) are decoded at full
+    # resolution; with correction_blur a period-2 pattern in them is removed exactly (the binomial
+    # blur's response there is zero), without it the base colour shows it.
+    photo = _photo()
+    frame = centred_flash_frame(2, 64, 64, 40.0)
+    checker = (-1.0) ** (torch.arange(64).view(1, 1, 1, 64) + torch.arange(64).view(1, 1, 64, 1))
+    corrections = torch.zeros(1, 11, 1, 1)
+    corrections[:, [*range(6), 8, 9, 10]] = 0.05  # logits before the head gain (10)
+
+    def inject(_module: torch.nn.Module, _inputs: object, output: torch.Tensor) -> torch.Tensor:
+        return output + corrections * checker
+
+    for blur in (True, False):
+        model = AnchoredUNet(width=4, depth=3, anchor_blur=True, correction_blur=blur)
+        torch.manual_seed(3)
+        for parameter in model.material.parameters():  # a metal share and colour that vary
+            parameter.data.normal_(0.0, 0.02)
+        with torch.no_grad():
+            clean = model(photo, frame)
+            handle = model.material.register_forward_hook(inject)
+            patterned = model(photo, frame)
+            handle.remove()
+        if blur:
+            torch.testing.assert_close(patterned, clean, atol=1e-5, rtol=1e-5)
+        else:
+            assert (patterned[:, :3] - clean[:, :3]).abs().mean() > 0.003
+
+
 def test_the_head_gain_keeps_the_start_and_scales_every_outputs_step() -> None:
     photo = _photo()
     plain, fast = AnchoredUNet(width=4, depth=3), AnchoredUNet(width=4, depth=3, head_gain=10.0)
@@ -181,6 +210,7 @@ def test_sizes_configs_and_weights_round_trip(tmp_path: Path) -> None:
         "anchor_gain": 1.5,
         "head_gain": 8.0,
         "anchor_blur": False,
+        "correction_blur": False,
         "global_features": True,
     }
     photo = _photo()
@@ -253,6 +283,7 @@ def test_experiment_anchored_composes_the_model_data_and_v3_losses(tmp_path: Pat
     assert "normal_head" not in cfg.model.generator  # the v3 experiment's key would not fit it
     assert cfg.data.data_dir.endswith("procedural_and_scans") and cfg.data.sensor.auto_white_balance
     assert cfg.loss.metallic_loss == "bce" and not cfg.loss.switches.adversarial
+    assert cfg.model.generator.correction_blur and cfg.data.sensor.auto_white_balance_probability == 0.75
 
 
 def test_the_global_track_sets_levels_but_never_tilts_the_normals() -> None:

@@ -154,6 +154,10 @@ class AnchoredUNet(nn.Module):
             phone photo's noise, demosaicing and JPEG put ~100× the truth's power at the period-2
             frequencies into the de-lit photo (the evaluator's checkerboard ratio), which an
             anchored base colour would copy; the blur removes exactly those frequencies.
+        correction_blur: pass the base colour's corrections (log-gain, residual, metal colour)
+            through the same blur before they are applied: decoded at full resolution, they
+            otherwise grow the period-2 power the anchor's blur removed (checkerboard ratio of
+            the base colour on the validation photos 0.9 after 2 400 steps, 2.3 after 4 800).
         global_features: a global track: the per-image mean and log standard deviation of every
             encoder level's first convolution (before its InstanceNorm removes them;
             :class:`~brdfgan.models.image_statistics.ImageMoments`, frozen in tiles like the norms)
@@ -178,6 +182,7 @@ class AnchoredUNet(nn.Module):
         anchor_gain: float = DEFAULT_ANCHOR_GAIN,
         head_gain: float = 1.0,
         anchor_blur: bool = False,
+        correction_blur: bool = False,
         global_features: bool = False,
     ) -> None:
         super().__init__()
@@ -195,6 +200,7 @@ class AnchoredUNet(nn.Module):
         self.anchor_gain = float(anchor_gain)
         self.head_gain = float(head_gain)
         self.anchor_blur = bool(anchor_blur)
+        self.correction_blur = bool(correction_blur)
         self.global_features = bool(global_features)
         widths = [width * 2 ** min(level, 3) for level in range(depth + 1)]
         self.encoder = nn.ModuleList(
@@ -227,6 +233,7 @@ class AnchoredUNet(nn.Module):
             "anchor_gain": self.anchor_gain,
             "head_gain": self.head_gain,
             "anchor_blur": self.anchor_blur,
+            "correction_blur": self.correction_blur,
             "global_features": self.global_features,
         }
 
@@ -282,6 +289,9 @@ class AnchoredUNet(nn.Module):
         material = self.head_gain * material
         metallic = torch.sigmoid(material[:, 6:7])
         if self.anchored:
+            if self.correction_blur:  # the corrections only: metallic, provisional roughness stay sharp
+                corrections = binomial_blur(torch.cat([material[:, 0:6], material[:, 8:11]], dim=1))
+                material = torch.cat([corrections[:, 0:6], material[:, 6:8], corrections[:, 6:9]], dim=1)
             log_gain = material[:, 0:3].clamp(-LOG_GAIN_LIMIT, LOG_GAIN_LIMIT)
             dielectric = (anchor * log_gain.exp() + RESIDUAL_SCALE * torch.tanh(material[:, 3:6])).clamp(
                 0.0, 1.0
