@@ -418,6 +418,28 @@ def test_auto_white_balance_neutralises_the_flash_colour() -> None:
         torch.ones(3, 8, 8), gen(0), illuminant_rgb=illuminant
     )[0]
     assert torch.equal(clipped, torch.ones(3, 8, 8))
+
+
+def test_a_share_of_photos_keeps_the_flash_cast() -> None:
+    # auto_white_balance_probability: each photo is white-balanced or keeps the flash's cast whole,
+    # in about that share, and the draw leaves every other effect's values as they were.
+    illuminant = blackbody_rgb(4000.0)
+    white = torch.full((3, 16, 16), 0.5) * torch.tensor(illuminant).view(3, 1, 1) / max(illuminant)
+    always = dataclasses.replace(NOTHING_RANDOM, auto_exposure=False, auto_white_balance=True)
+    share = dataclasses.replace(always, auto_white_balance_probability=0.7)
+    kept = 0
+    for seed in range(200):
+        out, record = share.apply(white, gen(seed), illuminant_rgb=illuminant)
+        reference, reference_record = always.apply(white, gen(seed), illuminant_rgb=illuminant)
+        if record["auto_white_balance"] is None:
+            kept += 1
+            red, _, blue = out.mean(dim=(1, 2)).tolist()
+            assert red / blue > 2.5  # orange, as without AWB
+        else:
+            assert torch.equal(out, reference) and record == reference_record
+    assert 40 <= kept <= 80  # 30 % of 200, binomial σ ≈ 6.5
+    with pytest.raises(DatasetConfigError, match="auto_white_balance_probability"):
+        dataclasses.replace(always, auto_white_balance_probability=1.5)
     assert auto_white_balance_gains((2.0, 1.0, 0.5)) == (1.0, 2.0, 4.0)
     with pytest.raises(ValueError, match="illuminant"):
         auto_white_balance_gains((1.0, 0.0, 1.0))

@@ -124,8 +124,8 @@ LEVELS_16BIT = 65535
 # Uniform variates drawn per photo, a fixed number whatever is switched on, so turning one
 # effect off leaves the values drawn for the others unchanged.
 _DRAWS = 10
-# The phone processing's variates (RAW, local contrast, tone curve, saturation, sharpening; two
-# spare) come from a second stream seeded by a hash of the generator's state on entry: the
+# The phone processing's variates (RAW, local contrast, tone curve, saturation, sharpening, auto
+# white balance; one spare) come from a second stream seeded by a hash of the generator's state on entry: the
 # generator itself then draws exactly what it drew before they existed (its 10 uniforms, then the
 # noise), so with the phone processing off the output is bit for bit the earlier one.
 _PHONE_DRAWS = 12
@@ -384,6 +384,7 @@ class SensorEffects:
         auto_exposure: end with the auto exposure ``preprocess`` applies before the network.
         auto_white_balance: divide the photo by the flash's colour (the ``illuminant_rgb`` of
             :meth:`apply`) before the white-balance error, as a phone's AWB does.
+        auto_white_balance_probability: the chance that it does (with ``auto_white_balance``).
         raw_probability: chance that a photo is a RAW capture: no phone processing and no
             JPEG, a 16-bit linear file (noise and white balance still apply).
         local_contrast_min, local_contrast_max: clarity amount (:func:`local_contrast`), uniform.
@@ -416,6 +417,9 @@ class SensorEffects:
     # Phone processing, all off by default (probability 0). The ranges, when switched on, span a
     # neutral rendering to a phone's "vivid" look (judged, not measured on phone files):
     auto_white_balance: bool = False
+    # The share of photos it applies to: the rest keep the flash's cast, as a capture that was not
+    # white-balanced to the flash (the OOD benchmark's standard variant) does.
+    auto_white_balance_probability: float = 1.0
     # Phones that write DNGs (pro modes) are a minority of the photos predict gets.
     raw_probability: float = 0.0
     # Local tone mapping's detail boost: up to +40 % contrast at scales below σ, visible but not
@@ -456,6 +460,7 @@ class SensorEffects:
             "tone_curve",
             "saturation",
             "sharpening",
+            "auto_white_balance",
         ):
             in_range(f"{key}.{effect}_probability", getattr(self, f"{effect}_probability"), 0.0, 1.0)
         for name in ("vignetting_min", "vignetting_max"):  # 1 would make the corners black
@@ -546,7 +551,8 @@ class SensorEffects:
         awb_gains = None
         if illuminant_rgb is not None:
             record["illuminant"] = [float(c) for c in illuminant_rgb]
-            if self.auto_white_balance:
+            # phone[10]: a spare of the phone stream, so the other draws stay as they were.
+            if self.auto_white_balance and phone[10] < self.auto_white_balance_probability:
                 awb_gains = auto_white_balance_gains(illuminant_rgb)
                 linear = white_balance(linear, awb_gains)
                 record["auto_white_balance"] = list(awb_gains)
