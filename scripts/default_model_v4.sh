@@ -56,17 +56,17 @@ compare() {
   done
 }
 
-final() {  # the chosen recipe (conf/experiment/anchored.yaml), two seeds, 4 800 batches each, ~76 min each
+final() {  # the chosen recipe (conf/experiment/anchored.yaml), two seeds, 12 000 batches each, ~3 h each
   for seed in 0 1; do
-    $PY train.py experiment=anchored test=false seed=$seed data.seed=$seed hydra.run.dir=$OUT/seed$seed \
-      $(resume $OUT/seed$seed)
+    $PY train.py experiment=anchored test=false seed=$seed data.seed=$seed hydra.run.dir=$OUT/final_seed$seed \
+      $(resume $OUT/final_seed$seed)
   done
 }
 
 evaluate() {  # procedural and scan test sets, both OOD variants: v4 (two seeds), v3, the references
-  local models="v4: $OUT/seed0/checkpoints/last.ckpt, v3: $V3"
+  local models="v4: $OUT/final_seed0/checkpoints/last.ckpt, v3: $V3"
   # seed 1 when it has finished (the first evaluation ran before it had)
-  [ -f $OUT/seed1/checkpoints/last.ckpt ] && models="$models, v4_seed1: $OUT/seed1/checkpoints/last.ckpt"
+  [ -f $OUT/final_seed1/checkpoints/last.ckpt ] && models="$models, v4_seed1: $OUT/final_seed1/checkpoints/last.ckpt"
   models="$models, mean_maps: $REF/mean_maps.safetensors, photo_basecolor: $REF/photo_basecolor.safetensors"
   models="$models, de_lit: $REF/de_lit.safetensors"
   # Grid samples fixed before v4 was evaluated on the test split: the first crop of the first
@@ -87,7 +87,7 @@ evaluate() {  # procedural and scan test sets, both OOD variants: v4 (two seeds)
 refine() {  # test-time refinement re-chosen for v4 on the validation split's two parts
   # (the rule: the largest novel-light gain that raises no map's RMSE by more than 5 %), then the
   # chosen variant checked on the scan test set and both OOD variants.
-  local v4=$OUT/seed0/checkpoints/last.ckpt
+  local v4=$OUT/final_seed0/checkpoints/last.ckpt
   declare -A REFINE=(
     [default]="refine_steps=[20,60]"
     [no_roughness]="refine_steps=[60] refine.fit_roughness=false refine.learning_rate=0.05"
@@ -104,7 +104,7 @@ refine() {  # test-time refinement re-chosen for v4 on the validation split's tw
 
 check_refine() {  # REFINE_CHOSEN="<evaluate.py overrides>" on the scan test set and both OOD variants
   : "${REFINE_CHOSEN:?set REFINE_CHOSEN to the evaluate.py overrides of the chosen variant}"
-  local v4=$OUT/seed0/checkpoints/last.ckpt
+  local v4=$OUT/final_seed0/checkpoints/last.ckpt
   # shellcheck disable=SC2086
   $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_test_scans data.prepare=null \
     grid_samples=0 hydra.run.dir=$OUT/refine/chosen_test_scans "ckpt={v4: $v4}" $REFINE_CHOSEN
@@ -115,7 +115,7 @@ check_refine() {  # REFINE_CHOSEN="<evaluate.py overrides>" on the scan test set
 }
 
 export_weights() {
-  $PY -m brdfgan.cli export-weights $OUT/seed0 --out src/brdfgan/weights/default.safetensors \
+  $PY -m brdfgan.cli export-weights $OUT/final_seed0 --out src/brdfgan/weights/default.safetensors \
     --model-id brdfgan-default-v4 --metrics $OUT/eval_test_procedural/metrics.json --metrics-model v4 \
     --hardware "2 vCPU x86_64 (no GPU), 2 threads, one training at a time"
   $PY -m tests.test_shipped_weights                                        # refresh the stored statistics
