@@ -11,9 +11,10 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
 from brdfgan.core.sky import ProceduralSky, sample_sky
-from brdfgan.core.svbrdf import check_map_shape
+from brdfgan.core.svbrdf import check_single_maps
 
 # Sky lights sit this many plane half-sizes away. A light at distance D with intensity E·D² gives
 # irradiance E at the centre; over the sample (|p| ≤ √2 s) |x − p|² = D² − 2D ω·p + |p|² differs
@@ -21,13 +22,6 @@ from brdfgan.core.svbrdf import check_map_shape
 # float32 still resolves it: D² = 1e8 is exact to 1e-7 relative and the direction to ~1e-7 rad.
 SKY_LIGHT_DISTANCE = 1.0e4
 SKY_CHUNK = 8  # sky lights rendered per render_point_lights call (as configurations)
-
-
-def check_single_maps(maps: Tensor) -> None:
-    """Raise ``ValueError`` unless ``maps`` is one map set ``(8, H, W)``."""
-    check_map_shape(maps)
-    if maps.ndim != 3:
-        raise ValueError(f"maps must have shape (8, H, W), got {tuple(maps.shape)}")
 
 
 def _light_rgb(intensity: float | Tensor, count: int, like: Tensor) -> Tensor:
@@ -100,8 +94,7 @@ def relight(
         - output: ``(L, 3, H, W)``
     """
     check_single_maps(maps)
-    if light_positions.ndim != 2 or light_positions.shape[-1] != 3:
-        raise ValueError(f"light_positions must have shape (L, 3), got {tuple(light_positions.shape)}")
+    check_shape(light_positions, "L 3", name="light_positions")
     rgb = _light_rgb(intensity, light_positions.shape[0], maps)
     # One light per renderer call: L is small and this keeps memory at one rendering's worth.
     images = _render_lights(maps, light_positions, rgb, capture, chunk=1, combine=False)

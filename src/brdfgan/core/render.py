@@ -34,6 +34,7 @@ from brdfgan.core.brdf import (
     ggx_specular_factor,
     schlick_weight,
 )
+from brdfgan.core.checks import check_shape
 from brdfgan.core.svbrdf import (
     NORMAL,
     NUM_CHANNELS,
@@ -187,8 +188,7 @@ def maps_in_view(maps: Tensor, pose: CameraPose, plane_half_size: float = 1.0) -
         - maps: ``(8, H, W)`` in the layout of :mod:`brdfgan.core.svbrdf`
         - output: ``(8, H, W)``
     """
-    if maps.ndim != 3 or maps.shape[0] != NUM_CHANNELS:
-        raise ValueError(f"maps must have shape ({NUM_CHANNELS}, H, W), got {tuple(maps.shape)}")
+    check_shape(maps, f"{NUM_CHANNELS} H W", name="maps")
     height, width = maps.shape[-2:]
     points = torch.from_numpy(view_plane_points(pose, height, width) / plane_half_size)
     # grid_sample's (x, y) in [-1, 1] with align_corners=False are the outer texel edges: x = -1 is
@@ -243,28 +243,11 @@ def check_scene_shapes(maps: Tensor, camera_position: Tensor, lights: PointLight
     """Raise ``ValueError`` unless maps ``(B, 8, H, W)``, camera ``(B, V, 3)`` and lights
     ``(B, V, K, ·)`` fit together."""
     check_map_shape(maps)
-    if maps.ndim != 4:
-        raise ValueError(f"maps must have shape (B, 8, H, W), got {tuple(maps.shape)}")
-    batch = maps.shape[0]
-    if camera_position.ndim != 3 or camera_position.shape[0] != batch or camera_position.shape[-1] != 3:
-        raise ValueError(
-            f"camera_position must have shape ({batch}, V, 3), got {tuple(camera_position.shape)}"
-        )
-    views = camera_position.shape[1]
-    expected = (batch, views)
-    if lights.position.ndim != 4 or lights.position.shape[:2] != expected or lights.position.shape[-1] != 3:
-        raise ValueError(
-            f"light position must have shape ({batch}, {views}, K, 3), got {tuple(lights.position.shape)}"
-        )
-    k = lights.position.shape[2]
-    if tuple(lights.intensity.shape) != (batch, views, k):
-        raise ValueError(
-            f"light intensity must have shape ({batch}, {views}, {k}), got {tuple(lights.intensity.shape)}"
-        )
-    if tuple(lights.color.shape) != (batch, views, k, 3):
-        raise ValueError(
-            f"light color must have shape ({batch}, {views}, {k}, 3), got {tuple(lights.color.shape)}"
-        )
+    scene = check_shape(maps, f"B {NUM_CHANNELS} H W", name="maps")
+    scene = check_shape(camera_position, "B V 3", name="camera_position", dims=scene)
+    scene = check_shape(lights.position, "B V K 3", name="light position", dims=scene)
+    check_shape(lights.intensity, "B V K", name="light intensity", dims=scene)
+    check_shape(lights.color, "B V K 3", name="light color", dims=scene)
 
 
 Components = tuple[Tensor, Tensor, Tensor]

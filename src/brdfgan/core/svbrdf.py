@@ -28,6 +28,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
+
 NUM_CHANNELS = 8
 BASECOLOR = slice(0, 3)
 NORMAL = slice(3, 6)
@@ -87,13 +89,17 @@ def check_map_shape(maps: Tensor) -> None:
     """Raise :class:`InvalidMapsError` unless ``maps`` is ``(*, 8, H, W)`` floating point."""
     if not isinstance(maps, Tensor):
         raise InvalidMapsError(f"maps must be a torch.Tensor, got {type(maps).__name__}")
-    if maps.ndim < 3 or maps.shape[-3] != NUM_CHANNELS:
-        raise InvalidMapsError(
-            f"maps must have shape (*, {NUM_CHANNELS}, H, W) "
-            f"[basecolor 3, normal 3, roughness 1, metallic 1], got {tuple(maps.shape)}"
-        )
+    name = "maps [basecolor 3, normal 3, roughness 1, metallic 1]"
+    check_shape(maps, f"* {NUM_CHANNELS} H W", name=name, error=InvalidMapsError)
     if not maps.is_floating_point():
         raise InvalidMapsError(f"maps must be floating point, got {maps.dtype}")
+
+
+def check_single_maps(maps: Tensor) -> None:
+    """Raise ``ValueError`` unless ``maps`` is one map set ``(8, H, W)`` (:class:`InvalidMapsError`
+    unless it is a map tensor at all, see :func:`check_map_shape`)."""
+    check_map_shape(maps)
+    check_shape(maps, f"{NUM_CHANNELS} H W", name="maps")
 
 
 def check_map_pair(pred: Tensor, target: Tensor) -> None:
@@ -293,9 +299,7 @@ def resize_maps(maps: Tensor, size: int | tuple[int, int]) -> Tensor:
         - maps: ``(8, H, W)``
         - output: ``(8, h, w)`` with ``(h, w) = size`` (an int means square)
     """
-    check_map_shape(maps)
-    if maps.ndim != 3:
-        raise ValueError(f"maps must have shape (8, H, W), got {tuple(maps.shape)}")
+    check_single_maps(maps)
     height, width = (size, size) if isinstance(size, int) else size
     if height < 1 or width < 1:
         raise ValueError(f"size must be positive, got {size}")

@@ -48,12 +48,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.exposure import auto_expose, auto_exposure_scale
 from brdfgan.core.lighting import spherical_direction
-from brdfgan.core.relight import SKY_LIGHT_DISTANCE, check_single_maps, relight
+from brdfgan.core.relight import SKY_LIGHT_DISTANCE, relight
 from brdfgan.core.render import FlashCapture, PointLights, shade_point_lights, shading_inputs
 from brdfgan.core.sky import ProceduralSky, sample_sky
-from brdfgan.core.svbrdf import linear_to_srgb, resize_image, resize_maps
+from brdfgan.core.svbrdf import check_single_maps, linear_to_srgb, resize_image, resize_maps
 from brdfgan.io.atomic import atomic_replace
 from brdfgan.io.video import write_video
 
@@ -159,8 +160,7 @@ def render_preview_tiles(
         - output: ``(L + 1, 3, H, W)``
     """
     check_single_maps(maps)
-    if light_positions.ndim != 2 or light_positions.shape[-1] != 3:
-        raise ValueError(f"light_positions must have shape (L, 3), got {tuple(light_positions.shape)}")
+    check_shape(light_positions, "L 3", name="light_positions")
     if chunk < 1:
         raise ValueError(f"chunk must be >= 1, got {chunk}")
     directions, irradiance = sample_sky(sky, samples, seed=seed)
@@ -247,8 +247,7 @@ def preview_image(
         - output: ``(rows, cols, 3)`` uint8 with ``(rows, cols) = preview_size(tile, lights, labels=labels)``
     """
     check_single_maps(maps)
-    if photo.ndim != 3 or photo.shape[0] != 3:
-        raise ValueError(f"photo must have shape (3, h, w), got {tuple(photo.shape)}")
+    check_shape(photo, "3 h w", name="photo")
     if tile < 1 or lights < 0:
         raise ValueError(f"tile must be >= 1 and lights >= 0, got tile={tile}, lights={lights}")
     sky = sky if sky is not None else ProceduralSky()
