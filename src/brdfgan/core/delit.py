@@ -27,6 +27,7 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.brdf import evaluate_brdf
+from brdfgan.core.checks import check_shape
 from brdfgan.core.exposure import luminance
 from brdfgan.core.flash_geometry import check_flash_frame, flash_offset_channels
 
@@ -80,8 +81,7 @@ def hotspot_cap(
         - image: ``(B, 3, H, W)`` linear RGB, non-negative
         - output: ``(B,)``
     """
-    if image.ndim != 4 or image.shape[1] != 3:
-        raise ValueError(f"expected a (B, 3, H, W) image, got {tuple(image.shape)}")
+    check_shape(image, "B 3 H W", name="image")
     if not factor > 0 or not 0.0 < quantile <= 1.0:
         raise ValueError(f"need factor > 0 and 0 < quantile <= 1, got {factor=}, {quantile=}")
     return factor * torch.quantile(luminance(image).flatten(1).float(), quantile, dim=1).to(image.dtype)
@@ -121,8 +121,7 @@ def delit_photo(photo: Tensor, frame: Tensor, *, clip: bool = True) -> Tensor:
         - frame: ``(B, 3)``
         - output: ``(B, 3, H, W)`` linear, non-negative (not bounded above)
     """
-    if photo.ndim != 4 or photo.shape[1] != 3:
-        raise ValueError(f"expected a (B, 3, H, W) photo, got {tuple(photo.shape)}")
+    check_shape(photo, "B 3 H W", name="photo")
     check_flash_frame(frame, photo.shape[0])
     falloff = flat_flash_falloff(frame.to(photo.dtype), photo.shape[-2], photo.shape[-1])
     delit = photo.clamp_min(0.0) / falloff

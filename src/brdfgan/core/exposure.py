@@ -27,6 +27,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
+
 ISO_SPEED = 100.0
 METER_CALIBRATION_K = 12.5
 LENS_ATTENUATION_Q = 0.65
@@ -44,9 +46,8 @@ def luminance(rgb: Tensor, dim: int = -3) -> Tensor:
     """
     if dim >= 0:
         raise ValueError(f"dim must be negative (counted from the end), got {dim}")
-    if rgb.ndim < -dim or rgb.shape[dim] != 3:
-        layout = "(*, 3, H, W)" if dim == -3 else f"3 channels at dim {dim}"
-        raise ValueError(f"expected linear RGB of shape {layout}, got {tuple(rgb.shape)}")
+    trailing = "H W" if dim == -3 else " ".join(f"D{i}" for i in range(1, -dim))
+    check_shape(rgb, f"* 3 {trailing}", name="linear RGB")
     weights = rgb.new_tensor(LUMINANCE_WEIGHTS).view(3, *([1] * (-dim - 1)))
     return (rgb * weights).sum(dim=dim, keepdim=True)
 

@@ -10,6 +10,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
+
 Border = Literal["zeros", "reflect"]
 
 
@@ -52,7 +54,8 @@ def binomial_blur(image: Tensor) -> Tensor:
         - image: ``(B, C, H, W)``, H and W >= 2
         - output: same
     """
-    if image.ndim != 4 or min(image.shape[-2:]) < 2:
+    check_shape(image, "B C H W", name="image")
+    if min(image.shape[-2:]) < 2:
         raise ValueError(f"expected (B, C, H, W) images with H, W >= 2, got {tuple(image.shape)}")
     channels = image.shape[1]
     kernel = torch.tensor([0.25, 0.5, 0.25], dtype=image.dtype, device=image.device)

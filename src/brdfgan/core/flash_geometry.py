@@ -35,6 +35,8 @@ import math
 import torch
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
+
 # The horizontal field of view a photo is assumed to have when nothing says otherwise: the centre
 # of the v3 training captures' 40–75° (conf/dataset_spec/default_model.yaml, capture.fov_*), after
 # the preprocessing's centre crop. Photos without EXIF focal length get it.
@@ -45,9 +47,10 @@ FLASH_CHANNELS = 4  # flash_side_channels: the offsets split by sign
 
 def check_flash_frame(frame: Tensor, batch: int | None = None) -> None:
     """Raise ``ValueError`` unless ``frame`` is a finite ``(B, 3)`` floating tensor with ``s > 0``."""
-    if not isinstance(frame, Tensor) or frame.ndim != 2 or frame.shape[1] != FLASH_FRAME_SIZE:
-        shape = tuple(frame.shape) if isinstance(frame, Tensor) else type(frame).__name__
-        raise ValueError(f"a flash frame must be a (B, {FLASH_FRAME_SIZE}) tensor (x, y, s), got {shape}")
+    if not isinstance(frame, Tensor):
+        name = type(frame).__name__
+        raise ValueError(f"a flash frame must be a (B, {FLASH_FRAME_SIZE}) tensor (x, y, s), got {name}")
+    check_shape(frame, f"B {FLASH_FRAME_SIZE}", name="a flash frame (x, y, s)")
     if batch is not None and frame.shape[0] != batch:
         raise ValueError(f"flash frame for {frame.shape[0]} photos, but the batch holds {batch}")
     if not frame.is_floating_point() or not torch.isfinite(frame).all() or (frame[:, 2] <= 0).any():

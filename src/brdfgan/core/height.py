@@ -22,6 +22,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
+
 # Azimuths and distances (pixels, roughly geometric) the horizon search looks along by default.
 AO_DIRECTIONS = 8
 AO_RADIUS_FRACTION = 1.0 / 16.0  # of the sample side
@@ -42,8 +44,7 @@ def height_from_normals(normal: Tensor, *, periodic: bool = False) -> Tensor:
     Shape: ``(..., 3, H, W)`` unit normals → ``(..., H, W)`` heights in sample-side units
     (the width is the side).
     """
-    if normal.shape[-3] != 3:
-        raise ValueError(f"expected normals (..., 3, H, W), got {tuple(normal.shape)}")
+    check_shape(normal, "* 3 H W", name="normals")
     height, width = normal.shape[-2:]
     dh_dx, dh_drow = _slopes(normal.to(torch.float64))
     # A sample is a flat surface: a mean slope is a bias of the normals (a periodic field cannot
