@@ -14,6 +14,7 @@ from collections.abc import Callable
 import torch
 from torch import Tensor, nn
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.render import (
     PointLights,
     check_scene_shapes,
@@ -106,8 +107,7 @@ def rendering_loss(
         - output: scalar
     """
     check_map_pair(pred, target)
-    if pred.ndim != 4:
-        raise ValueError(f"maps must have shape (B, 8, H, W), got {tuple(pred.shape)}")
+    check_shape(pred, "B 8 H W", name="maps")
     if configs.camera_position.shape[0] != pred.shape[0]:
         raise ValueError(
             f"configs were drawn for a batch of {configs.camera_position.shape[0]}, maps have {pred.shape[0]}"
@@ -212,8 +212,7 @@ class RenderingLoss(nn.Module):
         self, pred: Tensor, target: Tensor, return_configs: bool = False
     ) -> Tensor | tuple[Tensor, RenderConfigs]:
         check_map_shape(pred)
-        if pred.ndim != 4:
-            raise ValueError(f"maps must have shape (B, 8, H, W), got {tuple(pred.shape)}")
+        check_shape(pred, "B 8 H W", name="maps")
         dtype = torch.promote_types(pred.dtype, torch.float32)
         configs = self.sample_configs(pred.shape[0], device=pred.device, dtype=dtype)
         if self.compiled and pred.requires_grad and tuple(pred.shape) not in self._compiled_shapes:

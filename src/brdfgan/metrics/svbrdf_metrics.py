@@ -82,6 +82,7 @@ from torch import Tensor
 from torchmetrics import Metric, MetricCollection
 
 from brdfgan.config_check import ConfigValueError
+from brdfgan.core.checks import check_shape
 from brdfgan.core.render import PointLights, render_point_lights
 from brdfgan.core.sampling import (
     RenderConfigs,
@@ -123,8 +124,7 @@ def _as_batch(pred: Tensor, true: Tensor) -> tuple[Tensor, Tensor]:
     check_map_pair(pred, true)
     if pred.ndim == 3:
         pred, true = pred.unsqueeze(0), true.unsqueeze(0)
-    if pred.ndim != 4:
-        raise ValueError(f"maps must have shape (B, 8, H, W) or (8, H, W), got {tuple(pred.shape)}")
+    check_shape(pred, "B 8 H W", name="maps")  # (8, H, W) became (1, 8, H, W) above
     dtype = torch.promote_types(torch.promote_types(pred.dtype, true.dtype), torch.float32)
     return pred.detach().to(dtype), true.detach().to(device=pred.device, dtype=dtype)
 
@@ -945,8 +945,7 @@ class HotspotError(Metric):
             centres = hotspot.detach().to(device=pred.device, dtype=torch.float64)
             if unbatched and centres.shape == (2,):
                 centres = centres.unsqueeze(0)
-            if centres.shape != (batch, 2):
-                raise ValueError(f"hotspot must have shape ({batch}, 2), got {tuple(hotspot.shape)}")
+            check_shape(centres, "B 2", name="hotspot", dims={"B": batch})
         inside = hotspot_disk(centres, height, width, self.radius_fraction * min(height, width))
         pixels_in = inside.sum()
         self.pixels_in += pixels_in

@@ -45,6 +45,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.exposure import auto_expose
 from brdfgan.core.lighting import Environment, SunLight, check_equirect, orthonormal_frame
 from brdfgan.core.render import CameraPose, FlashCapture, Vector3
@@ -258,8 +259,7 @@ class CaptureRenderer:
         start = time.perf_counter()
         mi = mitsuba()
         validate_maps(maps)
-        if maps.ndim != 3:
-            raise ValueError(f"maps must have shape (8, H, W), got {tuple(maps.shape)}")
+        check_shape(maps, "8 H W", name="maps")
         if len(flash_rgb_intensity) != 3 or any(not c >= 0 for c in flash_rgb_intensity):
             raise ValueError(f"flash_rgb_intensity must be 3 non-negative values, got {flash_rgb_intensity}")
         flash = (float(flash_rgb_intensity[0]), float(flash_rgb_intensity[1]), float(flash_rgb_intensity[2]))
