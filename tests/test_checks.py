@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import doctest
+import functools
 
 import numpy as np
 import pytest
@@ -76,6 +77,15 @@ def test_error_class_is_the_callers() -> None:
 
     with pytest.raises(BadInput, match=r"photo must have shape \(3, H, W\), got \(4, 2, 2\)"):
         check_shape(torch.zeros(4, 2, 2), "3 H W", name="photo", error=BadInput)
+
+
+def test_error_can_be_any_callable_that_makes_the_exception() -> None:
+    class FileProblem(UserError):
+        def __init__(self, path: str, problem: str) -> None:
+            super().__init__(f"{path}: {problem}")
+
+    with pytest.raises(FileProblem, match=r"^a\.raw: rgb must have shape \(H, W, 3\), got \(2, 2\)$"):
+        check_shape(np.zeros((2, 2)), "H W 3", name="rgb", error=functools.partial(FileProblem, "a.raw"))
 
 
 @pytest.mark.parametrize("pattern", ["B 8 * W", "B -1", "B 8.0", "(B, 8)"])

@@ -9,7 +9,7 @@ leading dimensions, none included.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 from torch import Tensor
@@ -31,13 +31,14 @@ def check_shape(
     *,
     name: str = "tensor",
     dims: Mapping[str, int] | None = None,
-    error: type[Exception] = ValueError,
+    error: Callable[[str], Exception] = ValueError,
 ) -> dict[str, int]:
     """Raise ``error`` unless ``tensor``'s shape matches ``pattern``; return the bound sizes.
 
     The message is one line, ``<name> must have shape (<pattern>), got <shape>``, with the
-    names bound through ``dims`` shown as their sizes. ``error`` is the exception class to
-    raise (a :class:`~brdfgan.errors.UserError` subclass where the tensor comes from the user).
+    names bound through ``dims`` shown as their sizes. ``error`` makes the exception from that
+    message: an exception class (a :class:`~brdfgan.errors.UserError` subclass where the tensor
+    comes from the user) or e.g. ``functools.partial(PhotoError, path)``.
 
     Shape:
         - tensor: any, checked against ``pattern``

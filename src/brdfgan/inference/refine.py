@@ -53,6 +53,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.flash_geometry import (
     centred_flash_frame,
@@ -221,11 +222,9 @@ def refine_maps(
         - photo: ``(3, N, N)``; maps: ``(8, M, M)``; flash_frame: ``(1, 3)`` or ``(3,)``
         - output maps: ``(8, M, M)``
     """
-    if photo.ndim != 3 or photo.shape[0] != 3 or photo.shape[1] != photo.shape[2]:
-        raise ValueError(f"refinement needs a square (3, N, N) photo, got {tuple(photo.shape)}")
+    check_shape(photo, "3 N N", name="square photo")
     check_map_shape(maps)
-    if maps.ndim != 3 or maps.shape[1] != maps.shape[2]:
-        raise ValueError(f"refinement needs square (8, M, M) maps, got {tuple(maps.shape)}")
+    check_shape(maps, "8 M M", name="square maps")
     config = config or RefineConfig()
     frame = flash_frame.detach().float().reshape(1, -1)
     check_flash_frame(frame, 1)

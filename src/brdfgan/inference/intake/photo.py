@@ -54,6 +54,7 @@ them); the colour-space heuristic behind one of them is described at :func:`colo
 
 from __future__ import annotations
 
+import functools
 import io
 import math
 import os
@@ -68,6 +69,7 @@ import numpy as np
 import torch
 from PIL import Image, UnidentifiedImageError
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.exposure import LUMINANCE_WEIGHTS
 from brdfgan.core.svbrdf import srgb_decoding_table, srgb_to_linear
 from brdfgan.errors import UserError
@@ -753,8 +755,7 @@ def _read_raw_photo(path: Path) -> Photo:
     except (rawpy.LibRawError, rawpy.NotSupportedError, OSError, ValueError) as error:
         raise PhotoError(path, f"cannot decode RAW file ({type(error).__name__}: {error})") from error
     rgb = np.asarray(rgb)
-    if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise PhotoError(path, f"RAW decoder returned shape {rgb.shape}, expected (H, W, 3)")
+    check_shape(rgb, "H W 3", name="RAW decoder output", error=functools.partial(PhotoError, path))
     _check_size(path, rgb.shape[1], rgb.shape[0])
     _check_not_black(path, rgb)
     warnings: list[str] = []

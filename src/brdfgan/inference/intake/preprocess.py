@@ -36,6 +36,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.exposure import auto_expose, luminance
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.flash_geometry import pixel_scale
@@ -472,9 +473,9 @@ def preprocess(
 
 
 def _check_image(linear: Tensor) -> None:
-    if not isinstance(linear, Tensor) or linear.ndim != 3 or linear.shape[0] != 3:
-        shape = tuple(linear.shape) if isinstance(linear, Tensor) else type(linear).__name__
-        raise ValueError(f"expected a linear RGB tensor of shape (3, H, W), got {shape}")
+    if not isinstance(linear, Tensor):
+        raise ValueError(f"expected a linear RGB tensor of shape (3, H, W), got {type(linear).__name__}")
+    check_shape(linear, "3 H W", name="linear RGB image")
     if linear.shape[1] < 1 or linear.shape[2] < 1:
         raise ValueError(f"expected a non-empty image, got shape {tuple(linear.shape)}")
 

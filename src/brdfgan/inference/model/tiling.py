@@ -64,6 +64,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.flash_geometry import (
     centred_flash_frame,
     check_flash_frame,
@@ -180,8 +181,7 @@ def norm_statistics(model: nn.Module, photo: Tensor, flash: Tensor | None = None
         - output: per module name, a list with one ``(mean, var)`` pair of shape ``(C_norm,)`` per call
           (biased variance, as the norm uses), or one ``(value,)`` of shape ``(1, K)`` per call
     """
-    if photo.ndim != 4 or photo.shape[0] != 1:
-        raise ValueError(f"norm_statistics expects one photo (1, C, H, W), got {tuple(photo.shape)}")
+    check_shape(photo, "1 C H W", name="norm_statistics photo")
     stats: NormStatistics = {}
     handles = []
 
@@ -488,9 +488,7 @@ def predict_memory(
 
 
 def _check_photo(photo: Tensor, *, single: bool) -> None:
-    if photo.ndim != 4 or photo.shape[1] != PHOTO_CHANNELS or (single and photo.shape[0] != 1):
-        batch = "1" if single else "B"
-        raise ValueError(f"expected a photo of shape ({batch}, 3, H, W), got {tuple(photo.shape)}")
+    check_shape(photo, f"{'1' if single else 'B'} {PHOTO_CHANNELS} H W", name="photo")
     if min(photo.shape[-2:]) < 2 or not photo.is_floating_point():
         raise ValueError(f"expected a floating-point photo of at least 2×2 pixels, got {tuple(photo.shape)}")
 
