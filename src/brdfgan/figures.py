@@ -11,6 +11,8 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
+from brdfgan.core.checks import check_shape
+
 # Height of the header row in pixels: room for two lines (scripts that cut panels out of a grid
 # skip it).
 HEADER_HEIGHT = 34
@@ -26,8 +28,7 @@ def with_column_header(grid: np.ndarray, labels: Sequence[str]) -> np.ndarray:
     Shape: ``grid`` ``(H, W, 3)`` in ``[0, 1]``, ``W`` divisible by ``len(labels)`` → output
     ``(HEADER_HEIGHT + H, W, 3)`` float32 in ``[0, 1]``.
     """
-    if grid.ndim != 3 or grid.shape[-1] != 3:
-        raise ValueError(f"grid must be (H, W, 3), got {grid.shape}")
+    check_shape(grid, "H W 3", name="grid")
     if not labels or grid.shape[1] % len(labels):
         raise ValueError(f"{len(labels)} labels for a grid {grid.shape[1]} px wide")
     width = grid.shape[1] // len(labels)

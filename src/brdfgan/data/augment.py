@@ -27,6 +27,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.sampling import log_uniform
 from brdfgan.core.svbrdf import (
     BASECOLOR,
@@ -124,8 +125,7 @@ def crop_maps(maps: Tensor, transform: CropTransform, out_size: int) -> Tensor:
         - output: ``(8, out_size, out_size)``
     """
     check_map_shape(maps)
-    if maps.ndim != 3 or maps.shape[-1] != maps.shape[-2]:
-        raise ValueError(f"expected square maps of shape (8, S, S), got {tuple(maps.shape)}")
+    check_shape(maps, "8 S S", name="square maps")
     return _crop_linear(_linear_basecolor(maps), transform, out_size)
 
 
@@ -173,8 +173,7 @@ def random_crops(
         - output: ``(count, 8, out_size, out_size)``
     """
     check_map_shape(maps)
-    if maps.ndim != 3 or maps.shape[-1] != maps.shape[-2]:
-        raise ValueError(f"expected square maps of shape (8, S, S), got {tuple(maps.shape)}")
+    check_shape(maps, "8 S S", name="square maps")
     transforms = [sampling.sample(generator) for _ in range(count)]
     work = _linear_basecolor(maps)  # once per material, not per crop
     return torch.stack([_crop_linear(work, t, out_size) for t in transforms]), transforms

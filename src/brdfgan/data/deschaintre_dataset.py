@@ -55,6 +55,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.svbrdf import (
     DIELECTRIC_F0,
     diffuse_albedo,
@@ -132,7 +133,8 @@ def albedos_to_basecolor_metallic(diffuse: Tensor, specular: Tensor) -> tuple[Te
         - diffuse, specular: ``(*, 3, H, W)``, linear albedos in [0, 1]
         - output: linear base colour ``(*, 3, H, W)`` and metallic ``(*, 1, H, W)`` (input dtype)
     """
-    if diffuse.shape != specular.shape or diffuse.ndim < 3 or diffuse.shape[-3] != 3:
+    check_shape(diffuse, "* 3 H W", name="diffuse")
+    if diffuse.shape != specular.shape:
         raise ValueError(
             "diffuse and specular must both be (*, 3, H, W), "
             f"got {tuple(diffuse.shape)} and {tuple(specular.shape)}"
@@ -286,8 +288,8 @@ def write_deschaintre_sample(
     Shape:
         - photo: ``(3, H, W)`` linear LDR in [0, 1]; maps: ``(8, H, W)``
     """
-    if photo.ndim != 3 or photo.shape[0] != 3 or photo.shape[1:] != maps.shape[-2:]:
-        raise ValueError(f"photo must be (3, H, W) of the maps' size, got {tuple(photo.shape)}")
+    height, width = maps.shape[-2:]
+    check_shape(photo, "3 H W", name="photo (the maps' size)", dims={"H": height, "W": width})
     tiles = (linear_to_srgb(photo.clamp(0.0, 1.0)), *maps_to_deschaintre(maps, flip_green=flip_green))
     strip = torch.cat([tile.detach().cpu().float() for tile in tiles], dim=-1)
     return write_image(path, strip.permute(1, 2, 0).numpy(), bit_depth=8)

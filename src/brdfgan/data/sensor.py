@@ -92,6 +92,7 @@ import torch
 from PIL import Image
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.exposure import LUMINANCE_WEIGHTS, auto_expose
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.sampling import log_uniform
@@ -324,7 +325,8 @@ def jpeg_roundtrip(codes: Tensor, quality: int) -> Tensor:
         - codes: ``(3, H, W)`` uint8
         - output: ``(3, H, W)`` uint8
     """
-    if codes.dtype != torch.uint8 or codes.ndim != 3 or codes.shape[0] != 3:
+    check_shape(codes, "3 H W", name="uint8 codes")
+    if codes.dtype != torch.uint8:
         raise ValueError(f"expected (3, H, W) uint8 codes, got {tuple(codes.shape)} {codes.dtype}")
     buffer = io.BytesIO()
     Image.fromarray(codes.permute(1, 2, 0).contiguous().numpy(), mode="RGB").save(
@@ -521,8 +523,7 @@ class SensorEffects:
             - photo: ``(3, H, W)`` linear LDR in [0, 1]
             - output: ``(3, H, W)`` float32, linear LDR in [0, 1]
         """
-        if photo.ndim != 3 or photo.shape[0] != 3:
-            raise ValueError(f"expected a (3, H, W) photo, got shape {tuple(photo.shape)}")
+        check_shape(photo, "3 H W", name="photo")
         if not self.enabled:
             return photo, {}
         phone = _phone_uniforms(generator)  # leaves the generator as it is: drawn before u or after

@@ -93,6 +93,7 @@ import torch
 import zstandard
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.svbrdf import (
     NORMAL,
     NORMAL_UNIT_TOLERANCE,
@@ -204,14 +205,15 @@ class Sample:
             raise ShardError(f"{where}: meta must be a mapping, got {type(self.meta).__name__}")
         if not check:
             return
-        if not isinstance(self.photo, Tensor) or self.photo.ndim != 3 or self.photo.shape[0] != 3:
-            shape = tuple(self.photo.shape) if isinstance(self.photo, Tensor) else type(self.photo).__name__
-            raise ShardError(f"{where}: photo must be a (3, H, W) tensor, got {shape}")
+        if not isinstance(self.photo, Tensor):
+            raise ShardError(f"{where}: photo must be a (3, H, W) tensor, got {type(self.photo).__name__}")
+        check_shape(self.photo, "3 H W", name=f"{where}: photo", error=ShardError)
         if not self.photo.is_floating_point():
             raise ShardError(f"{where}: photo must be floating point, got {self.photo.dtype}")
-        if not isinstance(self.maps, Tensor) or self.maps.ndim != 3 or self.maps.shape[0] != NUM_CHANNELS:
-            shape = tuple(self.maps.shape) if isinstance(self.maps, Tensor) else type(self.maps).__name__
-            raise ShardError(f"{where}: maps must be an ({NUM_CHANNELS}, H, W) tensor, got {shape}")
+        if not isinstance(self.maps, Tensor):
+            name = type(self.maps).__name__
+            raise ShardError(f"{where}: maps must be an ({NUM_CHANNELS}, H, W) tensor, got {name}")
+        check_shape(self.maps, f"{NUM_CHANNELS} H W", name=f"{where}: maps", error=ShardError)
         if self.photo.shape[1:] != self.maps.shape[1:]:
             raise ShardError(
                 f"{where}: photo {tuple(self.photo.shape)} and maps {tuple(self.maps.shape)} differ in size"

@@ -93,6 +93,7 @@ from typing import Any, Literal
 import torch
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.flash_geometry import check_flash_frame, resize_flash_frame
 from brdfgan.core.render import PointLights, render_point_lights
 from brdfgan.core.svbrdf import check_map_shape, linear_to_srgb, resize_maps
@@ -601,11 +602,7 @@ def predict_capture_maps(capture: Capture, photo: Photo, model: CaptureModel) ->
     with torch.no_grad():
         maps = model.predict(prepared.photo, frame)
     check_map_shape(maps)
-    if tuple(maps.shape) != (8, resolution, resolution):
-        raise ValueError(
-            f"{model.name} returned maps of shape {tuple(maps.shape)}, "
-            f"expected (8, {resolution}, {resolution})"
-        )
+    check_shape(maps, "8 R R", name=f"{model.name}'s maps", dims={"R": resolution})
     if model.refine is not None:
         maps = refine_maps(prepared.photo, maps, frame, model.refine).maps
     return resize_maps(maps.detach().float().cpu(), side)

@@ -33,6 +33,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.svbrdf import (
     MAP_NAMES,
     InvalidMapsError,
@@ -93,8 +94,7 @@ def write_maps(
     """
     _check_format(format)
     directory = Path(directory)
-    if maps.ndim != 3:
-        raise InvalidMapsError(f"write_maps expects one map set of shape (8, H, W), got {tuple(maps.shape)}")
+    check_shape(maps, "8 H W", name="write_maps maps (one map set)", error=InvalidMapsError)
     validate_maps(maps)
     if directory.exists() and not directory.is_dir():
         raise MapIOError(f"{directory}: exists and is not a directory")

@@ -53,6 +53,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.delit import clip_hotspot, delit_photo, flat_flash_render
 from brdfgan.core.filtering import binomial_blur
 from brdfgan.core.flash_geometry import (
@@ -244,8 +245,7 @@ class AnchoredUNet(nn.Module):
 
     def check_input(self, photo: Tensor) -> None:
         """Raise ``ValueError`` unless ``photo`` is ``(B, 3, H, W)`` of a supported size."""
-        if photo.ndim != 4 or photo.shape[1] != 3:
-            raise ValueError(f"AnchoredUNet expects a photo of shape (B, 3, H, W), got {tuple(photo.shape)}")
+        check_shape(photo, "B 3 H W", name="AnchoredUNet photo")
         height, width = photo.shape[-2:]
         multiple = self.size_multiple
         if height % multiple or width % multiple or min(height, width) < 2 * multiple:

@@ -46,6 +46,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.svbrdf import NUM_CHANNELS
 from brdfgan.models.heads import (
     PHOTO_CHANNELS,
@@ -181,11 +182,7 @@ class Deschaintre2018(nn.Module):
 
     def check_input(self, photo: Tensor) -> None:
         """Raise ``ValueError`` unless ``photo`` is ``(B, in_channels, H, W)`` of a supported size."""
-        if photo.ndim != 4 or photo.shape[1] != self.in_channels:
-            raise ValueError(
-                f"Deschaintre2018 expects a photo of shape (B, {self.in_channels}, H, W), "
-                f"got {tuple(photo.shape)}"
-            )
+        check_shape(photo, f"B {self.in_channels} H W", name="Deschaintre2018 photo")
         height, width = photo.shape[-2:]
         multiple = self.size_multiple
         if height % multiple or width % multiple or min(height, width) == 0:

@@ -24,6 +24,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.svbrdf import NUM_CHANNELS, check_map_shape
 from brdfgan.models.heads import PHOTO_CHANNELS, encode_photo, init_weights
 
@@ -45,11 +46,8 @@ def discriminator_input(photo: Tensor, maps: Tensor) -> Tensor:
         - output: ``(B, 11, H, W)``, channels photo 0:3, maps 3:11
     """
     check_map_shape(maps)
-    if photo.ndim != 4 or maps.ndim != 4 or photo.shape[1] != PHOTO_CHANNELS:
-        raise ValueError(
-            f"discriminator_input expects photo (B, {PHOTO_CHANNELS}, H, W) and maps (B, 8, H, W), "
-            f"got {tuple(photo.shape)} and {tuple(maps.shape)}"
-        )
+    check_shape(photo, f"B {PHOTO_CHANNELS} H W", name="discriminator_input photo")
+    check_shape(maps, f"B {NUM_CHANNELS} H W", name="discriminator_input maps")
     if photo.shape[0] != maps.shape[0] or photo.shape[-2:] != maps.shape[-2:]:
         raise ValueError(
             f"photo and maps must share batch and size, got {tuple(photo.shape)} and {tuple(maps.shape)}"
@@ -122,7 +120,8 @@ class PatchDiscriminator(nn.Module):
         return 2 ** (self.layers + 1)
 
     def forward(self, x: Tensor) -> list[Tensor]:
-        if x.ndim != 4 or x.shape[1] != self.in_channels or min(x.shape[-2:]) < self.min_size:
+        check_shape(x, f"B {self.in_channels} H W", name="PatchDiscriminator input")
+        if min(x.shape[-2:]) < self.min_size:
             raise ValueError(
                 f"PatchDiscriminator expects (B, {self.in_channels}, H, W) with H, W >= {self.min_size}, "
                 f"got {tuple(x.shape)}"

@@ -46,6 +46,7 @@ from typing import Any, Literal, get_args
 import torch
 from torch import Tensor, nn
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.flash_geometry import (
     FLASH_CHANNELS,
     centred_flash_frame,
@@ -218,10 +219,7 @@ class Generator(nn.Module):
 
     def check_input(self, photo: Tensor) -> None:
         """Raise ``ValueError`` unless ``photo`` is ``(B, in_channels, H, W)`` of a supported size."""
-        if photo.ndim != 4 or photo.shape[1] != self.in_channels:
-            raise ValueError(
-                f"Generator expects a photo of shape (B, {self.in_channels}, H, W), got {tuple(photo.shape)}"
-            )
+        check_shape(photo, f"B {self.in_channels} H W", name="Generator photo")
         height, width = photo.shape[-2:]
         multiple = self.size_multiple
         # At the bottleneck reflection padding and InstanceNorm need at least 2×2 pixels.

@@ -65,6 +65,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.height import ambient_occlusion, height_from_normals
 from brdfgan.core.svbrdf import (
     diffuse_albedo,
@@ -205,8 +206,7 @@ def texture_set(maps: Tensor, options: ExportOptions, relief: Relief | None = No
     Shape:
         - maps: ``(8, H, W)``, layout of :mod:`brdfgan.core.svbrdf`
     """
-    if maps.ndim != 3:
-        raise ExportError(f"expected one map set of shape (8, H, W), got {tuple(maps.shape)}")
+    check_shape(maps, "8 H W", name="maps (one map set)", error=ExportError)
     validate_maps(maps)
     # float32 is exact enough for 16-bit PNG and half EXR, and half the memory of float64 at 4096².
     parts = split_maps(maps.detach().to("cpu", torch.float32))
