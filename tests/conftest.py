@@ -76,10 +76,20 @@ def tiny_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-def run_train_py(*args: str, cwd: Path, project_root: Path) -> subprocess.CompletedProcess[str]:
-    """``python train.py ARGS`` in a subprocess with ``PROJECT_ROOT`` at ``project_root`` (where
-    its data and logs go) and this checkout's sources first on the path."""
-    env = {**os.environ, "PYTHONPATH": str(CONF.parent / "src"), "PROJECT_ROOT": str(project_root),
+# The project's entry points: run_python resolves them to this checkout's scripts.
+ENTRY_POINTS = ("train.py", "evaluate.py", "generate.py")
+
+
+def run_python(
+    *args: str, cwd: Path, project_root: Path | None = None, timeout: float = 600
+) -> subprocess.CompletedProcess[str]:
+    """``python ARGS`` in a subprocess, as a user runs this checkout's commands: its sources first
+    on the path, ``PROJECT_ROOT`` (where data and logs go) at ``project_root`` or else ``cwd``,
+    W&B silent. A first argument naming an entry point (``train.py``, ``evaluate.py``,
+    ``generate.py``) runs that script of this checkout; ``-m brdfgan.cli …`` runs the console."""
+    root = CONF.parent
+    command = [str(root / args[0]), *args[1:]] if args and args[0] in ENTRY_POINTS else list(args)
+    env = {**os.environ, "PYTHONPATH": str(root / "src"), "PROJECT_ROOT": str(project_root or cwd),
            "WANDB_SILENT": "true"}  # fmt: skip
-    return subprocess.run([sys.executable, str(CONF.parent / "train.py"), *args], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=600)  # fmt: skip
+    return subprocess.run([sys.executable, *command], cwd=cwd, env=env, capture_output=True, text=True,
+                          timeout=timeout)  # fmt: skip

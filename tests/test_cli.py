@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -21,7 +19,7 @@ from brdfgan.errors import (
     run_reporting_errors,
 )
 from brdfgan.runs import load_weights
-from tests.conftest import random_maps
+from tests.conftest import random_maps, run_python
 
 COMMANDS = (
     "predict", "export-weights", "contact-sheet", "convert-deschaintre", "report", "references",
@@ -106,7 +104,6 @@ def test_references_writes_the_three_weight_files(tmp_path: Path, capsys: pytest
 
 
 def test_a_user_error_is_one_line_from_the_console_script(tmp_path: Path) -> None:
-    result = subprocess.run([sys.executable, "-m", "brdfgan.cli", "report", str(tmp_path)],
-                            capture_output=True, text=True, timeout=120)  # fmt: skip
+    result = run_python("-m", "brdfgan.cli", "report", str(tmp_path), cwd=tmp_path)
     assert result.returncode == USER_ERROR_EXIT_CODE
     assert result.stderr.startswith("error: ") and result.stderr.count("\n") == 1, result.stderr

@@ -3,9 +3,6 @@ anything is built (brdfgan.config_check), for train.py, evaluate.py and their gr
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -14,7 +11,7 @@ from omegaconf import OmegaConf
 
 from brdfgan.config_check import ConfigValueError, check_config, describe, fits
 from brdfgan.training.run import CHECKED_GROUPS, train
-from tests.conftest import compose_train
+from tests.conftest import compose_train, run_python
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -82,12 +79,6 @@ def test_fits_and_describe_on_the_annotation_kinds() -> None:
         check_config(node, ["x"])
 
 
-def _run(script: str, *args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "PROJECT_ROOT": str(cwd)}
-    return subprocess.run([sys.executable, str(ROOT / script), *args], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=300)  # fmt: skip
-
-
 def test_train_and_evaluate_print_one_line_and_exit_2(tmp_path: Path) -> None:
     cases = [
         (
@@ -109,7 +100,7 @@ def test_train_and_evaluate_print_one_line_and_exit_2(tmp_path: Path) -> None:
     ]
     for script, args, message in cases:
         began = time.monotonic()
-        result = _run(script, *args, cwd=tmp_path)
+        result = run_python(script, *args, cwd=tmp_path)
         assert result.returncode == 2, result.stderr[-2000:]
         assert "Traceback" not in result.stderr
         lines = [line for line in result.stderr.splitlines() if line.strip()]

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import glob
 import json
-import os
 import socket
 import struct
 import subprocess
@@ -27,7 +26,7 @@ from brdfgan.figures import HEADER_HEIGHT, with_column_header
 from brdfgan.models.generator import Generator
 from brdfgan.models.reference import ConstantMaps
 from brdfgan.tracking import run_identity, with_identity
-from tests.conftest import run_train_py
+from tests.conftest import run_python
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -132,7 +131,8 @@ def test_tensorboard_server_shows_scalars_prediction_grids_and_hparams(
     tiny_data: Path, tensorboard_server: tuple[str, Path]
 ) -> None:
     url, logdir = tensorboard_server
-    result = run_train_py(
+    result = run_python(
+        "train.py",
         "debug=default",
         "logger=tensorboard",
         "seed=4",
@@ -222,8 +222,9 @@ def test_sweep_of_a_dozen_overrides_logs_each_job_to_its_own_wandb_run_and_repor
         "callbacks.mid_epoch_checkpoint.every_n_train_steps=0", "trainer.accelerator=cpu",
         "trainer.devices=1",
     ]  # fmt: skip
-    result = run_train_py("-m", "debug=default", "logger=wandb", "loss=full,no_adv", "seed=0,1", *budget,
-                    f"hydra.sweep.dir={sweep}", cwd=tiny_data, project_root=tiny_data)  # fmt: skip
+    result = run_python("train.py", "-m", "debug=default", "logger=wandb", "loss=full,no_adv", "seed=0,1",
+                        *budget, f"hydra.sweep.dir={sweep}", cwd=tiny_data,
+                        project_root=tiny_data)  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
     jobs = sorted(path.name for path in sweep.iterdir() if path.is_dir())
     assert jobs == [
@@ -248,9 +249,7 @@ def test_sweep_of_a_dozen_overrides_logs_each_job_to_its_own_wandb_run_and_repor
         media = Path(run_file).parent / "files" / "media" / "images"
         assert list((media / "val").glob("grid_*.png")) and list((media / "test").glob("grid_*.png"))
 
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
-    report = subprocess.run([sys.executable, "-m", "brdfgan.cli", "report", str(sweep)], env=env,
-                            capture_output=True, text=True, timeout=120)  # fmt: skip
+    report = run_python("-m", "brdfgan.cli", "report", str(sweep), cwd=tiny_data)
     assert report.returncode == 0, report.stderr[-2000:]
     assert "4 runs grouped by loss" in report.stdout
     lines = report.stdout.splitlines()

@@ -4,8 +4,6 @@
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 from functools import partial
 from pathlib import Path
 from types import SimpleNamespace
@@ -20,7 +18,7 @@ from brdfgan.data.datamodule import ShardDataModule
 from brdfgan.data.generation import SPEC_FILE, DatasetConfigError, ensure_dataset, run_generation
 from brdfgan.models.generator import Generator
 from brdfgan.runs import save_weights
-from tests.conftest import compose_train
+from tests.conftest import compose_train, run_python
 from tests.test_generation import tiny_spec, torch_photographer
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -142,12 +140,6 @@ def test_a_complete_dataset_elsewhere_is_read_and_a_partial_one_refused(
     assert (elsewhere / SPEC_FILE).is_file() and not home.exists()
 
 
-def _cli(script: str, *args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "PROJECT_ROOT": str(cwd), "WANDB_SILENT": "true"}
-    return subprocess.run([sys.executable, str(ROOT / script), *args], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=600)  # fmt: skip
-
-
 @pytest.mark.parametrize("script", ["train.py", "evaluate.py"])
 def test_train_and_evaluate_refuse_a_mistyped_data_dir_with_one_line(tmp_path: Path, script: str) -> None:
     missing = tmp_path / "nonexistent"
@@ -159,7 +151,7 @@ def test_train_and_evaluate_refuse_a_mistyped_data_dir_with_one_line(tmp_path: P
         weights = save_weights(tmp_path / "w.safetensors", Generator(**config), model_id="t", config=config,
                                target="brdfgan.models.generator.Generator")  # fmt: skip
         args = [f"ckpt={weights}", "data=tiny"]
-    result = _cli(script, *args, f"data.data_dir={missing}", cwd=tmp_path)
+    result = run_python(script, *args, f"data.data_dir={missing}", cwd=tmp_path)
     assert result.returncode == 2, result.stderr[-3000:]
     errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and errors[0].startswith(f"error: data.data_dir={missing}: no dataset there")

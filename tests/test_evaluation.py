@@ -4,9 +4,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
-import subprocess
-import sys
 from functools import partial
 from pathlib import Path
 
@@ -33,6 +30,7 @@ from brdfgan.report import (
     write_report,
 )
 from brdfgan.runs import WeightsError, load_generator, load_weights, save_weights
+from tests.conftest import run_python
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = "brdfgan.models.generator.Generator"
@@ -148,15 +146,9 @@ def test_runs_are_grouped_by_every_key_that_varies_and_duplicates_are_kept(
     ] == "loss,model.generator.width,n,diffuse"
 
 
-def _cli(script: str, *args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "PROJECT_ROOT": str(cwd)}
-    return subprocess.run([sys.executable, str(ROOT / script), *args], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=600)  # fmt: skip
-
-
 @pytest.mark.mitsuba
 def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> None:
-    trained = _cli("train.py", "debug=default", "task_name=evaltest", cwd=tiny_data)
+    trained = run_python("train.py", "debug=default", "task_name=evaltest", cwd=tiny_data)
     assert trained.returncode == 0, trained.stderr[-3000:]
     run = sorted((tiny_data / "logs" / "evaltest" / "runs").iterdir())[-1]
     metrics = json.loads((run / "metrics.json").read_text())["model"]
@@ -166,8 +158,8 @@ def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> N
     weights = save_weights(tiny_data / "model.safetensors", generator, target=meta["target"],
                            config=meta["config"], model_id="smoke")  # fmt: skip
 
-    result = _cli("evaluate.py", "data=tiny", f"ckpt={{ours: {ckpt}, exported: {weights}}}", "grid_samples=2",
-                  "logger=many", cwd=tiny_data)  # fmt: skip
+    result = run_python("evaluate.py", "data=tiny", f"ckpt={{ours: {ckpt}, exported: {weights}}}",
+                        "grid_samples=2", "logger=many", cwd=tiny_data)  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
     out = sorted((tiny_data / "logs" / "evaluate" / "runs").iterdir())[-1]
     outputs = ("metrics.json", "metrics.csv", "metrics.md", "rmse.png", "grid_ours.png", "grid_exported.png")
@@ -182,14 +174,13 @@ def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> N
     assert "ours/rmse/diffuse" in logged and "exported/rerender_rmse" in logged
     assert list((out / "tensorboard").rglob("events.out.tfevents.*"))
 
-    bad = _cli("evaluate.py", "data=tiny", "ckpt=/nonexistent.ckpt", cwd=tiny_data)
+    bad = run_python("evaluate.py", "data=tiny", "ckpt=/nonexistent.ckpt", cwd=tiny_data)
     assert bad.returncode == 2 and "checkpoint not found" in bad.stderr and "Traceback" not in bad.stderr
 
     # The run exports to the weights `brdfgan predict` loads: fp16 tensors, architecture and summary.
     shipped = tiny_data / "shipped" / "smoke.safetensors"
-    exported = subprocess.run([sys.executable, "-m", "brdfgan.cli", "export-weights", str(run), "--out",
-                               str(shipped), "--model-id", "smoke-v1", "--hardware", "test CPU"],
-                              capture_output=True, text=True, timeout=300)  # fmt: skip
+    exported = run_python("-m", "brdfgan.cli", "export-weights", str(run), "--out", str(shipped),
+                          "--model-id", "smoke-v1", "--hardware", "test CPU", cwd=tiny_data)  # fmt: skip
     assert exported.returncode == 0, exported.stderr[-2000:]
     model = load_model(shipped)
     assert model.model_id == "smoke-v1" and model.resolution == 64  # the tiny dataset's resolution
@@ -207,8 +198,7 @@ def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> N
         assert all(handle.get_tensor(k).dtype == torch.float16 for k in handle.keys() if "weight" in k)  # noqa: SIM118 (not iterable)
     photo = torch.rand(1, 3, 64, 64)
     assert torch.allclose(model.generator(photo), generator.eval()(photo), atol=2e-2)  # fp16 rounding
-    missing = subprocess.run([sys.executable, "-m", "brdfgan.cli", "export-weights", str(tiny_data)],
-                             capture_output=True, text=True, timeout=300)  # fmt: skip
+    missing = run_python("-m", "brdfgan.cli", "export-weights", str(tiny_data), cwd=tiny_data)
     assert missing.returncode == 2 and "not a training run directory" in missing.stderr
 
 
@@ -218,14 +208,14 @@ def test_baseline_trains_and_is_evaluated_by_the_same_commands(tiny_data: Path) 
     baseline = ["model=deschaintre2018", "model.generator.levels=6"]
     baseline += ["loss=no_adv", "loss.switches.feature=false"]
     baseline += ["data=tiny", "trainer.max_epochs=1", "trainer.num_sanity_val_steps=0", "task_name=baseline"]
-    trained = _cli("train.py", *baseline, cwd=tiny_data)
+    trained = run_python("train.py", *baseline, cwd=tiny_data)
     assert trained.returncode == 0, trained.stderr[-3000:]
     run = sorted((tiny_data / "logs" / "baseline" / "runs").iterdir())[-1]
     assert "rmse/diffuse" in json.loads((run / "metrics.json").read_text())["model"]
     ckpt = run / "checkpoints" / "last.ckpt"
     _, meta = load_generator(ckpt)
     assert meta["target"] == "brdfgan.models.deschaintre2018.Deschaintre2018"
-    result = _cli("evaluate.py", "data=tiny", f"ckpt={{deschaintre2018: {ckpt}}}", "grid_samples=1",
+    result = run_python("evaluate.py", "data=tiny", f"ckpt={{deschaintre2018: {ckpt}}}", "grid_samples=1",
                   "task_name=baseline_eval", cwd=tiny_data)  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
     out = sorted((tiny_data / "logs" / "baseline_eval" / "runs").iterdir())[-1]
@@ -345,7 +335,7 @@ def test_checkpoint_of_another_architecture_is_a_clear_error(tmp_path: Path) -> 
 def test_evaluating_an_empty_split_names_the_folder(tmp_path: Path) -> None:
     generator, config = tiny_generator()
     weights = save_weights(tmp_path / "w.safetensors", generator, target=TARGET, config=config, model_id="t")
-    result = _cli("evaluate.py", "data=deschaintre", f"ckpt={weights}", cwd=tmp_path)
+    result = run_python("evaluate.py", "data=deschaintre", f"ckpt={weights}", cwd=tmp_path)
     assert result.returncode == 2, result.stderr[-2000:]
     assert f"no shards in {tmp_path}/data/deschaintre/test" in result.stderr
     assert "Traceback" not in result.stderr

@@ -5,11 +5,8 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import os
 import re
 import shutil
-import subprocess
-import sys
 import tarfile
 from collections import Counter
 from collections.abc import Mapping
@@ -50,6 +47,7 @@ from brdfgan.data.shards import (
     write_manifest,
 )
 from brdfgan.io.images import write_image
+from tests.conftest import run_python
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -353,14 +351,6 @@ def test_end_to_end_mitsuba_generation_feeds_the_datamodule(tmp_path: Path) -> N
     assert isinstance(MitsubaPhotographer(spec).renderer.variant, str)
 
 
-def _generate_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
-    return subprocess.run(
-        [sys.executable, str(ROOT / "generate.py"), *args, "progress=false"],
-        cwd=cwd, env=env, capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
-
-
 @pytest.mark.parametrize(
     ("override", "message"),
     [
@@ -377,8 +367,10 @@ def test_cli_bad_input_is_one_line_and_writes_nothing(tmp_path: Path, override: 
     override = override.replace("EMPTY", str(empty))
     message = message.replace("EMPTY", str(empty))
     prefix = "+" if "no_such_key" in override else ""
-    result = _generate_cli(
+    result = run_python(
+        "generate.py",
         "dataset_spec=tiny",
+        "progress=false",
         f"out_dir={tmp_path / 'out'}",
         *(prefix + o for o in override.split()),
         cwd=tmp_path,
@@ -391,7 +383,7 @@ def test_cli_bad_input_is_one_line_and_writes_nothing(tmp_path: Path, override: 
 
 
 def test_cli_plan_lists_every_shard(tmp_path: Path) -> None:
-    result = _generate_cli("dataset_spec=tiny", "plan=true", cwd=tmp_path)
+    result = run_python("generate.py", "dataset_spec=tiny", "plan=true", "progress=false", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert "shards; run them all with: python generate.py -m shard='range(0," in result.stdout
     assert json.dumps("train")[1:-1] in result.stdout

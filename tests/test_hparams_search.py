@@ -17,7 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 from optuna.distributions import CategoricalDistribution
 
 from brdfgan.sweep_folders import JOB_FOLDER_MAX_LENGTH
-from tests.conftest import CONF, run_train_py
+from tests.conftest import CONF, run_python
 
 ROOT = Path(__file__).resolve().parents[1]
 OPTUNA_SWEEPER = "hydra_plugins.hydra_optuna_sweeper.optuna_sweeper.OptunaSweeper"
@@ -84,7 +84,7 @@ def test_two_trials_on_the_tiny_data_record_the_best_parameters(tiny_data: Path,
         "trainer.max_epochs=1", "trainer.limit_train_batches=2", "trainer.limit_val_batches=1",
         "test=false", "logger=csv", f"hydra.sweep.dir={sweep}",
     ]  # fmt: skip
-    result = run_train_py("-m", *overrides, cwd=tmp_path, project_root=tiny_data)
+    result = run_python("train.py", "-m", *overrides, cwd=tmp_path, project_root=tiny_data)
     assert result.returncode == 0, result.stderr[-3000:]
 
     searched = set(_compose(["hparams_search=svbrdf_optuna"]).hydra.sweeper.params)

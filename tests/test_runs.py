@@ -7,9 +7,6 @@ the project's own network classes with plain arguments. The crafted configs belo
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +22,7 @@ from brdfgan.runs import (
     network_from_config,
     save_weights,
 )
+from tests.conftest import run_python
 
 ROOT = Path(__file__).resolve().parents[1]
 GENERATOR = "brdfgan.models.generator.Generator"
@@ -93,22 +91,15 @@ def test_a_crafted_run_config_is_refused_without_running_anything(tmp_path: Path
     _untouched(tmp_path)
 
 
-def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "PROJECT_ROOT": str(cwd)}
-    return subprocess.run(
-        [sys.executable, *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=300
-    )
-
-
 def test_evaluate_and_export_weights_refuse_a_crafted_run_in_one_line(tmp_path: Path) -> None:
     node, _ = _evil_nodes(tmp_path)["pickle"]
     run, checkpoint = _crafted_run(tmp_path, node)
     expected = f"error: {run.resolve()}/.hydra/config.yaml: not a brdfgan model config (torch.load)"
     for command in (
-        [str(ROOT / "evaluate.py"), f"ckpt={checkpoint}", "data=tiny"],
+        ["evaluate.py", f"ckpt={checkpoint}", "data=tiny"],
         ["-m", "brdfgan.cli", "export-weights", str(run)],
     ):
-        result = _cli(*command, cwd=tmp_path)
+        result = run_python(*command, cwd=tmp_path)
         assert result.returncode == 2, result.stderr[-2000:]
         assert result.stderr.strip().splitlines()[-1] == expected
         assert "Traceback" not in result.stderr
@@ -164,11 +155,8 @@ def test_predict_refuses_a_crafted_weights_file_in_one_line(tmp_path: Path) -> N
     weights = save_weights(tmp_path / "evil.safetensors", generator, target="builtins.open",
                            config={"file": str(victim), "mode": "w"}, model_id="x")  # fmt: skip
     photo = ROOT / "src" / "brdfgan" / "samples" / "bricks.jpg"
-    result = subprocess.run(
-        [sys.executable, "-m", "brdfgan.cli", "predict", str(photo), "--weights", str(weights), "--out",
-         str(tmp_path / "out")], capture_output=True, text=True, timeout=300,
-        env={**os.environ, "PYTHONPATH": str(ROOT / "src")},
-    )  # fmt: skip
+    result = run_python("-m", "brdfgan.cli", "predict", str(photo), "--weights", str(weights), "--out",
+                        str(tmp_path / "out"), cwd=tmp_path)  # fmt: skip
     assert result.returncode == 2, result.stderr[-2000:]
     assert f"error: {weights}: not a brdfgan model config (builtins.open)" in result.stderr
     assert "Traceback" not in result.stderr and victim.read_text() == "precious"

@@ -10,7 +10,7 @@ from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from brdfgan.sweep_folders import JOB_FOLDER_MAX_LENGTH, job_folder_name
-from tests.conftest import CONF, run_train_py
+from tests.conftest import CONF, run_python
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -50,7 +50,7 @@ def test_a_multirun_with_a_dozen_overrides_gets_short_folders_that_evaluate_acce
         "model.generator.residual_blocks=2",
         "train=false", "test=false",
     ]  # fmt: skip
-    result = run_train_py("-m", *overrides, cwd=tmp_path, project_root=tmp_path)
+    result = run_python("train.py", "-m", *overrides, cwd=tmp_path, project_root=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
     jobs = sorted(p for p in (tmp_path / "logs" / "train" / "multiruns").glob("*/*") if p.is_dir())
     assert [job.name.split("_")[0] for job in jobs] == ["0", "1"]

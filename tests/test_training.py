@@ -4,10 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import hydra
@@ -22,7 +19,7 @@ from torch import nn
 from brdfgan.config_check import ConfigValueError
 from brdfgan.training.run import TrainConfigError, build, train, warm_start
 from brdfgan.training.schedule import LinearDecaySchedule
-from tests.conftest import compose_train
+from tests.conftest import compose_train, run_python
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = ROOT / "conf"
@@ -243,17 +240,9 @@ def test_resume_continues_with_the_same_step_count_and_lr(tiny_data: Path, tmp_p
     assert list((tmp_path / "interrupted" / "checkpoints").glob("epoch*.ckpt"))
 
 
-def _train_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "PROJECT_ROOT": str(cwd)}
-    return subprocess.run(
-        [sys.executable, str(ROOT / "train.py"), *args], cwd=cwd, env=env, capture_output=True, text=True,
-        timeout=600,
-    )  # fmt: skip
-
-
 @pytest.mark.mitsuba
 def test_train_py_runs_the_loop_and_returns_the_metric(tiny_data: Path) -> None:
-    result = _train_cli("debug=default", cwd=tiny_data)
+    result = run_python("train.py", "debug=default", cwd=tiny_data)
     assert result.returncode == 0, result.stderr[-3000:]
     runs = sorted((tiny_data / "logs" / "debug" / "runs").iterdir())
     checkpoints = {p.name for p in (runs[-1] / "checkpoints").iterdir()}
@@ -264,7 +253,7 @@ def test_train_py_runs_the_loop_and_returns_the_metric(tiny_data: Path) -> None:
 @pytest.mark.mitsuba
 def test_train_py_prints_each_log_line_once_and_not_the_whole_config(tiny_data: Path) -> None:
     # Lightning's own stderr handler used to print every line a second time beside Hydra's console.
-    result = _train_cli("debug=fdr", "task_name=once", "seed=3", cwd=tiny_data)
+    result = run_python("train.py", "debug=fdr", "task_name=once", "seed=3", cwd=tiny_data)
     assert result.returncode == 0, result.stderr[-3000:]
     console = result.stdout + result.stderr
     assert console.count("Seed set to 3") == 1
@@ -296,15 +285,15 @@ def test_bad_run_input_is_a_user_error_before_any_work(
 
 def test_train_py_reports_a_user_error_in_one_line(tmp_path: Path) -> None:
     # The command-line property the in-process cases above rely on: one line, exit 2, no traceback.
-    result = _train_cli("debug=default", "ckpt_path=/nonexistent.ckpt", cwd=tmp_path)
+    result = run_python("train.py", "debug=default", "ckpt_path=/nonexistent.ckpt", cwd=tmp_path)
     assert result.returncode == 2, result.stderr[-2000:]
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert lines == ["error: ckpt_path: checkpoint /nonexistent.ckpt does not exist"], result.stderr[-2000:]
 
 
 def test_ablation_sweep_config_lists_the_grid(tmp_path: Path) -> None:
-    result = _train_cli("--config-dir", str(ROOT / "sweeps"), "--config-name", "ablation", "--cfg", "hydra",
-                        cwd=tmp_path)  # fmt: skip
+    result = run_python("train.py", "--config-dir", str(ROOT / "sweeps"), "--config-name", "ablation",
+                        "--cfg", "hydra", cwd=tmp_path)  # fmt: skip
     assert result.returncode == 0, result.stderr[-2000:]
     assert "loss: full,no_adv,no_feat,no_param,no_render" in result.stdout
     assert "seed: 0,1,2" in result.stdout
@@ -315,7 +304,7 @@ def test_ablation_sweep_config_lists_the_grid(tmp_path: Path) -> None:
 def test_ddp_on_two_cpu_processes_trains_and_tests(tiny_data: Path) -> None:
     # The paper trains with DDP; two gloo processes on the CPU exercise the same code path:
     # per-rank shard splitting, both networks in one module, toggled optimizers.
-    result = _train_cli(
+    result = run_python("train.py",
         "debug=default", "trainer.devices=2", "+trainer.strategy=ddp_find_unused_parameters_true",
         "task_name=ddp", cwd=tiny_data,
     )  # fmt: skip
