@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 import re
+import warnings
 from pathlib import Path
 
 import hydra
@@ -19,7 +20,7 @@ from torch import nn
 from brdfgan.config_check import ConfigValueError
 from brdfgan.training.run import TrainConfigError, build, train, warm_start
 from brdfgan.training.schedule import LinearDecaySchedule
-from tests.conftest import compose_train, run_python
+from tests.conftest import compose_train, random_maps, run_python
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = ROOT / "conf"
@@ -94,6 +95,25 @@ def test_without_adversarial_and_feature_terms_there_is_no_discriminator(tmp_pat
     cfg = compose_train(["loss=full"], tmp_path)
     _, module, _ = build(cfg)
     assert module.discriminator is not None
+
+
+def test_validation_loss_renders_every_sample_under_the_same_fixed_lights(tmp_path: Path) -> None:
+    # val/loss is a per-sample quantity: the batch's value is the mean of its samples' values,
+    # whatever the batch size or position, and the same on every call.
+    _, module, _ = build(compose_train(["debug=default", "loss=supervised", "loss.compile=false"], tmp_path))
+    module.eval()
+    torch.manual_seed(0)
+    photos, maps = torch.rand(3, 3, 32, 32), random_maps(32, 32, batch=(3,))
+
+    def val_loss(index: list[int]) -> float:
+        with torch.no_grad(), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # self.log outside a Trainer
+            return float(module.validation_step({"photo": photos[index], "maps": maps[index]}, 7))
+
+    each = [val_loss([i]) for i in range(3)]
+    assert val_loss([0, 1, 2]) == pytest.approx(sum(each) / 3, rel=1e-5)
+    assert val_loss([2, 0]) == pytest.approx((each[2] + each[0]) / 2, rel=1e-5)
+    assert len(set(each)) == 3  # the samples differ, so the check above can fail
 
 
 def test_linear_decay_schedule() -> None:

@@ -72,6 +72,28 @@ class RenderConfigs:
     camera_position: Tensor
     lights: PointLights
 
+    def expand(self, batch: int) -> RenderConfigs:
+        """The configurations of a batch of 1 shared by every sample of a batch of ``batch``
+        (views, not copies).
+
+        Shape:
+            - self: camera ``(1, V, 3)``, lights ``(1, V, K, ·)``
+            - output: camera ``(batch, V, 3)``, lights ``(batch, V, K, ·)``
+        """
+        if self.camera_position.shape[0] != 1:
+            raise ValueError(
+                f"expand needs configurations of a batch of 1, got {self.camera_position.shape[0]}"
+            )
+        lights = self.lights
+        return RenderConfigs(
+            camera_position=self.camera_position.expand(batch, -1, -1),
+            lights=PointLights(
+                position=lights.position.expand(batch, -1, -1, -1),
+                intensity=lights.intensity.expand(batch, -1, -1),
+                color=lights.color.expand(batch, -1, -1, -1),
+            ),
+        )
+
 
 def sample_cosine_hemisphere(
     shape: tuple[int, ...], generator: torch.Generator | None = None, **kw: Any

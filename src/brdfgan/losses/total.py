@@ -139,6 +139,7 @@ class GANLoss(nn.Module):
         self.switches = switches
         self.seed = seed
         self.rendering_sampling = rendering_sampling
+        self.plane_half_size = plane_half_size
         self.feature_layers = feature_layers
         self.weight = weight
         self.feature_weight = feature_weight

@@ -31,19 +31,20 @@ from torch.optim.lr_scheduler import LambdaLR
 from torch.profiler import record_function
 from torchmetrics import MetricCollection
 
-from brdfgan.core.sampling import sample_rendering_loss_configs
 from brdfgan.errors import UserError
 from brdfgan.losses.parameter import parameter_loss
 from brdfgan.losses.rendering import rendering_loss
 from brdfgan.losses.total import GANLoss
-from brdfgan.metrics import hotspot_centres
+from brdfgan.metrics import fixed_render_configs, hotspot_centres
 from brdfgan.training.schedule import LinearDecaySchedule
 
 log = logging.getLogger(__name__)
 
 OptimizerFactory = Callable[..., Optimizer]
 
-# Validation renders under fixed configurations so every epoch and every model is compared alike.
+# Seed of the light/view configurations val/loss and test/loss render under: drawn once
+# (fixed_render_configs, the evaluation metrics' draw), so every batch, batch size, epoch and model
+# is compared under the same lights.
 VALIDATION_RENDER_SEED = 2019
 # Where a checkpoint keeps the random generators' states (see on_save_checkpoint).
 RNG_STATE_KEY = "brdfgan_rng_states"
@@ -272,16 +273,14 @@ class SVBRDFGAN(L.LightningModule):
 
     # -- evaluation --------------------------------------------------------------------------
 
-    def _evaluate(self, batch: Mapping[str, Any], batch_idx: int, stage: str) -> Tensor:
+    def _evaluate(self, batch: Mapping[str, Any], stage: str) -> Tensor:
         photo, maps = self._inputs(batch)
         fake = self.generator(photo, batch.get("flash"))
         terms = parameter_loss(fake, maps)
-        configs = sample_rendering_loss_configs(
-            photo.shape[0],
-            self.loss.rendering_sampling,
-            generator=torch.Generator().manual_seed(VALIDATION_RENDER_SEED + batch_idx),
-        )
-        terms["render"] = rendering_loss(fake, maps, configs)
+        configs = fixed_render_configs(
+            self.loss.rendering_sampling.num_configs, VALIDATION_RENDER_SEED, self.loss.plane_half_size
+        ).expand(photo.shape[0])
+        terms["render"] = rendering_loss(fake, maps, configs, self.loss.plane_half_size)
         terms["loss"] = terms["param"] + terms["render"]
         metrics = self.val_metrics if stage == "val" else self.test_metrics
         if metrics is not None:
@@ -314,7 +313,7 @@ class SVBRDFGAN(L.LightningModule):
         self._log_metrics("test")
 
     def validation_step(self, batch: Mapping[str, Any], batch_idx: int) -> Tensor:
-        return self._evaluate(batch, batch_idx, "val")
+        return self._evaluate(batch, "val")
 
     def test_step(self, batch: Mapping[str, Any], batch_idx: int) -> Tensor:
-        return self._evaluate(batch, batch_idx, "test")
+        return self._evaluate(batch, "test")
