@@ -1,4 +1,4 @@
-"""The README's TensorBoard screenshots: a tiny sweep's images and HParams pages, taken with
+"""The TensorBoard screenshots of docs/training.md: a tiny sweep's images and HParams pages, taken with
 headless Chromium (Debian's, installed by ``make setup`` as root).
 
     python scripts/dashboard_screenshots.py [--out docs] [--work /tmp/brdfgan-dashboards]

@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
-# Reproduces the shipped default model (brdfgan-default-v3) and the README section "Default model":
+# Reproduces the shipped default model (brdfgan-default-v3) and its measurements (docs/default_model_v3.md):
 # the v3 dataset, v3, a second seed of its recipe, the same-budget baseline, the trivial references, the evaluation on the
 # procedural test split and on the out-of-distribution benchmark, the export into the package.
 # One training at a time on the two threads (two side by side each ran at 40-60 % speed).
 # About 2.5 hours on the 2-core CPU machine this project was developed on (no GPU); the
-# equal-wall-time comparisons that chose the recipe are in README "Towards v3" (logs/v3cmp).
+# equal-wall-time comparisons that chose the recipe are in docs/default_model_v3.md, "How the v3 recipe was chosen" (logs/v3cmp).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=.venv/bin/python

@@ -1,4 +1,4 @@
-"""The README's qualitative figure from evaluate.py's per-model grids.
+"""A qualitative figure (docs/default_model_grid.png) from evaluate.py's per-model grids.
 
     python scripts/grid_figure.py EVAL_DIR OUT.png [--models gan baseline] [--panel 96]
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Install Debian's Chromium (headless browser) for the browser tests and the README's screenshots
-# (scripts/dashboard_screenshots.py: TensorBoard's pages for the README).
+# Install Debian's Chromium (headless browser) for the browser tests and the docs' screenshots
+# (scripts/dashboard_screenshots.py: TensorBoard's pages for docs/training.md).
 # Optional tooling: this script always exits 0, so a machine without root or apt still builds;
 # the browser tests then skip with a reason.
 set -u

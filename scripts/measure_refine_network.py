@@ -17,7 +17,7 @@ It runs ``evaluate.py`` with this fine-tuning in place of ``--refine`` for the
 
 ``FT_PART``: ``all`` (every weight), ``up`` (the decoder and the output layer) or ``out`` (the
 output layer only). ~13 s per photo at 256² and 60 steps with every weight (2 threads).
-Not part of the package: it did not pass validation (README "Test-time refinement").
+Not part of the package: it did not pass validation (docs/refinement.md).
 """
 
 from __future__ import annotations

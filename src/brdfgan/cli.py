@@ -225,7 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="STEPS",
         help="fit one offset per map (base colour, roughness, metallic), the exposure and the ambient "
         "light to the photo with the differentiable renderer: relit views come closer to the "
-        "surface's, the roughness map moves away from the true one (README); STEPS Adam steps "
+        "surface's, the roughness map moves away from the true one (docs/refinement.md); STEPS Adam steps "
         f"(default {DEFAULT_REFINE_STEPS} when given bare; ~4 s per photo at 256² on 2 CPU cores)",
     )
     predict.add_argument(

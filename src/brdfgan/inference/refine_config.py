@@ -19,8 +19,8 @@ class RefineConfig:
     and the maps' spatial detail (``pixel_maps=False, material_grid=1``, no pulls toward the
     prediction): 60 Adam steps at learning rate 0.02. Chosen in session 5 on the validation split
     of the v3 data (never on the test split or the OOD benchmark), shipped model, by the rule "the
-    largest novel-light gain that raises no map's RMSE by more than 5 %" (README "Test-time
-    refinement"). First 16 photos, 100 steps, re-render error:
+    largest novel-light gain that raises no map's RMSE by more than 5 %" (docs/refinement.md).
+    First 16 photos, 100 steps, re-render error:
 
     - per pixel (``pixel_maps=True, prior_weight=1, normal_prior_weight=3,
       material_prior_weight=1, low_frequency_weight=1, learning_rate=0.05``, the first default):
