@@ -56,7 +56,7 @@ demo: setup
 
 # The foundation demo: our renderer against Mitsuba 3 on the same maps.
 demo-renderer: setup
-	$(PY) -m brdfgan.demo
+	$(PY) -m brdfgan.renderer_demo
 
 lint: setup
 	$(PY) -m ruff check src tests benchmarks faults *.py

@@ -5,8 +5,8 @@ from pathlib import Path
 
 import pytest
 
-from brdfgan.demo import main
 from brdfgan.io.maps import read_maps
+from brdfgan.renderer_demo import main
 
 pytestmark = pytest.mark.mitsuba
 

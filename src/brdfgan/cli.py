@@ -571,7 +571,7 @@ def report_command(args: argparse.Namespace) -> int:
 
 
 def references_command(args: argparse.Namespace) -> int:
-    from brdfgan.references import REFERENCE_NAMES, write_reference_weights
+    from brdfgan.reference_weights import REFERENCE_NAMES, write_reference_weights
 
     for path in write_reference_weights(args.data_dir, args.out, args.only or REFERENCE_NAMES):
         print(path)

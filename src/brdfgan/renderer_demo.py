@@ -1,8 +1,8 @@
-"""`make demo`: render a map set as a flash photograph with both renderers and save everything.
+"""`make demo-renderer`: one map set photographed with a flash by both renderers, everything saved.
 
-Until the predict command lands (issue: phone photo → textures), the demo shows the foundation
-end to end: a tile-and-grout map set → map files on disk → the flash photo from the torch
-renderer and from Mitsuba → auto exposure to linear LDR → PNGs, with the agreement printed.
+The foundation end to end: a tile-and-grout map set → map files on disk → the flash photo from
+the torch renderer and from Mitsuba → auto exposure to linear LDR → PNGs, with their agreement
+printed. (`make demo` is `brdfgan predict` on the sample photos.)
 """
 
 from __future__ import annotations
