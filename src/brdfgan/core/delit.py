@@ -45,6 +45,17 @@ def flat_flash_falloff(frame: Tensor, height: int, width: int) -> Tensor:
     Shape:
         - frame: ``(B, 3)`` flash frame ``(x, y, s)``
         - output: ``(B, 1, height, width)`` in ``(0, 1]``, 1 at the hotspot
+
+    Example:
+        A 3 × 3 photo with a 90° field of view: ``s = 2 tan 45° / 3 = 2/3`` per pixel, so a corner
+        pixel is offset by ``(±2/3, ±2/3)`` and receives ``(1 + 8/9)^(−3/2)`` of the hotspot's light:
+
+        >>> from brdfgan.core.flash_geometry import centred_flash_frame
+        >>> falloff = flat_flash_falloff(centred_flash_frame(1, 3, 3, fov_deg=90.0), 3, 3)
+        >>> round(falloff[0, 0, 1, 1].item(), 4), round(falloff[0, 0, 0, 0].item(), 4)
+        (1.0, 0.3852)
+        >>> round((1 + 8 / 9) ** -1.5, 4)
+        0.3852
     """
     offsets = flash_offset_channels(frame, height, width)
     return (1.0 + offsets.square().sum(dim=1, keepdim=True)).pow(-1.5)
@@ -120,6 +131,16 @@ def delit_photo(photo: Tensor, frame: Tensor, *, clip: bool = True) -> Tensor:
         - photo: ``(B, 3, H, W)`` linear LDR
         - frame: ``(B, 3)``
         - output: ``(B, 3, H, W)`` linear, non-negative (not bounded above)
+
+    Example:
+        The flash photo of a flat matte surface of albedo 0.3 (the falloff times 0.3) comes out
+        de-lit as a uniform 0.3:
+
+        >>> from brdfgan.core.flash_geometry import centred_flash_frame
+        >>> frame = centred_flash_frame(1, 5, 5, fov_deg=60.0)
+        >>> photo = 0.3 * flat_flash_falloff(frame, 5, 5).expand(1, 3, 5, 5)
+        >>> torch.allclose(delit_photo(photo, frame), torch.full((1, 3, 5, 5), 0.3))
+        True
     """
     check_shape(photo, "B 3 H W", name="photo")
     check_flash_frame(frame, photo.shape[0])

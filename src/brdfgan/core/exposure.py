@@ -43,6 +43,15 @@ def luminance(rgb: Tensor, dim: int = -3) -> Tensor:
     Shape:
         - rgb: ``(*, 3, H, W)`` (``dim = -3``, images) or ``(*, 3)`` (``dim = -1``, colours)
         - output: ``(*, 1, H, W)`` or ``(*, 1)``
+
+    Example:
+        The Rec. 709 weights sum to 1 (white has luminance 1) and green carries most of it:
+
+        >>> colours = torch.tensor([[1.0, 1.0, 1.0], [0.0, 1.0, 0.0]])
+        >>> [round(v, 4) for v in luminance(colours, dim=-1).flatten().tolist()]
+        [1.0, 0.7152]
+        >>> tuple(luminance(torch.ones(2, 3, 4, 5)).shape)
+        (2, 1, 4, 5)
     """
     if dim >= 0:
         raise ValueError(f"dim must be negative (counted from the end), got {dim}")
@@ -58,7 +67,14 @@ def luminance_value(rgb: Sequence[float] | np.ndarray) -> float:
 
 
 def exposure_value_100(average_luminance: Tensor) -> Tensor:
-    """EV100 = log2(L_avg · S / K). Shape: any → same."""
+    """EV100 = log2(L_avg · S / K). Shape: any → same.
+
+    Example:
+        ``K / S = 0.125`` is EV 0, and every doubling of the luminance is one stop more:
+
+        >>> exposure_value_100(torch.tensor([0.125, 0.25, 1.0])).tolist()
+        [0.0, 1.0, 3.0]
+    """
     return torch.log2(average_luminance * ISO_SPEED / METER_CALIBRATION_K)
 
 
@@ -73,6 +89,15 @@ def auto_exposure_scale(hdr: Tensor) -> Tensor:
     Shape:
         - hdr: ``(*, 3, H, W)`` linear HDR
         - output: ``(*)``
+
+    Example:
+        ``1 / L_max = 1 / (9.6 · L_avg)``, and 0 for a black image:
+
+        >>> scale = auto_exposure_scale(torch.full((1, 3, 2, 2), 5.0))
+        >>> round(scale.item() * 9.6 * 5.0, 4)
+        1.0
+        >>> auto_exposure_scale(torch.zeros(2, 3, 2, 2)).tolist()
+        [0.0, 0.0]
     """
     if not torch.isfinite(hdr).all():
         raise ValueError("HDR image contains NaN or infinite values")
@@ -94,6 +119,18 @@ def auto_expose(hdr: Tensor, exposure_ev: float = 0.0) -> tuple[Tensor, Tensor]:
     Shape:
         - hdr: ``(*, 3, H, W)``
         - output: ldr ``(*, 3, H, W)``, scale ``(*)``
+
+    Example:
+        A uniform image lands at ``1 / 9.6`` whatever its brightness; +1 EV doubles that:
+
+        >>> hdr = torch.full((1, 3, 2, 2), 5.0)
+        >>> ldr, scale = auto_expose(hdr)
+        >>> round(ldr.max().item(), 4), round(ldr.min().item(), 4), round(1 / 9.6, 4)
+        (0.1042, 0.1042, 0.1042)
+        >>> torch.allclose(auto_expose(100.0 * hdr)[0], ldr)
+        True
+        >>> round(auto_expose(hdr, exposure_ev=1.0)[0].max().item(), 4)
+        0.2083
     """
     if not math.isfinite(exposure_ev):
         raise ValueError(f"exposure_ev must be finite, got {exposure_ev}")
@@ -102,5 +139,12 @@ def auto_expose(hdr: Tensor, exposure_ev: float = 0.0) -> tuple[Tensor, Tensor]:
 
 
 def ev100_to_scale(ev100: float) -> float:
-    """The exposure multiplier for a given EV100, for metadata and manual exposure."""
+    """The exposure multiplier for a given EV100, for metadata and manual exposure.
+
+    Example:
+        ``1 / (1.2 · 2^EV100)``:
+
+        >>> round(ev100_to_scale(0.0), 4), round(ev100_to_scale(3.0), 4)
+        (0.8333, 0.1042)
+    """
     return 1.0 / (SATURATION_CONSTANT / (ISO_SPEED * LENS_ATTENUATION_Q) * math.pow(2.0, ev100))

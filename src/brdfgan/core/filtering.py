@@ -27,6 +27,18 @@ def gaussian_blur(image: Tensor, sigma: float, border: Border = "zeros") -> Tens
     Shape:
         - image: ``(B, C, H, W)``
         - output: same
+
+    Example:
+        An impulse spreads into ``exp(−(x² + y²)/2σ²)``, normalised: its centre keeps about
+        ``1 / (2πσ²)`` and the total is kept; a constant image stays constant with ``"reflect"``:
+
+        >>> impulse = torch.zeros(1, 1, 9, 9)
+        >>> impulse[0, 0, 4, 4] = 1.0
+        >>> blurred = gaussian_blur(impulse, 1.0)
+        >>> round(blurred[0, 0, 4, 4].item(), 3), round(1 / (2 * math.pi), 3), round(blurred.sum().item(), 4)
+        (0.159, 0.159, 1.0)
+        >>> torch.allclose(gaussian_blur(torch.ones(1, 2, 5, 5), 2.0, "reflect"), torch.ones(1, 2, 5, 5))
+        True
     """
     if not sigma > 0:
         raise ValueError(f"sigma must be positive, got {sigma}")
@@ -53,6 +65,13 @@ def binomial_blur(image: Tensor) -> Tensor:
     Shape:
         - image: ``(B, C, H, W)``, H and W >= 2
         - output: same
+
+    Example:
+        A checkerboard becomes its mean, borders included:
+
+        >>> checkerboard = (torch.arange(4).view(4, 1) + torch.arange(4)).remainder(2).float()
+        >>> binomial_blur(checkerboard.view(1, 1, 4, 4)).unique().tolist()
+        [0.5]
     """
     check_shape(image, "B C H W", name="image")
     if min(image.shape[-2:]) < 2:

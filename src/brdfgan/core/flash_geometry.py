@@ -58,7 +58,14 @@ def check_flash_frame(frame: Tensor, batch: int | None = None) -> None:
 
 
 def pixel_scale(fov_deg: float, photo_width: float) -> float:
-    """``s`` of a photo ``photo_width`` pixels wide with horizontal field of view ``fov_deg``."""
+    """``s`` of a photo ``photo_width`` pixels wide with horizontal field of view ``fov_deg``.
+
+    Example:
+        ``2 tan(fov/2) / W``: a 90° photo 2 pixels wide spans one camera distance per pixel:
+
+        >>> round(pixel_scale(90.0, 2), 4), round(pixel_scale(90.0, 512), 6)
+        (1.0, 0.003906)
+    """
     if not 0.0 < fov_deg < 180.0 or not photo_width > 0:
         raise ValueError(f"need 0 < fov_deg < 180 and photo_width > 0, got {fov_deg=}, {photo_width=}")
     return 2.0 * math.tan(math.radians(fov_deg) / 2.0) / photo_width
@@ -66,7 +73,14 @@ def pixel_scale(fov_deg: float, photo_width: float) -> float:
 
 def field_of_view(scale: float, photo_width: float) -> float:
     """The horizontal field of view in degrees of a photo ``photo_width`` pixels wide whose frame has
-    scale ``s``: the inverse of :func:`pixel_scale`."""
+    scale ``s``: the inverse of :func:`pixel_scale`.
+
+    Example:
+        >>> round(field_of_view(pixel_scale(57.5, 640), 640), 6)
+        57.5
+        >>> round(field_of_view(1.0, 2), 4)
+        90.0
+    """
     if not scale > 0 or not photo_width > 0:
         raise ValueError(f"need scale > 0 and photo_width > 0, got {scale=}, {photo_width=}")
     return math.degrees(2.0 * math.atan(scale * photo_width / 2.0))
@@ -101,6 +115,13 @@ def centred_flash_frame(
 
     Shape:
         - output: ``(batch, 3)``
+
+    Example:
+        The hotspot at the centre of a 4 × 6 photo, ``s = 2 tan 45° / 6 = 1/3``:
+
+        >>> frame = centred_flash_frame(2, 4, 6, fov_deg=90.0)
+        >>> tuple(frame.shape), [round(v, 4) for v in frame[0].tolist()]
+        ((2, 3), [3.0, 2.0, 0.3333])
     """
     row = [width / 2.0, height / 2.0, pixel_scale(fov_deg, width)]
     return (
@@ -166,6 +187,14 @@ def flash_offset_channels(frame: Tensor, height: int, width: int) -> Tensor:
     Shape:
         - frame: ``(B, 3)`` ``(x, y, s)``
         - output: ``(B, 2, height, width)`` in the frame's dtype and device
+
+    Example:
+        With the hotspot at the centre of a 2 × 2 photo (s = 1), the top-left pixel lies half a
+        camera distance left (−x) and up (+y) of it, the bottom-right one right and down:
+
+        >>> offsets = flash_offset_channels(torch.tensor([[1.0, 1.0, 1.0]]), 2, 2)
+        >>> offsets[0, :, 0, 0].tolist(), offsets[0, :, 1, 1].tolist()
+        ([-0.5, 0.5], [0.5, -0.5])
     """
     check_flash_frame(frame)
     if height < 1 or width < 1:

@@ -43,6 +43,20 @@ def height_from_normals(normal: Tensor, *, periodic: bool = False) -> Tensor:
 
     Shape: ``(..., 3, H, W)`` unit normals → ``(..., H, W)`` heights in sample-side units
     (the width is the side).
+
+    Example:
+        Waves ``h = 0.01 sin 2πx`` across and ``0.01 cos 2πy`` up a periodic 16 × 16 sample, their
+        normals ``∝ (−∂h/∂x, −∂h/∂y, 1)`` (+y up the rows), integrate back to the heights:
+
+        >>> t = (torch.arange(16, dtype=torch.float64) + 0.5) / 16  # texel centres, in sample sides
+        >>> x, y = t.view(1, 16), (1 - t).view(16, 1)  # +x along the columns, +y up the rows
+        >>> h = 0.01 * (torch.sin(2 * math.pi * x) + torch.cos(2 * math.pi * y))
+        >>> dh_dx = (0.02 * math.pi * torch.cos(2 * math.pi * x)).expand(16, 16)
+        >>> dh_dy = (-0.02 * math.pi * torch.sin(2 * math.pi * y)).expand(16, 16)
+        >>> normal = torch.stack([-dh_dx, -dh_dy, torch.ones(16, 16, dtype=torch.float64)])
+        >>> normal = normal / normal.norm(dim=0)
+        >>> torch.allclose(height_from_normals(normal, periodic=True), h, atol=1e-9)
+        True
     """
     check_shape(normal, "* 3 H W", name="normals")
     height, width = normal.shape[-2:]
@@ -81,6 +95,18 @@ def ambient_occlusion(
     azimuths of ``cos²`` of the highest horizon elevation within ``radius`` (sample sides).
 
     Shape: ``(..., H, W)`` heights in sample-side units → ``(..., H, W)`` in ``[0, 1]``.
+
+    Example:
+        A flat field sees the whole sky; the bottom of a pit a quarter of the side wide sees
+        less of it than the ground around the pit, within a horizon radius of a quarter side:
+
+        >>> ambient_occlusion(torch.zeros(8, 8)).unique().tolist()
+        [1.0]
+        >>> pit = torch.zeros(16, 16)
+        >>> pit[6:10, 6:10] = -0.05
+        >>> ao = ambient_occlusion(pit, radius=0.25)
+        >>> bool(ao[8, 8] < 1.0), ao[0, 0].item()
+        (True, 1.0)
     """
     if directions < 1 or radius <= 0:
         raise ValueError(f"need directions >= 1 and radius > 0, got {directions} and {radius}")

@@ -50,6 +50,15 @@ def spherical_direction(azimuth_rad: ArrayT, elevation_rad: ArrayT) -> ArrayT:
     Shape:
         - azimuth_rad, elevation_rad: ``(*)`` (same shape)
         - output: ``(*, 3)``
+
+    Example:
+        >>> [round(v, 4) for v in spherical_direction(np.array(0.0), np.array(0.0)).tolist()]
+        [1.0, 0.0, 0.0]
+        >>> [round(v, 4) for v in spherical_direction(np.array(math.pi / 2), np.array(math.pi / 4)).tolist()]
+        [0.0, 0.7071, 0.7071]
+        >>> d = spherical_direction(torch.rand(5, generator=torch.Generator().manual_seed(0)), torch.ones(5))
+        >>> tuple(d.shape), torch.allclose(d.norm(dim=-1), torch.ones(5))
+        ((5, 3), True)
     """
     xp = torch if isinstance(azimuth_rad, Tensor) else np
     cos_elevation = xp.cos(elevation_rad)
@@ -66,6 +75,13 @@ def orthonormal_frame(axis: ArrayT) -> tuple[ArrayT, ArrayT]:
     Shape:
         - axis: ``(3,)``
         - output: ``(3,)``, ``(3,)``
+
+    Example:
+        >>> tangent, bitangent = orthonormal_frame(np.array([0.0, 0.0, 1.0]))
+        >>> tangent.tolist(), bitangent.tolist()
+        ([0.0, 1.0, 0.0], [-1.0, 0.0, 0.0])
+        >>> np.allclose(np.cross(tangent, bitangent), [0.0, 0.0, 1.0])  # right-handed
+        True
     """
     helper = [1.0, 0.0, 0.0] if abs(float(axis[2])) >= 0.9 else [0.0, 0.0, 1.0]
     if isinstance(axis, Tensor):
@@ -199,6 +215,10 @@ def upper_hemisphere_irradiance(array: np.ndarray) -> float:
 
     Shape:
         - array: ``(H, 2H, 3)``
+
+    Example:
+        >>> round(upper_hemisphere_irradiance(np.full((16, 32, 3), 2.0, np.float32)) / math.pi, 4)
+        2.0
     """
     return luminance_value(upper_hemisphere_irradiance_rgb(array))
 

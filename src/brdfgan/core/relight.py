@@ -92,6 +92,18 @@ def relight(
         - light_positions: ``(L, 3)``
         - intensity: ``()``, ``(L,)`` or ``(L, 3)``
         - output: ``(L, 3, H, W)``
+
+    Example:
+        One texel at the centre lit from straight above at distances 2 and 4 (the same BRDF
+        value): inverse-square falloff, ``(4/2)² = 4``; a light below the plane gives nothing:
+
+        >>> from brdfgan.core.svbrdf import flat_maps
+        >>> lights = torch.tensor([[0.0, 0.0, 2.0], [0.0, 0.0, 4.0], [0.0, 0.0, -1.0]])
+        >>> images = relight(flat_maps(1, 1), lights)
+        >>> tuple(images.shape)
+        (3, 3, 1, 1)
+        >>> round((images[0] / images[1]).mean().item(), 4), images[2].flatten().tolist()
+        (4.0, [0.0, 0.0, 0.0])
     """
     check_single_maps(maps)
     check_shape(light_positions, "L 3", name="light_positions")

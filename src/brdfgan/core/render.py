@@ -64,7 +64,15 @@ class PointLights:
 
 def capture_camera_height(fov_deg: float, plane_half_size: float = 1.0) -> float:
     """Height above z = 0 at which a camera with horizontal field of view ``fov_deg`` looking
-    down −Z frames exactly the square ``[-s, s]²``."""
+    down −Z frames exactly the square ``[-s, s]²``.
+
+    Example:
+        ``s / tan(fov / 2)``: a 90° lens frames the unit square from height 1, the default 45°
+        from 1 / tan 22.5° = 1 + √2:
+
+        >>> round(capture_camera_height(90.0), 4), round(capture_camera_height(45.0), 4)
+        (1.0, 2.4142)
+    """
     if not 0.0 < fov_deg < 180.0:
         raise ValueError(f"fov_deg must lie in (0, 180), got {fov_deg}")
     return plane_half_size / math.tan(math.radians(fov_deg) / 2.0)
@@ -343,6 +351,23 @@ def render_point_lights(
         - camera_position: ``(B, V, 3)``
         - lights: position ``(B, V, K, 3)``, intensity ``(B, V, K)``, color ``(B, V, K, 3)``
         - output: ``(B, V, 3, H, W)``
+
+    Example:
+        One texel at the centre, camera and light 2 above it with intensity ``π·2²``: the
+        radiance is ``π f`` with f the head-on BRDF, ``(1 + F0/4)/π`` for a white dielectric of
+        roughness 1 (Lambertian ``1/π`` plus ``F0 D G/4`` with ``D = 1/π``, F0 = 0.04):
+
+        >>> from brdfgan.core.svbrdf import flat_maps
+        >>> maps = flat_maps(1, 1, basecolor=(1.0, 1.0, 1.0), roughness=1.0, batch=(1,))
+        >>> camera = torch.tensor([[[0.0, 0.0, 2.0]]])
+        >>> lights = PointLights(
+        ...     position=camera[:, :, None],
+        ...     intensity=torch.full((1, 1, 1), 4 * math.pi),
+        ...     color=torch.ones(1, 1, 1, 3),
+        ... )
+        >>> image = render_point_lights(maps, camera, lights)
+        >>> tuple(image.shape), round(image[0, 0, 0, 0, 0].item(), 4)
+        ((1, 1, 3, 1, 1), 1.01)
     """
     check_scene_shapes(maps, camera_position, lights)
     return shade_point_lights(shading_inputs(maps), camera_position, lights, plane_half_size)
@@ -490,6 +515,19 @@ def render_flash(
     Shape:
         - maps: ``(B, 8, H, W)``; flash_offset, camera_xy: ``(B, 2)``
         - output: ``(B, 3, H, W)``
+
+    Example:
+        A uniform flat sample photographed with the flash at the lens: the hotspot is the centre
+        and the photo is symmetric (mirrored left–right and top–bottom):
+
+        >>> from brdfgan.core.svbrdf import flat_maps
+        >>> photo = render_flash(flat_maps(5, 5, batch=(1,)))
+        >>> tuple(photo.shape)
+        (1, 3, 5, 5)
+        >>> divmod(int(photo[0, 0].argmax()), 5)
+        (2, 2)
+        >>> torch.allclose(photo, photo.flip(-1)) and torch.allclose(photo, photo.flip(-2))
+        True
     """
     batch = maps.shape[0]
     camera = maps.new_tensor([0.0, 0.0, capture.camera_height]).expand(batch, 1, 3)

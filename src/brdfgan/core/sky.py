@@ -189,6 +189,21 @@ def sample_sky(sky: ProceduralSky, samples: int = 64, *, seed: int = 0) -> tuple
 
     Shape:
         - output: ``(samples, 3)``, ``(samples, 3)``
+
+    Example:
+        >>> directions, irradiance = sample_sky(ProceduralSky(), 64, seed=0)
+        >>> tuple(directions.shape), tuple(irradiance.shape)
+        ((64, 3), (64, 3))
+        >>> torch.allclose(directions.norm(dim=-1), torch.ones(64, dtype=torch.float64))
+        True
+
+        The lights estimate the sky's irradiance on the upward plane, ``∫ L cos θ dω``: ``π`` for
+        a uniform sky of radiance 1 (a Monte Carlo estimate: within ~1 % at 256 samples):
+
+        >>> white = ProceduralSky(zenith=(1.0, 1.0, 1.0), horizon=(1.0, 1.0, 1.0), sun_irradiance=0.0)
+        >>> directions, irradiance = sample_sky(white, 256)
+        >>> abs((irradiance[:, 0] * directions[:, 2]).sum().item() - math.pi) < 0.03
+        True
     """
     if samples < 1:
         raise ValueError(f"samples must be >= 1, got {samples}")

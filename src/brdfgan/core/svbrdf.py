@@ -68,6 +68,13 @@ def split_maps(maps: Tensor) -> SVBRDFMaps:
         - maps: ``(*, 8, H, W)``
         - output: basecolor ``(*, 3, H, W)``, normal ``(*, 3, H, W)``,
           roughness ``(*, 1, H, W)``, metallic ``(*, 1, H, W)``
+
+    Example:
+        >>> parts = split_maps(flat_maps(4, 5, roughness=0.25))
+        >>> tuple(parts.basecolor.shape), tuple(parts.roughness.shape)
+        ((3, 4, 5), (1, 4, 5))
+        >>> parts.normal[:, 0, 0].tolist(), parts.roughness[0, 0, 0].item()
+        ([0.0, 0.0, 1.0], 0.25)
     """
     check_map_shape(maps)
     return SVBRDFMaps(*(maps[..., channels, :, :] for channels in CHANNELS.values()))
@@ -79,6 +86,11 @@ def join_maps(basecolor: Tensor, normal: Tensor, roughness: Tensor, metallic: Te
     Shape:
         - basecolor, normal: ``(*, 3, H, W)``; roughness, metallic: ``(*, 1, H, W)``
         - output: ``(*, 8, H, W)``
+
+    Example:
+        >>> maps = flat_maps(2, 2, batch=(3,))
+        >>> torch.equal(join_maps(*split_maps(maps)), maps)
+        True
     """
     maps = torch.cat([basecolor, normal, roughness, metallic], dim=-3)
     check_map_shape(maps)
@@ -145,6 +157,13 @@ def srgb_to_linear(srgb: Tensor) -> Tensor:
     """The IEC 61966-2-1 sRGB decoding curve, elementwise, for values in [0, 1].
 
     Shape: any; output has the input's shape.
+
+    Example:
+        The linear segment ends at 0.04045 (= 0.0031308 linear); mid-grey in a file is about
+        21 % of the light of white, ``((0.5 + 0.055) / 1.055) ** 2.4``:
+
+        >>> [round(v, 4) for v in srgb_to_linear(torch.tensor([0.0, 0.04045, 0.5, 1.0])).tolist()]
+        [0.0, 0.0031, 0.214, 1.0]
     """
     low = srgb / 12.92
     high = ((srgb.clamp(min=0.04045) + 0.055) / 1.055) ** 2.4
@@ -172,6 +191,15 @@ def linear_to_srgb(linear: Tensor) -> Tensor:
     The clamp inside the power keeps the gradient finite on the linear segment.
 
     Shape: any; output has the input's shape.
+
+    Example:
+        An 18 % grey card encodes to about 0.46, and the curve inverts :func:`srgb_to_linear`:
+
+        >>> round(linear_to_srgb(torch.tensor(0.18)).item(), 4)
+        0.4614
+        >>> codes = torch.linspace(0.0, 1.0, 11, dtype=torch.float64)
+        >>> torch.allclose(linear_to_srgb(srgb_to_linear(codes)), codes)
+        True
     """
     low = linear * 12.92
     high = 1.055 * linear.clamp(min=0.0031308) ** (1.0 / 2.4) - 0.055
@@ -179,7 +207,14 @@ def linear_to_srgb(linear: Tensor) -> Tensor:
 
 
 def encode_normal(normal: Tensor) -> Tensor:
-    """Unit normal in [-1, 1] → file encoding ``(n + 1) / 2`` in [0, 1]. Shape: any."""
+    """Unit normal in [-1, 1] → file encoding ``(n + 1) / 2`` in [0, 1]. Shape: any.
+
+    Example:
+        A flat normal (+Z) is the familiar normal-map lavender, (128, 128, 255) in 8 bits:
+
+        >>> encode_normal(torch.tensor([0.0, 0.0, 1.0])).tolist()
+        [0.5, 0.5, 1.0]
+    """
     return (normal + 1.0) * 0.5
 
 
@@ -189,6 +224,14 @@ def decode_normal(encoded: Tensor, dim: int = -3) -> Tensor:
     Shape:
         - encoded: ``(*, 3, H, W)`` (vector axis ``dim``)
         - output: same
+
+    Example:
+        >>> normal = normalize_normal(torch.tensor([0.3, -0.4, 0.8]), dim=0)
+        >>> torch.allclose(decode_normal(encode_normal(normal), dim=0), normal)
+        True
+        >>> lavender = torch.tensor([128.0, 128.0, 255.0]) / 255  # 8-bit: not quite (0, 0, 1)
+        >>> round(decode_normal(lavender, dim=0).norm().item(), 6)
+        1.0
     """
     return normalize_normal(encoded * 2.0 - 1.0, dim=dim)
 
@@ -199,6 +242,12 @@ def normalize_normal(normal: Tensor, dim: int = -3, eps: float = 1e-8) -> Tensor
     Shape:
         - normal: ``(*, 3, H, W)`` (vector axis ``dim``)
         - output: same
+
+    Example:
+        >>> [round(v, 4) for v in normalize_normal(torch.tensor([3.0, 0.0, 4.0]), dim=0).tolist()]
+        [0.6, 0.0, 0.8]
+        >>> normalize_normal(torch.zeros(3), dim=0).tolist()
+        [0.0, 0.0, 1.0]
     """
     # Summed products rather than linalg.vector_norm: a norm over the strided channel axis is
     # several times slower on CPU, and this runs on every normal map the data pipeline touches.
@@ -225,7 +274,12 @@ def scale_normal_strength(normal: Tensor, strength: float) -> Tensor:
 
 
 def roughness_to_alpha(roughness: Tensor) -> Tensor:
-    """Perceptual roughness → GGX alpha = max(r², 0.001) (Mitsuba principled, Disney). Shape: any."""
+    """Perceptual roughness → GGX alpha = max(r², 0.001) (Mitsuba principled, Disney). Shape: any.
+
+    Example:
+        >>> [round(v, 4) for v in roughness_to_alpha(torch.tensor([0.0, 0.5, 1.0])).tolist()]
+        [0.001, 0.25, 1.0]
+    """
     return (roughness * roughness).clamp(min=MIN_ALPHA)
 
 
@@ -235,6 +289,13 @@ def diffuse_albedo(basecolor_linear: Tensor, metallic: Tensor) -> Tensor:
     Shape:
         - basecolor_linear: ``(*, 3, H, W)``; metallic: ``(*, 1, H, W)``
         - output: ``(*, 3, H, W)``
+
+    Example:
+        A dielectric diffuses its base color, a metal not at all:
+
+        >>> b = torch.full((3, 1, 1), 0.8)
+        >>> [round(diffuse_albedo(b, torch.full((1, 1, 1), m)).mean().item(), 4) for m in (0.0, 0.5, 1.0)]
+        [0.8, 0.4, 0.0]
     """
     return basecolor_linear * (1.0 - metallic)
 
@@ -245,6 +306,13 @@ def specular_albedo(basecolor_linear: Tensor, metallic: Tensor) -> Tensor:
     Shape:
         - basecolor_linear: ``(*, 3, H, W)``; metallic: ``(*, 1, H, W)``
         - output: ``(*, 3, H, W)``
+
+    Example:
+        A dielectric reflects 4 % at normal incidence whatever its colour, a metal its base color:
+
+        >>> b = torch.full((3, 1, 1), 0.8)
+        >>> [round(specular_albedo(b, torch.full((1, 1, 1), m)).mean().item(), 4) for m in (0.0, 0.5, 1.0)]
+        [0.04, 0.42, 0.8]
     """
     return DIELECTRIC_F0 * (1.0 - metallic) + basecolor_linear * metallic
 
@@ -263,6 +331,13 @@ def flat_maps(
 
     Shape:
         - output: ``(*batch, 8, height, width)``
+
+    Example:
+        >>> maps = flat_maps(2, 3, roughness=0.3, batch=(4,))
+        >>> tuple(maps.shape)
+        (4, 8, 2, 3)
+        >>> [round(v, 4) for v in maps[0, :, 1, 2].tolist()]
+        [0.5, 0.5, 0.5, 0.0, 0.0, 1.0, 0.3, 0.0]
     """
     values = torch.tensor([*basecolor, 0.0, 0.0, 1.0, roughness, metallic], dtype=dtype, device=device)
     return (
@@ -298,6 +373,18 @@ def resize_maps(maps: Tensor, size: int | tuple[int, int]) -> Tensor:
     Shape:
         - maps: ``(8, H, W)``
         - output: ``(8, h, w)`` with ``(h, w) = size`` (an int means square)
+
+    Example:
+        A black-and-white checkerboard shrinks to half the *light* of white, which is
+        ``linear_to_srgb(0.5)`` ≈ 0.7354 in the file, not 0.5:
+
+        >>> maps = flat_maps(2, 2)
+        >>> maps[0:3] = torch.tensor([[1.0, 0.0], [0.0, 1.0]])
+        >>> small = resize_maps(maps, 1)
+        >>> tuple(small.shape), round(small[0, 0, 0].item(), 4)
+        ((8, 1, 1), 0.7354)
+        >>> torch.allclose(resize_maps(flat_maps(8, 8), (2, 4)), flat_maps(2, 4))
+        True
     """
     check_single_maps(maps)
     height, width = (size, size) if isinstance(size, int) else size

@@ -57,6 +57,16 @@ def lsgan_discriminator_loss(real: DiscriminatorOutputs, fake: DiscriminatorOutp
     Shape:
         - real, fake: ``S`` scales × layers, each ``(B, C, H_i, W_i)``; the last layers are scored
         - output: scalar
+
+    Example:
+        A perfect discriminator (real scored 1, fake 0) scores 0; one that answers ½ everywhere
+        scores ``½·¼ + ½·¼`` on every scale:
+
+        >>> ones, zeros, half = torch.ones(1, 1, 4, 4), torch.zeros(1, 1, 4, 4), torch.full((1, 1, 4, 4), 0.5)
+        >>> lsgan_discriminator_loss([[ones]], [[zeros]]).item()
+        0.0
+        >>> lsgan_discriminator_loss([[half], [half]], [[half], [half]]).item()
+        0.25
     """
     _check_pair(real, fake)
     per_scale = [
@@ -72,6 +82,15 @@ def lsgan_generator_loss(fake: DiscriminatorOutputs) -> Tensor:
     Shape:
         - fake: ``S`` scales × layers, each ``(B, C, H_i, W_i)``; the last layers are scored
         - output: scalar
+
+    Example:
+        0 when every fake patch is scored real, ½ when every one is caught; scales are averaged:
+
+        >>> ones, zeros = torch.ones(1, 1, 4, 4), torch.zeros(1, 1, 2, 2)
+        >>> lsgan_generator_loss([[ones]]).item(), lsgan_generator_loss([[zeros]]).item()
+        (0.0, 0.5)
+        >>> lsgan_generator_loss([[ones], [zeros]]).item()
+        0.25
     """
     _check_outputs(fake, "fake")
     return reduce_scales([0.5 * (f[-1] - 1.0).square().mean() for f in fake])
@@ -95,6 +114,16 @@ def feature_matching_loss(
     Shape:
         - real, fake: ``S`` scales × at least ``layers`` layers, layer shapes matching pairwise
         - output: scalar
+
+    Example:
+        Features that differ by 1 everywhere in one of the two compared layers: the mean squared
+        difference per layer (1 and 0) averaged over the layers; the third layer is not compared:
+
+        >>> a, b, scores = torch.zeros(1, 8, 4, 4), torch.zeros(1, 16, 2, 2), torch.zeros(1, 1, 2, 2)
+        >>> feature_matching_loss([[a, b, scores]], [[a, b, scores]], layers=2).item()
+        0.0
+        >>> feature_matching_loss([[a, b, scores]], [[a + 1, b, scores + 5]], layers=2).item()
+        0.5
     """
     _check_pair(real, fake)
     if layers < 1:

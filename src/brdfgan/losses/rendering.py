@@ -105,6 +105,24 @@ def rendering_loss(
         - pred, target: ``(B, 8, H, W)``
         - configs: camera ``(B, V, 3)``, lights ``(B, V, K, ·)``
         - output: scalar
+
+    Example:
+        Identical maps render identically (0); the loss is symmetric and grows with the error:
+
+        >>> from brdfgan.core.svbrdf import flat_maps
+        >>> configs = sample_rendering_loss_configs(2, generator=torch.Generator().manual_seed(0))
+        >>> target = flat_maps(4, 4, batch=(2,))
+        >>> rendering_loss(target, target, configs).item()
+        0.0
+        >>> brighter = target.clone()
+        >>> brighter[:, 0:3] = 0.7
+        >>> loss = rendering_loss(brighter, target, configs)
+        >>> loss.item() == rendering_loss(target, brighter, configs).item()
+        True
+        >>> brightest = brighter.clone()
+        >>> brightest[:, 0:3] = 0.9
+        >>> bool(0 < loss < rendering_loss(brightest, target, configs))
+        True
     """
     check_map_pair(pred, target)
     check_shape(pred, "B 8 H W", name="maps")

@@ -77,6 +77,16 @@ def generator_total(
     Shape:
         - terms: scalars
         - output: scalar
+
+    Example:
+        Four terms of 1 make 1; with the rendering term off the ¼ stays, so three make ¾:
+
+        >>> import torch
+        >>> terms = {name: torch.tensor(1.0) for name in ("g_adv", "g_feat", "param", "render")}
+        >>> generator_total(terms).item()
+        1.0
+        >>> generator_total(terms, LossSwitches(rendering=False)).item()
+        0.75
     """
     names = switches.enabled_terms
     missing = [name for name in names if name not in terms]
@@ -94,6 +104,13 @@ def discriminator_total(
     Shape:
         - d_adv, d_feat: scalars
         - output: scalar
+
+    Example:
+        >>> import torch
+        >>> round(discriminator_total(torch.tensor(0.5), torch.tensor(2.0)).item(), 4)  # 0.5 + 0.01 · 2
+        0.52
+        >>> discriminator_total(torch.tensor(0.5)).item()
+        0.5
     """
     return d_adv if d_feat is None else d_adv + feature_weight * d_feat
 
