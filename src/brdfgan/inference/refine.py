@@ -1,39 +1,31 @@
 """Test-time refinement: fit the network's maps to the photo with the differentiable renderer.
 
 A forward pass uses the photo only through what the network learnt; re-rendered under the
-capture's own flash, its maps often reproduce the photo poorly. :func:`refine_maps` optimises the
-maps so that their render matches the photo, starting from the prediction and held near it
-(MaterialGAN, Guo et al. 2020; Deschaintre et al. 2020; Gao et al. 2019).
+capture's own flash, its maps often reproduce the photo poorly. :func:`refine_maps` moves the
+maps so that their render matches the photo, starting from the prediction (MaterialGAN, Guo et
+al. 2020; Deschaintre et al. 2020; Gao et al. 2019).
 
 The capture model is the training captures' (:class:`~brdfgan.core.render.FlashCapture`): a
 camera looking straight down from above the photo's flash hotspot (the flash frame the network
 read; a crop is a window of a view centred on its hotspot), at the height the frame's field of
-view gives (from the EXIF, :mod:`brdfgan.inference.intake.lens`), the flash at the lens. What is
-corrected (:class:`~brdfgan.inference.refine_config.RefineConfig`): by default one logit offset per
-map — base colour, roughness, metallic — keeping the network's normals and spatial detail;
-optionally the roughness kept (``fit_roughness=False``) or fitted but not returned
-(``roughness_nuisance``), a scale of the normals' slopes (``fit_normal_strength``), the gradient
-of a fitted height field added to them (``fit_relief``) and per-pixel corrections (``pixel_maps``).
-Fitted beside the maps:
+view gives (from the EXIF, :mod:`brdfgan.inference.intake.lens`), the flash at the lens.
 
+What is fitted (:class:`CaptureFit`; settings in
+:class:`~brdfgan.inference.refine_config.RefineConfig`):
+
+- **one logit offset per map** — base colour (all channels alike: its level against the specular
+  highlight, which the gain cannot set), roughness, metallic — so the network's normals and the
+  maps' spatial detail stay as predicted; ``fit_roughness=False`` keeps the roughness, and
+  ``roughness_nuisance`` fits its offset but returns the predicted roughness;
 - a per-channel **gain** (log-parametrised): the photo's unknown exposure and white balance;
 - optionally a low-frequency **ambient irradiance** (a ``g × g`` grid per channel, bilinearly
   upsampled, times the diffuse albedo): light the flash model cannot explain — a room or the sky —
   which would otherwise be fitted into the base colour;
 - optionally a **flash offset** (a 2-vector in the plane, world units): a flash beside the lens.
 
-The objective, per term (weights in :class:`RefineConfig`):
-
-- *photo*: L1 between log(render + ε) and log(photo + ε) over the unclipped pixels; a clipped
-  pixel (any channel ≥ ``clip_level``) says only that the truth is at least that bright, so it
-  costs only where the render falls below it;
-- *prior*: L1 of every map to the network's prediction (base colour, roughness, metallic values
-  and the normals' slopes) — the photo shows one view and cannot tell everything apart; needed
-  by per-pixel corrections, off by default (on one offset per map it is a dead zone);
-- *low-frequency prior*: L1 of the base colour blurred, to the prediction blurred — the
-  photo's large-scale shading (vignetting, falloff the model misjudges) belongs to light, not
-  to the albedo;
-- *total variation* of roughness and metallic: they change at edges, not per pixel.
+The objective (:func:`photo_loss`) is the L1 between log(render + ε) and log(photo + ε) over the
+unclipped pixels; a clipped pixel (any channel ≥ ``clip_level``) says only that the truth is at
+least that bright, so it costs only where the render falls below it.
 
 Parametrisation keeps every map valid: logits for base colour, roughness and metallic, slopes
 ``(s_x, s_y)`` for the normal ``normalize(s_x, s_y, 1)`` (unit and facing up). Large maps are
@@ -54,7 +46,6 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from brdfgan.core.checks import check_shape
-from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.flash_geometry import (
     centred_flash_frame,
     check_flash_frame,
@@ -94,7 +85,6 @@ class RefineResult:
     gain: tuple[float, float, float]
     flash_offset: tuple[float, float] | None
     ambient_mean: tuple[float, float, float] | None  # irradiance relative to the flash's at the centre
-    normal_strength: float | None  # the fitted scale of the normals' slopes (fit_normal_strength)
     loss_start: float
     loss_end: float
     photo_rmse_start: float  # sRGB RMSE of the re-rendered input view, before and after
@@ -149,13 +139,6 @@ def photo_loss(render: Tensor, photo: Tensor, clip_level: float) -> Tensor:
     return error.mean()
 
 
-def total_variation(image: Tensor) -> Tensor:
-    """Mean absolute difference of neighbouring pixels. Shape: ``(B, C, H, W)`` → scalar."""
-    return (image[..., 1:, :] - image[..., :-1, :]).abs().mean() + (
-        image[..., :, 1:] - image[..., :, :-1]
-    ).abs().mean()
-
-
 def transfer_correction(maps: Tensor, before: Tensor, after: Tensor) -> Tensor:
     """Add the refinement's correction ``after − before`` (maps at the working size) to ``maps``
     at their own size, in the parameters of :func:`maps_to_parameters` (bilinear upsampling).
@@ -198,6 +181,80 @@ def cosine_decay(step: int, steps: int) -> float:
     return 0.5 * (1 + math.cos(math.pi * min(step, steps) / max(steps, 1)))
 
 
+# The offsets' channels in CaptureFit.offsets, and the parameter channels each one shifts.
+_OFFSET_TARGETS = (_ROUGHNESS, _METALLIC, _BASECOLOR)
+
+
+@dataclass(frozen=True)
+class CaptureFit:
+    """The unknowns of one refinement (module docstring), as leaf tensors for the optimiser.
+
+    Shape:
+        - offsets: ``(1, 3, 1, 1)``, logits added to roughness, metallic and base colour
+        - log_gain: ``(1, 3, 1, 1)``; log_ambient: ``(1, 3, g, g)``; flash_offset: ``(1, 2)``
+    """
+
+    offsets: Tensor
+    log_gain: Tensor
+    log_ambient: Tensor | None
+    flash_offset: Tensor | None
+
+    def variables(self) -> list[Tensor]:
+        optional = (self.log_ambient, self.flash_offset)
+        return [self.offsets, self.log_gain, *(t for t in optional if t is not None)]
+
+
+def offset_parameters(prior: Tensor, offsets: Tensor, mask: Tensor) -> Tensor:
+    """``prior``'s parameters (:func:`maps_to_parameters`) with ``offsets · mask`` added: each
+    offset to every pixel of its map (the base colour's to all three channels alike).
+
+    Shape: prior ``(B, 7, H, W)``; offsets, mask ``(B | 1, 3, 1, 1)`` → ``(B, 7, H, W)``."""
+    shifted = offsets * mask
+    parameters = prior.clone()
+    for channel, target in enumerate(_OFFSET_TARGETS):
+        parameters[:, target] = parameters[:, target] + shifted[:, channel : channel + 1]
+    return parameters
+
+
+def render_capture(maps: Tensor, capture: FlashCapture, camera_xy: Tensor, fit: CaptureFit) -> Tensor:
+    """What the camera records of ``maps`` under the fitted capture: the flash render (with the
+    fitted flash offset), plus the ambient light's diffuse reflection, times the gain.
+
+    Shape: maps ``(1, 8, H, W)``, camera_xy ``(1, 2)`` → ``(1, 3, H, W)``."""
+    render = render_flash(maps, capture, flash_offset=fit.flash_offset, camera_xy=camera_xy)
+    if fit.log_ambient is not None:
+        render = add_ambient(render, maps, fit.log_ambient)
+    return render * fit.log_gain.exp()
+
+
+def _at_working_size(photo: Tensor, maps: Tensor, size: int) -> tuple[Tensor, Tensor]:
+    """The photo and the maps (batches of one, float) at the fit's size."""
+    maps_small = resize_maps(maps[0], size)[None] if maps.shape[-1] != size else maps
+    target = photo.detach().float().unsqueeze(0).to(maps.device)
+    if target.shape[-1] != size:
+        mode = "area" if target.shape[-1] > size else "bilinear"
+        target = F.interpolate(target, size=(size, size), mode=mode)
+    return target, maps_small
+
+
+def _start(prior_maps: Tensor, target: Tensor, capture: FlashCapture, camera_xy: Tensor,
+           config: RefineConfig) -> CaptureFit:  # fmt: skip
+    """Offsets at zero, the gain at the photo's median ratio to the prediction's render, the
+    ambient light at 1 % of the flash's irradiance at the centre (small, but with a gradient)."""
+    device = prior_maps.device
+    with torch.no_grad():
+        render = render_flash(prior_maps, capture, camera_xy=camera_xy)
+    ambient = torch.full((1, 3, config.ambient_grid, config.ambient_grid), math.log(1e-2), device=device)
+    return CaptureFit(
+        offsets=torch.zeros(1, 3, 1, 1, device=device).requires_grad_(True),
+        log_gain=initial_log_gain(target, render, config.clip_level).clone().requires_grad_(True),
+        log_ambient=ambient.requires_grad_(True) if config.ambient else None,
+        flash_offset=torch.zeros(1, 2, device=device).requires_grad_(True)
+        if config.fit_flash_offset
+        else None,
+    )
+
+
 def refine_maps(
     photo: Tensor,
     maps: Tensor,
@@ -230,124 +287,27 @@ def refine_maps(
     check_flash_frame(frame, 1)
     started = time.perf_counter()
     capture = FlashCapture(fov_deg=field_of_view(float(frame[0, 2]), photo.shape[-1]))
+    maps_full = maps.detach().float().unsqueeze(0)
+    target, prior_maps = _at_working_size(photo, maps_full, min(config.working_size, maps_full.shape[-1]))
+    camera_xy = hotspot_position(frame, photo.shape[-2], photo.shape[-1]).to(maps_full.device)
+    prior = maps_to_parameters(prior_maps)
+    # Which offsets move (roughness, metallic, base colour), and which the returned maps keep.
+    fitted = torch.tensor([float(config.fit_roughness), 1.0, 1.0], device=prior.device).view(1, 3, 1, 1)
+    returned = fitted * torch.tensor(
+        [float(not config.roughness_nuisance), 1.0, 1.0], device=prior.device
+    ).view(1, 3, 1, 1)
+
     with torch.enable_grad():
-        maps_full = maps.detach().float().unsqueeze(0)
-        size = min(config.working_size, maps_full.shape[-1])
-        prior_maps = resize_maps(maps_full[0], size)[None] if maps_full.shape[-1] != size else maps_full
-        target = photo.detach().float().unsqueeze(0).to(maps_full.device)
-        if target.shape[-1] != size:
-            target = F.interpolate(
-                target, size=(size, size), mode="area" if target.shape[-1] > size else "bilinear"
-            )
-        camera_xy = hotspot_position(frame, photo.shape[-2], photo.shape[-1]).to(maps_full.device)
-        prior = maps_to_parameters(prior_maps)
-        prior_values = parameters_to_maps(prior)
-        prior_slopes = prior[:, _SLOPES]
-        prior_low = gaussian_blur(prior_values[:, 0:3], config.low_frequency_sigma, "reflect")
-
-        # Corrections of the prior's parameters: per pixel for base colour and slopes, and for
-        # roughness and metallic a coarse grid (the photo shows them only where it has a highlight)
-        pixel_delta = torch.zeros_like(prior[:, :5]).requires_grad_(config.pixel_maps)
-        grid = config.material_grid or size
-        # Without per-pixel maps, the grid also shifts the base colour's logits (all channels
-        # alike): the albedo's level against the specular highlight, which the gain cannot set.
-        material_delta = torch.zeros(1, 2 if config.pixel_maps else 3, grid, grid, device=prior.device)
-        material_delta.requires_grad_(True)
-        # A map left out of the fit keeps its offset at zero (channels: roughness, metallic, base).
-        fitted = torch.tensor([float(config.fit_roughness), 1.0, 1.0], device=prior.device)
-        fitted = fitted[: material_delta.shape[1]].view(1, -1, 1, 1)
-        # The normals' strength: one log-scale of the predicted slopes (as --normal-strength).
-        log_strength = torch.zeros(1, 1, 1, 1, device=prior.device, requires_grad=config.fit_normal_strength)
-
-        # fit_relief: a height field on a relief_grid² lattice whose gradient adds to the predicted
-        # slopes — an integrable correction, the relief the network's flat normals lack.
-        relief = torch.zeros(1, 1, config.relief_grid, config.relief_grid, device=prior.device)
-        relief.requires_grad_(config.fit_relief)
-
-        def relief_slopes() -> Tensor | None:
-            if not config.fit_relief:
-                return None
-            height = F.interpolate(relief, size=(size, size), mode="bilinear", align_corners=False)
-            padded = F.pad(height, (1, 1, 1, 1), mode="replicate")
-            dh_dx = (padded[..., 1:-1, 2:] - padded[..., 1:-1, :-2]) / 2
-            dh_drow = (padded[..., 2:, 1:-1] - padded[..., :-2, 1:-1]) / 2
-            return torch.cat([-dh_dx, dh_drow], dim=1)  # +y up the rows (core.height)
-
-        # roughness_nuisance: the roughness offset is fitted but not returned (the maps keep the
-        # predicted roughness): it soaks up the highlight's spread the flat normals cannot give.
-        returned = fitted.clone()
-        returned[:, :1] *= float(not config.roughness_nuisance)
-
-        def current_parameters(mask: Tensor, added_slopes: Tensor | None) -> Tensor:
-            upsampled = material_delta * mask
-            if grid != size:
-                upsampled = F.interpolate(upsampled, size=(size, size), mode="bilinear", align_corners=False)
-            base_shift = upsampled[:, 2:3] if not config.pixel_maps else 0.0
-            slopes = prior_slopes * log_strength.exp() + pixel_delta[:, _SLOPES]
-            if added_slopes is not None:
-                slopes = slopes + added_slopes
-            return torch.cat(
-                [
-                    prior[:, _BASECOLOR] + pixel_delta[:, _BASECOLOR] + base_shift,
-                    slopes,
-                    prior[:, 5:7] + upsampled[:, :2],
-                ],
-                dim=1,
-            )
-
-        with torch.no_grad():
-            start_render = render_flash(prior_values, capture, camera_xy=camera_xy)
-        log_gain = initial_log_gain(target, start_render, config.clip_level).clone().requires_grad_(True)
-        variables: list[Tensor] = (
-            [pixel_delta, material_delta, log_gain] if config.pixel_maps else [material_delta, log_gain]
-        )
-        if config.fit_normal_strength:
-            variables.append(log_strength)
-        if config.fit_relief:
-            variables.append(relief)
-        ambient = None
-        if config.ambient:
-            # Start at 1 % of the flash's irradiance at the centre: small but with a gradient.
-            ambient = torch.full(
-                (1, 3, config.ambient_grid, config.ambient_grid),
-                math.log(1e-2),
-                device=prior.device,
-                requires_grad=True,
-            )
-            variables.append(ambient)
-        offset = None
-        if config.fit_flash_offset:
-            offset = torch.zeros(1, 2, device=prior.device, requires_grad=True)
-            variables.append(offset)
-        optimizer = torch.optim.Adam(variables, lr=config.learning_rate)
-        schedule = torch.optim.lr_scheduler.LambdaLR(
-            optimizer,
-            lambda step: cosine_decay(step, config.steps),
-        )
+        fit = _start(prior_maps, target, capture, camera_xy, config)
 
         def objective() -> tuple[Tensor, Tensor]:
-            added_slopes = relief_slopes()  # once per step: the photo term and the relief prior
-            parameters = current_parameters(fitted, added_slopes)
-            current = parameters_to_maps(parameters)
-            render = render_flash(current, capture, flash_offset=offset, camera_xy=camera_xy)
-            if ambient is not None:
-                render = add_ambient(render, current, ambient)
-            render = render * log_gain.exp()
-            loss = photo_loss(render, target, config.clip_level)
-            loss = loss + config.prior_weight * (current[:, 0:3] - prior_values[:, 0:3]).abs().mean()
-            loss = loss + config.material_prior_weight * (current[:, 6:8] - prior_values[:, 6:8]).abs().mean()
-            if config.pixel_maps:
-                slope_change = (parameters[:, _SLOPES] - prior_slopes).abs().mean()
-                loss = loss + config.normal_prior_weight * slope_change
-            if config.low_frequency_weight > 0:
-                low = gaussian_blur(current[:, 0:3], config.low_frequency_sigma, "reflect")
-                loss = loss + config.low_frequency_weight * (low - prior_low).abs().mean()
-            if config.tv_weight > 0:
-                loss = loss + config.tv_weight * total_variation(current[:, 6:8])
-            if added_slopes is not None and config.relief_weight > 0:
-                loss = loss + config.relief_weight * added_slopes.square().mean()
-            return loss, render
+            render = render_capture(
+                parameters_to_maps(offset_parameters(prior, fit.offsets, fitted)), capture, camera_xy, fit
+            )
+            return photo_loss(render, target, config.clip_level), render
 
+        optimizer = torch.optim.Adam(fit.variables(), lr=config.learning_rate)
+        schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: cosine_decay(step, config.steps))
         with torch.no_grad():
             loss_start, render_start = objective()
         for step in range(config.steps):
@@ -358,29 +318,28 @@ def refine_maps(
             schedule.step()
             if on_step is not None:
                 on_step(step + 1, float(loss.detach()))
-        with torch.no_grad():
-            loss_end, render_end = objective()
-            refined = parameters_to_maps(current_parameters(returned, relief_slopes()))
-            out = (
-                refined
-                if maps_full.shape[-1] == size
-                else transfer_correction(maps_full, prior_values, refined)
-            )
+    with torch.no_grad():
+        loss_end, render_end = objective()
+        refined = parameters_to_maps(offset_parameters(prior, fit.offsets, returned))
+        same_size = maps_full.shape[-1] == prior_maps.shape[-1]
+        out = refined if same_size else transfer_correction(maps_full, parameters_to_maps(prior), refined)
 
     def srgb_rmse(render: Tensor) -> float:
         return float((linear_to_srgb(render.clamp(0, 1)) - linear_to_srgb(target)).square().mean().sqrt())
 
-    irradiance = None
-    if ambient is not None:
-        irradiance = tuple(float(v) for v in _ambient_irradiance(ambient.detach(), size).mean(dim=(0, 2, 3)))
+    ambient = None
+    if fit.log_ambient is not None:
+        irradiance = _ambient_irradiance(fit.log_ambient.detach(), target.shape[-1]).mean(dim=(0, 2, 3))
+        ambient = tuple(float(v) for v in irradiance)
     return RefineResult(
         maps=out[0].to(maps.dtype),
         steps=config.steps,
         seconds=time.perf_counter() - started,
-        gain=tuple(float(v) for v in log_gain.detach().exp().flatten()),  # type: ignore[arg-type]
-        flash_offset=None if offset is None else tuple(float(v) for v in offset.detach()[0]),  # type: ignore[arg-type]
-        ambient_mean=irradiance,  # type: ignore[arg-type]
-        normal_strength=float(log_strength.detach().exp()) if config.fit_normal_strength else None,
+        gain=tuple(float(v) for v in fit.log_gain.detach().exp().flatten()),  # type: ignore[arg-type]
+        flash_offset=None
+        if fit.flash_offset is None
+        else tuple(float(v) for v in fit.flash_offset.detach()[0]),  # type: ignore[arg-type]
+        ambient_mean=ambient,  # type: ignore[arg-type]
         loss_start=float(loss_start),
         loss_end=float(loss_end),
         photo_rmse_start=srgb_rmse(render_start),
