@@ -2,8 +2,8 @@
 
 Times :func:`brdfgan.inference.refine.refine_maps` with the default settings (one offset per map,
 ``DEFAULT_REFINE_STEPS`` steps at the 256² working size) on maps of 256² and 1024² — the larger
-is fitted at the working size and its correction transferred — and, for comparison, the per-pixel
-fit (``pixel_maps=true``) at 256². The photo is a flash render of random maps under the capture
+is fitted at the working size and its correction transferred — and with the ambient light left
+out (``ambient=false``). The photo is a flash render of random maps under the capture
 model; the start is those maps perturbed. Median of ``--repeats`` runs after one warm-up; the
 last column is the time relative to the default at 256², measured in the same run.
 
@@ -19,7 +19,7 @@ import time
 import torch
 
 
-def _case(size: int, pixel_maps: bool, repeats: int) -> float:
+def _case(size: int, ambient: bool, repeats: int) -> float:
     from tests.conftest import random_maps
 
     from brdfgan.core.flash_geometry import centred_flash_frame
@@ -31,8 +31,7 @@ def _case(size: int, pixel_maps: bool, repeats: int) -> float:
     start = truth.clone()
     start[6] = (start[6] + 0.2).clamp(0, 1)
     frame = centred_flash_frame(1, size, size, 57.5)
-    extra = {"prior_weight": 1.0, "material_prior_weight": 1.0, "material_grid": 0} if pixel_maps else {}
-    config = RefineConfig(pixel_maps=pixel_maps, **extra)
+    config = RefineConfig(ambient=ambient)
     seconds = []
     for _ in range(repeats + 1):  # the first is a warm-up
         begin = time.perf_counter()
@@ -47,15 +46,15 @@ def main() -> None:
     args = parser.parse_args()
     from brdfgan.inference import DEFAULT_REFINE_STEPS
 
-    cases = [("one offset per map (default)", 256, False), ("one offset per map (default)", 1024, False),
-             ("per pixel (pixel_maps=true)", 256, True)]  # fmt: skip
+    cases = [("one offset per map (default)", 256, True), ("one offset per map (default)", 1024, True),
+             ("without the ambient light (ambient=false)", 256, False)]  # fmt: skip
     threads = torch.get_num_threads()
     print(f"refinement, {DEFAULT_REFINE_STEPS} steps at the 256² working size, {threads} threads")
     print("| fit | maps | s per photo | vs default 256² |")
     print("|---|---|---|---|")
     reference = None
-    for label, size, pixel_maps in cases:
-        seconds = _case(size, pixel_maps, args.repeats)
+    for label, size, ambient in cases:
+        seconds = _case(size, ambient, args.repeats)
         reference = reference or seconds
         print(f"| {label} | {size}² | {seconds:.2f} | {seconds / reference:.2f}× |", flush=True)
 
