@@ -40,6 +40,7 @@ import json
 import logging
 import math
 import os
+import subprocess
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -520,14 +521,17 @@ class GenerationSummary:
 def code_version() -> dict[str, str]:
     """Package version and, from a source checkout, the git commit (recorded in manifests)."""
     version = {"brdfgan": __version__, "torch": torch.__version__}
-    head = Path(__file__).resolve().parents[3] / ".git" / "HEAD"
-    try:
-        ref = head.read_text().strip()
-        if ref.startswith("ref: "):
-            ref = (head.parent / ref[5:]).read_text().strip()
-        version["git_commit"] = ref
-    except OSError:
-        pass  # an installed wheel has no checkout
+    checkout = Path(__file__).resolve().parents[3]
+    if (checkout / ".git").exists():  # a directory, or a file in a worktree or submodule
+        # git itself resolves worktrees, packed refs and detached heads.
+        try:
+            result = subprocess.run(
+                ["git", "-C", str(checkout), "rev-parse", "HEAD"], capture_output=True, text=True, check=False
+            )
+        except OSError:  # no git on this machine
+            return version
+        if result.returncode == 0:
+            version["git_commit"] = result.stdout.strip()
     return version
 
 
