@@ -208,9 +208,7 @@ def test_refined_generator_reads_the_field_of_view_from_the_flash_frame() -> Non
     wide = render_flash(truth[None], FlashCapture(fov_deg=75.0))
     start = truth.clone()
     start[0:3] *= 0.8
-    refined = RefinedGenerator(
-        _ConstantGenerator(start[None]), RefineConfig(steps=40, ambient=False)
-    )
+    refined = RefinedGenerator(_ConstantGenerator(start[None]), RefineConfig(steps=40, ambient=False))
     told = refined(wide, centred_flash_frame(1, 16, 16, 75.0))
     untold = refined(wide, None)  # assumes the 57.5° default
     assert told.shape == (1, 8, 16, 16)
