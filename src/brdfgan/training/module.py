@@ -93,6 +93,10 @@ class SVBRDFGAN(L.LightningModule):
         self.allow_zero_length_dataloader_with_multiple_devices = True
         self.generator = generator
         self.loss = loss
+        # Drawn once: every validation and test batch renders under these (VALIDATION_RENDER_SEED).
+        self.evaluation_render_configs = fixed_render_configs(
+            loss.rendering_sampling.num_configs, VALIDATION_RENDER_SEED, loss.plane_half_size
+        )
         self.uses_discriminator = loss.switches.needs_discriminator
         if self.uses_discriminator and discriminator is None:
             raise UserError("model.discriminator: the loss needs one (adversarial or feature term)")
@@ -277,9 +281,7 @@ class SVBRDFGAN(L.LightningModule):
         photo, maps = self._inputs(batch)
         fake = self.generator(photo, batch.get("flash"))
         terms = parameter_loss(fake, maps)
-        configs = fixed_render_configs(
-            self.loss.rendering_sampling.num_configs, VALIDATION_RENDER_SEED, self.loss.plane_half_size
-        ).expand(photo.shape[0])
+        configs = self.evaluation_render_configs.expand(photo.shape[0])
         terms["render"] = rendering_loss(fake, maps, configs, self.loss.plane_half_size)
         terms["loss"] = terms["param"] + terms["render"]
         metrics = self.val_metrics if stage == "val" else self.test_metrics
