@@ -56,8 +56,8 @@ compare() {
   done
 }
 
-final() {  # the chosen recipe (conf/experiment/anchored.yaml), two seeds, 12 000 batches each, ~3 h each
-  for seed in 0 1; do
+final() {  # the chosen recipe (conf/experiment/anchored.yaml), two seeds, 6 000 batches each, ~80 min each
+  for seed in ${SEEDS:-0 1}; do  # SEEDS="1": one seed per session
     $PY train.py experiment=anchored test=false seed=$seed data.seed=$seed hydra.run.dir=$OUT/final_seed$seed \
       $(resume $OUT/final_seed$seed)
   done
