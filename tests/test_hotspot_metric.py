@@ -16,6 +16,7 @@ import torch
 from torch import Tensor, nn
 
 from brdfgan.config_check import ConfigValueError
+from brdfgan.core.flash_geometry import hotspot_disk
 from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, ROUGHNESS, flat_maps
 from brdfgan.data.datamodule import random_crop
 from brdfgan.data.shards import Sample
@@ -28,7 +29,6 @@ from brdfgan.metrics import (
     SVBRDFMetrics,
     compared_maps,
     hotspot_centres,
-    hotspot_disk,
 )
 from tests.conftest import random_maps
 

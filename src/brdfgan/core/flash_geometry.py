@@ -205,3 +205,41 @@ def flash_offset_channels(frame: Tensor, height: int, width: int) -> Tensor:
     offset_x = (columns[None, None, :] - x) * s
     offset_y = (y - rows[None, :, None]) * s
     return torch.stack(torch.broadcast_tensors(offset_x, offset_y), dim=1)
+
+
+def _squared_hotspot_distance(centres: Tensor, height: int, width: int) -> Tensor:
+    """:func:`hotspot_distance` squared (what a disk compares: exact on its boundary)."""
+    check_shape(centres, "B 2", name="hotspot centres (x, y)")
+    cx = centres[:, 0].to(torch.float64).view(-1, 1, 1)
+    cy = centres[:, 1].to(torch.float64).view(-1, 1, 1)
+    xs = torch.arange(width, dtype=torch.float64, device=centres.device).view(1, 1, width) + 0.5
+    ys = torch.arange(height, dtype=torch.float64, device=centres.device).view(1, height, 1) + 0.5
+    return (xs - cx).square() + (ys - cy).square()
+
+
+def hotspot_distance(centres: Tensor, height: int, width: int) -> Tensor:
+    """Each pixel's distance in pixels from each sample's hotspot, in float64.
+
+    Pixel ``(i, j)`` has its centre at ``(j + 0.5, i + 0.5)`` (the coordinates of the flash frame
+    and of :func:`brdfgan.metrics.hotspot_centres`).
+
+    Shape:
+        - centres: ``(B, 2)`` ``(x, y)``
+        - output: ``(B, H, W)`` float64, on ``centres``' device
+
+    Example:
+        >>> hotspot_distance(torch.tensor([[1.0, 0.5]]), 1, 3)[0].tolist()
+        [[0.5, 0.5, 1.5]]
+    """
+    return _squared_hotspot_distance(centres, height, width).sqrt()
+
+
+def hotspot_disk(centres: Tensor, height: int, width: int, radius: float) -> Tensor:
+    """Pixels whose centre lies within ``radius`` pixels of each sample's hotspot
+    (:func:`hotspot_distance`).
+
+    Shape:
+        - centres: ``(B, 2)`` ``(x, y)``
+        - output: ``(B, H, W)`` bool, on ``centres``' device
+    """
+    return _squared_hotspot_distance(centres, height, width) <= radius * radius

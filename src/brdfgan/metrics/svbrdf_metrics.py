@@ -83,6 +83,7 @@ from torchmetrics import Metric, MetricCollection
 
 from brdfgan.config_check import ConfigValueError
 from brdfgan.core.checks import check_shape
+from brdfgan.core.flash_geometry import hotspot_disk
 from brdfgan.core.render import PointLights, render_point_lights
 from brdfgan.core.sampling import (
     RenderConfigs,
@@ -844,23 +845,6 @@ def _point(values: Any, where: str) -> tuple[float, float]:
     if not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in (x, y)):
         raise ValueError(f"{where} must hold two finite numbers, got {values!r}")
     return float(x), float(y)
-
-
-def hotspot_disk(centres: Tensor, height: int, width: int, radius: float) -> Tensor:
-    """Pixels whose centre lies within ``radius`` pixels of each sample's hotspot.
-
-    Pixel ``(i, j)`` has its centre at ``(j + 0.5, i + 0.5)`` (the coordinates of
-    :func:`hotspot_centres`); distances in float64.
-
-    Shape:
-        - centres: ``(B, 2)`` ``(x, y)``
-        - output: ``(B, H, W)`` bool, on ``centres``' device
-    """
-    cx = centres[:, 0].to(torch.float64).view(-1, 1, 1)
-    cy = centres[:, 1].to(torch.float64).view(-1, 1, 1)
-    xs = torch.arange(width, dtype=torch.float64, device=centres.device).view(1, 1, width) + 0.5
-    ys = torch.arange(height, dtype=torch.float64, device=centres.device).view(1, height, 1) + 0.5
-    return (xs - cx).square() + (ys - cy).square() <= radius * radius
 
 
 def check_hotspot_radius(radius_fraction: Any) -> float:
