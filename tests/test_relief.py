@@ -11,8 +11,8 @@ import pytest
 import torch
 
 from brdfgan.core.height import ambient_occlusion, height_from_normals
-from brdfgan.core.seamless import make_seamless, seamless_blend, wrap_ratios
-from brdfgan.core.svbrdf import scale_normal_strength, split_maps, validate_maps
+from brdfgan.core.seamless import wrap_ratios
+from brdfgan.core.svbrdf import scale_normal_strength, split_maps
 from brdfgan.data.materials.base import height_to_normal
 from tests.conftest import random_maps
 
@@ -84,32 +84,6 @@ def test_normal_strength_scales_the_tilt_and_keeps_unit_length() -> None:
     assert torch.allclose(flat, torch.tensor([0.0, 0.0, 1.0]).view(3, 1, 1).expand_as(flat))
     with pytest.raises(ValueError, match="normal strength"):
         scale_normal_strength(normal, -1.0)
-
-
-def test_seamless_maps_wrap_like_their_interior_and_stay_valid() -> None:
-    # A map with a strong left-right and top-bottom seam: a ramp plus texture.
-    generator = torch.Generator().manual_seed(0)
-    size = 96
-    y, x = _grid(size)
-    ramp = (x / size * 0.6 + y / size * 0.3).float()
-    maps = random_maps(size, size, seed=3)
-    maps[0:3] = (0.2 * maps[0:3] + ramp).clamp(0, 1)
-    maps[6] = (0.5 * ramp + 0.3 * torch.rand(size, size, generator=generator)).clamp(0, 1)
-    before = wrap_ratios(maps[0:3])
-    assert min(before) > 3.0
-    tiled = make_seamless(maps)
-    validate_maps(tiled)
-    parts = split_maps(tiled)
-    for name, image in (("basecolor", parts.basecolor), ("normal", parts.normal),
-                        ("roughness", parts.roughness), ("metallic", parts.metallic)):  # fmt: skip
-        columns, rows = wrap_ratios(image)
-        assert columns < 1.2 and rows < 1.2, (name, columns, rows)
-    # Variance-preserving: the blend keeps the texture's contrast (a plain average would halve it
-    # where four copies meet).
-    noise = torch.rand(1, size, size, generator=generator)
-    blended = seamless_blend(noise)
-    centre = blended[0, size // 4 - 8 : size // 4 + 8, size // 4 - 8 : size // 4 + 8]
-    assert centre.std() == pytest.approx(float(noise.std()), rel=0.25)
 
 
 SCANS = Path(__file__).resolve().parents[2] / "shared" / "ood" / "ambientcg"

@@ -229,7 +229,7 @@ def predict_photo(
     if options.tileable:
         before = wrap_ratios(maps)
         with clock("tileable"):
-            maps = make_seamless(maps)
+            maps = make_seamless(maps).maps
         # How visible the wrap is: last vs first column (row) over neighbouring columns (rows).
         tiling_seams = {"wrap_ratio_before": list(before), "wrap_ratio_after": list(wrap_ratios(maps))}
     warnings = photo.warnings + prepared.warnings
