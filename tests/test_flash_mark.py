@@ -1,0 +1,80 @@
+"""The flash mark (``core/flash_mark.py``): a synthetic hotspot is detected in the maps it leaked
+into and repaired there, clean maps stay untouched (also near the image's edge)."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from torch import Tensor
+
+from brdfgan.core.filtering import gaussian_blur
+from brdfgan.core.flash_geometry import hotspot_distance
+from brdfgan.core.flash_mark import (
+    LEAK_THRESHOLD,
+    REPAIR_INNER,
+    REPAIR_OUTER,
+    leak_scores,
+    mark_radius,
+    repair_flash_mark,
+)
+from brdfgan.core.svbrdf import join_maps, normalize_normal, split_maps, validate_maps
+from tests.conftest import random_maps
+
+SIZE = 128
+
+
+def surface(seed: int = 0) -> Tensor:
+    """Valid maps with a texture a few pixels across everywhere (blurred noise)."""
+    maps = gaussian_blur(random_maps(SIZE, SIZE, seed=seed, dtype=torch.float64)[None], 1.5, "reflect")[0]
+    parts = split_maps(maps)
+    return join_maps(parts.basecolor, normalize_normal(parts.normal), parts.roughness, parts.metallic)
+
+
+def with_mark(maps: Tensor, centre: tuple[float, float]) -> Tensor:
+    """``maps`` with a flash mark baked into the base colour and the normals: a blotch of strong
+    pixel-scale detail in a disk of 0.8 × the scoring radius around ``centre``."""
+    generator = torch.Generator().manual_seed(7)
+    inside = hotspot_distance(torch.tensor([centre]), SIZE, SIZE)[0] <= 0.8 * mark_radius(SIZE, SIZE)
+    marked = maps.clone()
+    speckle = torch.rand(5, SIZE, SIZE, generator=generator, dtype=torch.float64) - 0.5
+    marked[0:3] = torch.where(inside, (0.6 + 0.8 * speckle[0:3]).clamp(0, 1), marked[0:3])
+    tilted = marked[3:6] + torch.cat([1.2 * speckle[3:5], torch.zeros(1, SIZE, SIZE, dtype=torch.float64)])
+    marked[3:6] = torch.where(inside, normalize_normal(tilted), marked[3:6])
+    return marked
+
+
+@pytest.mark.parametrize("centre", [(64.0, 60.0), (9.5, 120.0)], ids=["centre", "near a corner"])
+def test_a_hotspot_mark_is_detected_and_repaired_where_it_leaked(centre: tuple[float, float]) -> None:
+    clean = surface()
+    marked = with_mark(clean, centre)
+    scores = leak_scores(marked, centre)
+    assert scores["basecolor"] > 3 * LEAK_THRESHOLD and scores["normal"] > 3 * LEAK_THRESHOLD, scores
+    assert scores["roughness"] < 1.5 and scores["metallic"] < 1.5, scores
+    repaired, mark = repair_flash_mark(marked, centre)
+    assert mark.repaired == ("basecolor", "normal") and mark.patch_offset is not None
+    validate_maps(repaired)
+    # The mark is gone: the repaired disk is as busy as its surroundings.
+    after = leak_scores(repaired, centre)
+    assert after["basecolor"] < 1.5 and after["normal"] < 1.5, after
+    # The patch came from far enough that it does not copy the mark itself.
+    dy, dx = mark.patch_offset
+    assert (dy * dy + dx * dx) ** 0.5 > (REPAIR_OUTER + REPAIR_INNER) * mark.radius
+    # The clean maps are untouched, and so is everything outside the repaired disk.
+    assert torch.equal(repaired[6:8], marked[6:8])
+    outside = hotspot_distance(torch.tensor([centre]), SIZE, SIZE)[0] > REPAIR_OUTER * mark.radius
+    assert torch.equal(repaired[:, outside], marked[:, outside])
+
+
+def test_clean_maps_are_left_alone() -> None:
+    clean = surface(seed=3)
+    repaired, mark = repair_flash_mark(clean, (64.0, 64.0))
+    assert max(mark.scores.values()) < LEAK_THRESHOLD, mark.scores
+    assert mark.repaired == () and mark.patch_offset is None
+    assert repaired is clean or torch.equal(repaired, clean)
+    # A hotspot far outside the maps scores nothing.
+    assert set(leak_scores(clean, (-500.0, 40.0)).values()) == {1.0}
+
+
+def test_bad_centre_is_one_line() -> None:
+    with pytest.raises(ValueError, match="finite"):
+        repair_flash_mark(surface(), (float("nan"), 3.0))
