@@ -1,7 +1,10 @@
 """The flash mark (``core/flash_mark.py``): a synthetic hotspot is detected in the maps it leaked
-into and repaired there, clean maps stay untouched (also near the image's edge)."""
+into and repaired there, clean maps stay untouched (also near the image's edge), and what was done
+round-trips through ``material.json``."""
 
 from __future__ import annotations
+
+import json
 
 import pytest
 import torch
@@ -13,11 +16,13 @@ from brdfgan.core.flash_mark import (
     LEAK_THRESHOLD,
     REPAIR_INNER,
     REPAIR_OUTER,
+    FlashMark,
     leak_scores,
     mark_radius,
     repair_flash_mark,
 )
 from brdfgan.core.svbrdf import join_maps, normalize_normal, split_maps, validate_maps
+from brdfgan.inference.pipeline import TileableRecord, make_tileable
 from tests.conftest import random_maps
 
 SIZE = 128
@@ -78,3 +83,18 @@ def test_clean_maps_are_left_alone() -> None:
 def test_bad_centre_is_one_line() -> None:
     with pytest.raises(ValueError, match="finite"):
         repair_flash_mark(surface(), (float("nan"), 3.0))
+
+
+def test_the_tileable_record_round_trips_through_material_json() -> None:
+    centre = (64.0, 60.0)
+    maps = with_mark(surface(seed=1), centre)
+    tiled, record = make_tileable(maps, centre)
+    validate_maps(tiled)
+    document = json.loads(json.dumps(record.to_json()))
+    assert TileableRecord.from_json(document) == record
+    assert FlashMark.from_json(document["flash_mark"]) == record.flash_mark
+    assert document["flash_mark"]["repaired"] == ["basecolor", "normal"]
+    assert set(document["copied_fraction"]) == {"basecolor", "normal", "roughness", "metallic"}
+    assert min(document["copied_fraction"].values()) > 0.9
+    assert max(max(pair) for pair in document["wrap_ratio_after"].values()) <= 1.2
+    assert len(document["shifts"]) == 4 and document["shifts"][-1] == [0, 0]

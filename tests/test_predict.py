@@ -292,7 +292,9 @@ def test_cli_artist_options_quiet_verbose_prefix_and_device(
     assert quiet.out.split() == [str(tmp_path / "q" / "oak")]
     document = json.loads((tmp_path / "q" / "oak" / "material.json").read_text())
     assert document["files"]["normal.png"]["strength"] == 1.5 and document["relief"]["height_scale"] == 20.0
-    assert max(document["tileable"]["wrap_ratio_after"]) < 1.2
+    tiling = document["tileable"]
+    assert max(max(pair) for pair in tiling["wrap_ratio_after"].values()) < 1.2
+    assert min(tiling["copied_fraction"].values()) > 0.85
     assert main([*common, "--out", str(tmp_path / "v"), "--verbose", "--prefix"]) == 0
     verbose = capsys.readouterr()
     assert "oak.png: read " in verbose.err and " network " in verbose.err and " export " in verbose.err

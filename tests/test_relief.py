@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -130,6 +131,9 @@ def test_tileable_predictions_of_the_shipped_samples_wrap_and_plain_ones_are_unc
     )
     for photo in samples:
         out = predict_photo(photo, tmp_path / photo.stem, tileable).output
+        # The bar: at least 85 % of every map's pixels copied from one copy (a cut, not a blend).
+        tiling = json.loads((out / "material.json").read_text())["tileable"]
+        assert min(tiling["copied_fraction"].values()) >= 0.85, (photo.name, tiling["copied_fraction"])
         for name in ("basecolor", "normal", "roughness", "metallic", "height", "ao"):
             image = torch.from_numpy(read_image(out / f"{name}.png")).permute(2, 0, 1).double()
             columns, rows = wrap_ratios(image)

@@ -6,7 +6,8 @@ For each photo::
       → preprocess (square crop on the flash hotspot, linear resize, the training auto exposure)
       → the generator, tiled with frozen normalisation statistics when large          model
       [→ refine_maps: the maps fitted to the photo with the differentiable renderer (--refine)]
-      [→ make_seamless: every map blended into a tile that wraps (--tileable)]
+      [→ make_tileable: the flash mark repaired, then the maps rolled and cut into a tile that wraps
+         (--tileable)]
       → write_material (textures, material.glb, material.json, preview.png [, preview.gif/mp4],
                         index.html: the material viewer)                                   outputs
 
@@ -32,7 +33,15 @@ from typing import Any, Literal
 
 from torch import Tensor
 
-from brdfgan.core.seamless import make_seamless, wrap_ratios
+from brdfgan.core.flash_mark import FlashMark, repair_flash_mark
+from brdfgan.core.seamless import (
+    MAP_NAMES,
+    TilingMeasures,
+    file_units,
+    make_seamless,
+    tiling_measures,
+    wrap_ratios,
+)
 from brdfgan.errors import UserError, disk_full_message, is_disk_full, one_line
 from brdfgan.inference.intake.lens import FieldOfView, crop_field_of_view
 from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, read_photo
@@ -67,7 +76,7 @@ class PredictOptions:
     preview: bool = True
     animate: Literal["gif", "mp4"] | None = None
     refine: RefineConfig | None = None  # None: the network's maps as they are
-    tileable: bool = False  # blend the maps into a seamless tile (brdfgan.core.seamless)
+    tileable: bool = False  # cut the maps into a seamless tile (make_tileable)
     prefix_files: bool = False  # texture files named <material>_<map>.<ext> for engines' importers
     field_of_view: FieldOfView = field(default_factory=FieldOfView)  # --fov / --focal-length-35mm
 
@@ -169,6 +178,56 @@ def unique_names(names: Iterable[str]) -> list[str]:
     return unique
 
 
+@dataclass(frozen=True)
+class TileableRecord:
+    """What ``--tileable`` did to a photo's maps (``material.json``'s ``tileable``): the flash mark
+    found and repaired, the four copies the tile is cut from (:class:`~brdfgan.core.seamless.SeamlessTile`'s
+    ``shifts``), each map's wrap ratio before (the network's maps) and, with the copied fractions,
+    after (measured against the repaired maps, which the tile is cut from)."""
+
+    flash_mark: FlashMark
+    shifts: tuple[tuple[int, int], ...]
+    wrap_ratio_before: dict[str, tuple[float, float]]
+    after: TilingMeasures
+
+    def to_json(self) -> dict[str, Any]:
+        measures = self.after.to_json()
+        return {
+            "method": "flash mark repaired, then rolled and cut along minimum-error paths",
+            "flash_mark": self.flash_mark.to_json(),
+            "shifts": [list(shift) for shift in self.shifts],
+            "wrap_ratio_before": {name: list(pair) for name, pair in self.wrap_ratio_before.items()},
+            "wrap_ratio_after": measures["wrap_ratio"],
+            "copied_fraction": measures["copied_fraction"],
+        }
+
+    @classmethod
+    def from_json(cls, record: dict[str, Any]) -> TileableRecord:
+        before = record["wrap_ratio_before"]
+        return cls(
+            flash_mark=FlashMark.from_json(record["flash_mark"]),
+            shifts=tuple((int(dy), int(dx)) for dy, dx in record["shifts"]),
+            wrap_ratio_before={str(name): (float(pair[0]), float(pair[1])) for name, pair in before.items()},
+            after=TilingMeasures.from_json(
+                {"wrap_ratio": record["wrap_ratio_after"], "copied_fraction": record["copied_fraction"]}
+            ),
+        )
+
+
+def make_tileable(maps: Tensor, hotspot: tuple[float, float]) -> tuple[Tensor, TileableRecord]:
+    """``--tileable``: the flash mark repaired where it leaked into the maps (:mod:`brdfgan.core.flash_mark`,
+    ``hotspot`` ``(x, y)`` in the maps' pixels), so that no tile repeats it; then the maps rolled
+    and cut into a tile (:func:`~brdfgan.core.seamless.make_seamless`), with the record of both.
+
+    Shape: ``(8, H, W)`` → ``(8, H, W)``.
+    """
+    repaired, mark = repair_flash_mark(maps, hotspot)
+    tile = make_seamless(repaired)
+    before = {name: wrap_ratios(image) for name, image in zip(MAP_NAMES, file_units(maps), strict=True)}
+    after = tiling_measures(tile.maps, repaired, tile.shifts)
+    return tile.maps, TileableRecord(mark, tile.shifts, before, after)
+
+
 RefineProgress = Callable[[Path, int, int], None]  # (photo, step, of steps)
 
 
@@ -225,13 +284,10 @@ def predict_photo(
             "field_of_view": {"degrees": fov_deg, "source": fov_source},
             "settings": {k: v for k, v in options.refine.to_json().items() if k != "steps"},
         }
-    tiling_seams: dict[str, Any] | None = None
+    tiling: TileableRecord | None = None
     if options.tileable:
-        before = wrap_ratios(maps)
         with clock("tileable"):
-            maps = make_seamless(maps).maps
-        # How visible the wrap is: last vs first column (row) over neighbouring columns (rows).
-        tiling_seams = {"wrap_ratio_before": list(before), "wrap_ratio_after": list(wrap_ratios(maps))}
+            maps, tiling = make_tileable(maps, (float(flash_frame[0, 0]), float(flash_frame[0, 1])))
     warnings = photo.warnings + prepared.warnings
     metadata = {
         "name": out_dir.name,
@@ -244,8 +300,8 @@ def predict_photo(
         "inference": options.tiling.to_json(predictor.tiled(prepared.photo.shape[-1])),
         # The test-time fit (brdfgan.inference.refine), None without --refine.
         "refinement": refinement,
-        # --tileable: the maps' wrap-around differences before and after the seamless blend.
-        "tileable": tiling_seams,
+        # --tileable: the flash mark's repair, the cut's copies, wrap ratios and copied fractions.
+        "tileable": tiling.to_json() if tiling is not None else None,
         "input_statistics": prepared.stats,
         "brdf": BRDF_DESCRIPTION,
         "warnings": list(warnings),
