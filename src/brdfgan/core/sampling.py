@@ -72,6 +72,44 @@ class RenderConfigs:
     camera_position: Tensor
     lights: PointLights
 
+    def to(self, device: torch.device | str, dtype: torch.dtype) -> RenderConfigs:
+        """The same configurations on ``device`` in ``dtype``."""
+        lights = self.lights
+        return RenderConfigs(
+            camera_position=self.camera_position.to(device=device, dtype=dtype),
+            lights=PointLights(
+                position=lights.position.to(device=device, dtype=dtype),
+                intensity=lights.intensity.to(device=device, dtype=dtype),
+                color=lights.color.to(device=device, dtype=dtype),
+            ),
+        )
+
+    def configuration(self, index: int) -> RenderConfigs:
+        """Configuration ``index`` alone, as a batch of the same size with ``V = 1`` (views).
+
+        Shape:
+            - self: camera ``(B, V, 3)``, lights ``(B, V, K, ·)``
+            - output: camera ``(B, 1, 3)``, lights ``(B, 1, K, ·)``
+
+        Example:
+            >>> configs = sample_rendering_loss_configs(2, generator=torch.Generator().manual_seed(0))
+            >>> third = configs.configuration(3)
+            >>> tuple(third.camera_position.shape), tuple(third.lights.color.shape)
+            ((2, 1, 3), (2, 1, 1, 3))
+            >>> torch.equal(third.lights.position[:, 0], configs.lights.position[:, 3])
+            True
+        """
+        view = slice(index, index + 1)
+        lights = self.lights
+        return RenderConfigs(
+            camera_position=self.camera_position[:, view],
+            lights=PointLights(
+                position=lights.position[:, view],
+                intensity=lights.intensity[:, view],
+                color=lights.color[:, view],
+            ),
+        )
+
     def expand(self, batch: int) -> RenderConfigs:
         """The configurations of a batch of 1 shared by every sample of a batch of ``batch``
         (views, not copies).

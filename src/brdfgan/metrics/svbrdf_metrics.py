@@ -84,7 +84,7 @@ from torchmetrics import Metric, MetricCollection
 from brdfgan.config_check import ConfigValueError
 from brdfgan.core.checks import check_shape
 from brdfgan.core.flash_geometry import hotspot_disk
-from brdfgan.core.render import PointLights, render_point_lights
+from brdfgan.core.render import render_point_lights
 from brdfgan.core.sampling import (
     RenderConfigs,
     RenderingLossSampling,
@@ -746,21 +746,15 @@ class RerenderError(Metric):
     def update(self, pred: Tensor, true: Tensor) -> None:
         pred, true = _as_batch(pred, true)
         batch = pred.shape[0]
-        camera = self.render_configs.camera_position.to(device=pred.device, dtype=pred.dtype)
-        lights = self.render_configs.lights
-        position = lights.position.to(device=pred.device, dtype=pred.dtype)
-        intensity = lights.intensity.to(device=pred.device, dtype=pred.dtype)
-        color = lights.color.to(device=pred.device, dtype=pred.dtype)
+        configs = self.render_configs.to(pred.device, pred.dtype)
         for v in range(self.num_configs):
-            view = slice(v, v + 1)
-            config_lights = PointLights(
-                position=position[:, view].expand(batch, -1, -1, -1),
-                intensity=intensity[:, view].expand(batch, -1, -1),
-                color=color[:, view].expand(batch, -1, -1, -1),
+            config = configs.configuration(v).expand(batch)
+            pred_image = render_point_lights(
+                pred, config.camera_position, config.lights, self.plane_half_size
             )
-            config_camera = camera[:, view].expand(batch, -1, -1)
-            pred_image = render_point_lights(pred, config_camera, config_lights, self.plane_half_size)
-            true_image = render_point_lights(true, config_camera, config_lights, self.plane_half_size)
+            true_image = render_point_lights(
+                true, config.camera_position, config.lights, self.plane_half_size
+            )
             diff = log_transform(pred_image) - log_transform(true_image)
             self.sse += diff.square().sum(dtype=torch.float64)
             self.values += diff.numel()
