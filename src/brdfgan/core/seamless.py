@@ -4,10 +4,11 @@ own copies the way image quilting joins patches (the minimum-error boundary cut,
 
 1. **Roll.** The map set ``M`` (``H × W``) rolled left by ``cx`` columns, ``R[:, j] = M[:, j + cx]``,
    wraps exactly like the maps' own interior step ``cx − 1 → cx``; its only seam is the maps'
-   border, now inside at column ``s = W − cx``. :func:`choose_roll` takes ``cx`` in the middle half
+   border, now inside at column ``s = W − cx``. :func:`rank_rolls` takes ``cx`` in the middle half
    among the quiet steps (no larger than the maps' typical step, so the wrap does not show) where
    the copies agree best (``M`` and ``M`` shifted by ``cx`` differ least: for a regular pattern a
-   whole number of periods, so that grout and plank edges of the two copies coincide).
+   whole number of periods, so that grout and plank edges of the two copies coincide), and among
+   equally agreeing ones the quietest.
 2. **Cut.** In a band around ``s`` the tile takes each pixel from exactly one of two copies: ``R``
    outside two paths, the unrolled ``M`` between them (continuous there: its border is far away).
    Each path runs from the first row to the last, one pixel per row, moving at most one column per
@@ -20,7 +21,9 @@ own copies the way image quilting joins patches (the minimum-error boundary cut,
 3. **The other axis.** The same on the rows of that result, with paths that close around the
    horizontal wrap (the result already tiles horizontally). The crossing of the two seams needs
    nothing more: the second cut is computed on the first's result, so both of its copies carry the
-   first cut and the error it sees includes where they differ.
+   first cut and the error it sees includes where they differ. The second cut takes some rows of
+   the first's result twice and drops others, which can make the column wrap louder than the step
+   it was chosen for; then the next column roll in line is tried (:data:`ROLL_ATTEMPTS`).
 
 Every pixel is thus a pixel of one of four copies of ``M`` shifted by ``(0 or cy, 0 or cx)``
 (:class:`SeamlessTile`: ``shifts``, ``labels``), except the feathered pixels next to a path.
@@ -33,7 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import torch
@@ -57,7 +60,14 @@ STEP_FLOOR = 1.0 / 255.0
 # copied_fraction's default tolerance, in file units ([0, 1]; normals encoded as (n + 1) / 2):
 # two 8-bit levels, so that a feathered pixel where the two copies agree still counts as a copy.
 COPY_TOLERANCE = 2.0 / 255.0
-MIN_SIDE = 8  # a band of a quarter side must leave each path at least two positions
+# rank_rolls's score: the copies' disagreement over its median among the candidates, plus this
+# weight × the wrap step's loudness. A pattern's period (disagreement a fraction of the median)
+# outweighs any loudness; where no shift agrees better than another (no period in the photo) the
+# quieter wrap wins, with room below the 1.2 goal for the rows (columns) the second cut repeats.
+LOUDNESS_WEIGHT = 0.5
+# Column rolls tried at most (make_seamless): each costs a whole tile.
+ROLL_ATTEMPTS = 4
+MIN_SIDE = 16  # each path needs a few positions in a band of a quarter side, clear of the edges
 
 
 @dataclass(frozen=True)
@@ -149,9 +159,9 @@ def seam_cost(first: Tensor, second: Tensor, scales: Tensor, groups: Sequence[in
 def min_error_path(cost: Tensor, cyclic: bool = False) -> Tensor:
     """The path through ``cost`` from its first row to its last, one position per row, moving at
     most one position between rows, with the least summed cost (dynamic programming). Among equal
-    costs it keeps straight. ``cyclic``: the last row's position is also within one of the first
-    row's (the path closes when the rows wrap around); found by fixing the start where the free
-    path starts.
+    costs it keeps straight. ``cyclic``: the last row's position is also the first row's, so the
+    path closes when the rows wrap around (and a tile's wrap joins the same copies on both sides);
+    found by fixing the start where the free path starts.
 
     Shape: ``(N, K)`` → ``(N,)`` int64 positions in ``0..K-1``.
 
@@ -165,14 +175,13 @@ def min_error_path(cost: Tensor, cyclic: bool = False) -> Tensor:
     """
     check_shape(cost, "N K", name="cost")
     path = _trace(cost, start=None)
-    if cyclic and abs(int(path[0]) - int(path[-1])) > 1:
+    if cyclic and int(path[0]) != int(path[-1]):
         path = _trace(cost, start=int(path[0]))
     return path
 
 
 def _trace(cost: Tensor, start: int | None) -> Tensor:
-    """:func:`min_error_path` without the cycle: from any start, or from ``start`` ending within
-    one position of it."""
+    """:func:`min_error_path` without the cycle: from any start, or from ``start`` ending there."""
     rows, width = cost.shape
     inf = torch.tensor(math.inf, dtype=cost.dtype, device=cost.device)
     total = cost[0].clone()
@@ -188,7 +197,7 @@ def _trace(cost: Tensor, start: int | None) -> Tensor:
         back[row] = columns + torch.tensor([0, -1, 1], device=cost.device)[choice]
         total = cost[row] + best
     if start is not None:
-        total = torch.where((columns - start).abs() <= 1, total, inf)
+        total = torch.where(columns == start, total, inf)
     path = torch.empty(rows, dtype=torch.int64, device=cost.device)
     path[-1] = int(torch.argmin(total))
     for row in range(rows - 1, 0, -1):
@@ -196,18 +205,20 @@ def _trace(cost: Tensor, start: int | None) -> Tensor:
     return path
 
 
-def choose_roll(image: Tensor, dim: int, groups: Sequence[int] | None = None) -> int:
-    """How far to roll ``image`` along ``dim`` (-1: columns, -2: rows) before cutting: ``c`` in the
-    middle half, so that line ``c`` comes first and the step ``c − 1 → c`` becomes the tile's wrap.
+def rank_rolls(image: Tensor, dim: int, groups: Sequence[int] | None = None) -> list[int]:
+    """How far to roll ``image`` along ``dim`` (-1: columns, -2: rows) before cutting, best first:
+    ``c`` in the middle half, so that line ``c`` comes first and the step ``c − 1 → c`` becomes the
+    tile's wrap.
 
     Candidates are the quiet steps: each channel group's step there (its mean absolute difference
     between the two lines, ``groups`` as in :func:`map_scales`) at most the group's mean step, so
     the wrap is no more visible than a typical step. Among them the one where the copies agree
-    best: the least mean squared difference between ``image`` and ``image`` rolled by ``c``
-    (normalised per group), e.g. a whole number of a pattern's periods. Without a quiet step, the
+    best — the least mean squared difference between ``image`` and ``image`` rolled by ``c``
+    (normalised per group), e.g. a whole number of a pattern's periods — and, among shifts that
+    agree alike, the quietest (:data:`LOUDNESS_WEIGHT`); after the quiet steps, the others from the
     quietest.
 
-    Shape: ``(C, H, W)`` → an index.
+    Shape: ``(C, H, W)`` → indices.
     """
     check_shape(image, "C H W", name="image")
     if dim not in (-1, -2):
@@ -228,11 +239,12 @@ def choose_roll(image: Tensor, dim: int, groups: Sequence[int] | None = None) ->
     scales = map_scales(image.double(), chosen)
     disagreement = (_group_mean(squared, chosen) / scales.square().unsqueeze(-1)).sum(dim=0)
     candidates = torch.arange(low, high)
-    quiet = loudness[candidates - 1] <= 1.0
-    if not quiet.any():
-        return int(candidates[torch.argmin(loudness[candidates - 1])])
-    score = torch.where(quiet, disagreement[candidates], torch.tensor(math.inf, dtype=disagreement.dtype))
-    return int(candidates[torch.argmin(score)])
+    wrap = loudness[candidates - 1]
+    quiet = wrap <= 1.0
+    agreement = disagreement[candidates] / disagreement[candidates].median().clamp_min(1e-12)
+    # Quiet candidates by score; then the loud ones by loudness (offset to come after them all).
+    score = torch.where(quiet, agreement + LOUDNESS_WEIGHT * wrap, 1e6 + wrap)
+    return [int(c) for c in candidates[torch.argsort(score, stable=True)]]
 
 
 def _ramp(position: Tensor) -> Tensor:
@@ -254,13 +266,20 @@ def _cut_columns(
     height, width = image.shape[-2:]
     rolled = torch.roll(image, -shift, dims=-1)
     seam = width - shift  # rolled's columns seam − 1 | seam are the image's last | first column
-    half = min(width // 4, seam, width - seam)
-    cost = seam_cost(rolled, image, scales, groups)
+    # The band stays two columns clear of the tile's first and last (a path's feather reaches one
+    # column before it): the wrap is then the rolled copy's own, the maps' interior step.
+    half = min(width // 4, seam - 2, width - seam - 2)
+    # The cost of the band only, computed with a column of context on each side (the contrast
+    # looks at neighbours).
+    low, high = seam - half, seam + half
+    outer_low, outer_high = max(0, low - 1), min(width, high + 1)
+    cost = seam_cost(rolled[..., outer_low:outer_high], image[..., outer_low:outer_high], scales, groups)
+    cost = cost[:, low - outer_low : high - outer_low]
     # Left path: the first column from the unrolled copy, in [seam − half, seam − 1] so that the
     # rolled copy never shows both sides of its seam; right path: the first column from the rolled
     # copy again, in [seam, seam + half − 1].
-    left = min_error_path(cost[:, seam - half : seam], cyclic) + (seam - half)
-    right = min_error_path(cost[:, seam : seam + half], cyclic) + seam
+    left = min_error_path(cost[:, :half], cyclic) + low
+    right = min_error_path(cost[:, half:], cyclic) + seam
     centres = torch.arange(width, dtype=image.dtype, device=image.device).view(1, width) + 0.5
     left_f = left.to(image.dtype).view(height, 1)
     right_f = right.to(image.dtype).view(height, 1)
@@ -285,23 +304,41 @@ def make_seamless(maps: Tensor) -> SeamlessTile:
         )
     work = maps.detach().double()
     scales = map_scales(work, MAP_GROUPS)
-    shift_x = choose_roll(work, -1, MAP_GROUPS)
+    # The column wrap is the maps' step at the roll only up to which rows the second cut repeats
+    # (it takes some of them twice and drops others): if the tile's wrap comes out louder than a
+    # typical step, the next roll in line is tried, and the quietest tile kept.
+    best: tuple[float, SeamlessTile] | None = None
+    for shift_x in rank_rolls(work, -1, MAP_GROUPS)[:ROLL_ATTEMPTS]:
+        tile = _cut_both(work, shift_x, scales)
+        loudest = max(max(wrap_ratios(part)) for part in tile.maps.split(list(MAP_GROUPS)))
+        if best is None or loudest < best[0]:
+            best = (loudest, tile)
+        if loudest <= 1.0:
+            break
+    assert best is not None  # rank_rolls returns at least one candidate
+    tile = best[1]
+    parts = split_maps(tile.maps)
+    tiled = join_maps(parts.basecolor, normalize_normal(parts.normal), parts.roughness, parts.metallic)
+    return replace(tile, maps=tiled.to(maps.dtype))
+
+
+def _cut_both(work: Tensor, shift_x: int, scales: Tensor) -> SeamlessTile:
+    """The tile of :func:`make_seamless` for the column roll ``shift_x`` (maps unnormalised)."""
+    height = work.shape[-2]
     first, from_x, left, right = _cut_columns(work, shift_x, scales, MAP_GROUPS, cyclic=False)
     # The rows: the same on the transposed result, whose rows (the columns) now wrap.
-    shift_y = choose_roll(first, -2, MAP_GROUPS)
+    shift_y = rank_rolls(first, -2, MAP_GROUPS)[0]
     second, from_y, top, bottom = _cut_columns(
         first.transpose(-2, -1), shift_y, scales, MAP_GROUPS, cyclic=True
     )
     second, from_y = second.transpose(-2, -1), from_y.transpose(-2, -1)
     # Which x copy each pixel holds: its own row's first-pass label where the second pass kept the
     # unrolled rows, else that of the row the vertical roll brought there.
-    source_rows = (torch.arange(height, device=maps.device) + shift_y) % height
+    source_rows = (torch.arange(height, device=work.device) + shift_y) % height
     x_unrolled = torch.where(from_y, from_x, from_x[source_rows])
     labels = 2 * from_y.long() + x_unrolled.long()
-    parts = split_maps(second)
-    tiled = join_maps(parts.basecolor, normalize_normal(parts.normal), parts.roughness, parts.metallic)
     shifts = ((shift_y, shift_x), (shift_y, 0), (0, shift_x), (0, 0))
-    return SeamlessTile(tiled.to(maps.dtype), shifts, labels, (left, right, top, bottom))
+    return SeamlessTile(second, shifts, labels, (left, right, top, bottom))
 
 
 def copied_fraction(
