@@ -102,12 +102,6 @@ def detail_sigma(height: int, width: int) -> float:
     return max(1.0, min(height, width) / 128.0)
 
 
-def _distance(centre: tuple[float, float], height: int, width: int, like: Tensor) -> Tensor:
-    """Each pixel's distance from ``centre`` in pixels. Shape: ``(H, W)``."""
-    centres = torch.tensor([centre], dtype=torch.float64, device=like.device)
-    return hotspot_distance(centres, height, width)[0]
-
-
 def leak_scores(maps: Tensor, centre: tuple[float, float]) -> dict[str, float]:
     """Per map (:data:`MAP_NAMES`), the fine-detail energy inside the hotspot disk over that of the
     ring around it (module docstring); 1.0 for every map when the disk or the ring holds no pixel
@@ -118,14 +112,17 @@ def leak_scores(maps: Tensor, centre: tuple[float, float]) -> dict[str, float]:
     """
     check_single_maps(maps)
     height, width = maps.shape[-2:]
-    radius = mark_radius(height, width)
-    distance = _distance(centre, height, width, maps)
-    inside = distance <= radius
-    ring = (distance > radius) & (distance <= 2.0 * radius)
+    radius, sigma = mark_radius(height, width), detail_sigma(height, width)
+    # Only the disk and its ring matter: blur a window with room for the kernel around them (its
+    # own edges, mirrored, then lie beyond the ring), so the cost does not grow with the image.
+    window = _Window.around(maps, centre, 2.0 * radius + 3.0 * sigma + 1.0)
+    inside = window.distance <= radius
+    ring = (window.distance > radius) & (window.distance <= 2.0 * radius)
     if not inside.any() or not ring.any():
         return dict.fromkeys(MAP_NAMES, 1.0)
-    work = maps.detach().double()[None]
-    detail = (work - gaussian_blur(work, detail_sigma(height, width), "reflect"))[0].square()
+    # float32: the blur's precision does not matter here, and float64 convolutions are slow on CPUs.
+    work = window.read(maps.detach()).float()[None]
+    detail = (work - gaussian_blur(work, sigma, "reflect"))[0].double().square()
     scores: dict[str, float] = {}
     for name, part in zip(MAP_NAMES, detail.split(list(MAP_GROUPS)), strict=True):
         energy = part.mean(dim=0)
