@@ -66,7 +66,7 @@ COPY_TOLERANCE = 2.0 / 255.0
 # quieter wrap wins, with room below the 1.2 goal for the rows (columns) the second cut repeats.
 LOUDNESS_WEIGHT = 0.5
 # Column rolls tried at most (make_seamless): each costs a whole tile.
-ROLL_ATTEMPTS = 4
+ROLL_ATTEMPTS = 6
 MIN_SIDE = 16  # each path needs a few positions in a band of a quarter side, clear of the edges
 
 
