@@ -78,6 +78,7 @@ bench: setup
 	$(PY) -m benchmarks.bench_evaluate
 	$(PY) -m benchmarks.bench_predict
 	$(PY) -m benchmarks.bench_preview
+	$(PY) -m benchmarks.bench_tiling
 
 data: setup
 	$(PY) generate.py

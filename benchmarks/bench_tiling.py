@@ -1,0 +1,227 @@
+"""``brdfgan predict --tileable`` on the network's own maps: how well the tiles wrap, how much of
+them is copied pixels (a cut) rather than blends, the flash mark's repair, and the time.
+
+For every photo the maps come from the shipped weights (or ``--weights``) as ``brdfgan predict``
+makes them: the package's sample photos by default; with ``SOURCE``, a folder of photo files
+(through predict's intake) or a dataset folder of shards (e.g. the OOD benchmark ``data/ood``,
+its ``--split``; photos stored as predict's intake leaves them, with their recorded flash frame).
+Then :func:`brdfgan.inference.pipeline.make_tileable` (repair → roll → cuts) is timed, and the
+previous method (:func:`brdfgan.core.seamless.blend_reference`) runs on the same repaired maps
+for the before/after. Per map: the wrap ratio (:func:`~brdfgan.core.seamless.wrap_ratios`, the
+worse of columns and rows; ≤ 1.2 is the goal) and the copied fraction
+(:func:`~brdfgan.core.seamless.copied_fraction`: pixels within two 8-bit levels of one of the
+tile's copies; ≥ 0.85 is the goal). Last, the time of ``make_tileable`` on the first photo's maps
+enlarged to ``--large`` (content does not change the work much; the time does grow with the side).
+
+    python -m benchmarks.bench_tiling [SOURCE] [--split test] [--weights W] [--large 1024]
+        [--threads N] [--json out.json]
+
+``--threads 1`` gives steady times on a machine shared with other jobs: the tiling's operations
+are small, and with two threads each of them can wait for a busy core. The CPU seconds (in
+parentheses) are the process's own, what a wall time is on an idle machine with one thread.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import Tensor
+
+WRAP_GOAL = 1.2
+COPIED_GOAL = 0.85
+
+
+Item = tuple[str, Tensor, tuple[float, float]]  # (name, maps, hotspot (x, y) in the maps' pixels)
+
+
+def photo_maps(photos: list[Path], weights: Path | None) -> Iterator[Item]:
+    """``(name, maps, hotspot)`` per photo file, as ``brdfgan predict`` makes the maps."""
+    from brdfgan.inference.intake.lens import crop_field_of_view
+    from brdfgan.inference.intake.photo import read_photo
+    from brdfgan.inference.intake.preprocess import preprocess
+    from brdfgan.inference.model.weights import load_model
+    from brdfgan.inference.pipeline import PredictOptions, Predictor
+
+    predictor = Predictor.create(load_model(weights), PredictOptions(preview=False))
+    for path in photos:
+        photo = read_photo(path)
+        prepared = preprocess(photo, predictor.resolution, None)
+        fov, _ = crop_field_of_view(
+            photo.lens, photo.width, photo.height, prepared.crop.size, predictor.options.field_of_view
+        )
+        frame = prepared.flash_frame(fov)
+        with torch.no_grad():
+            maps = predictor.maps(prepared.photo, frame)
+        yield path.stem, maps, (float(frame[0, 0]), float(frame[0, 1]))
+
+
+def shard_maps(root: Path, split: str, weights: Path | None) -> Iterator[Item]:
+    """``(key, maps, hotspot)`` per sample of a dataset split, the network run on the stored photo
+    with the sample's flash frame (what the evaluator does)."""
+    from brdfgan.data.datamodule import flash_frames
+    from brdfgan.data.shards import iter_shard, list_shards
+    from brdfgan.inference.model.weights import load_model
+    from brdfgan.inference.pipeline import PredictOptions, Predictor
+
+    shards = list_shards(root, split)
+    if not shards:
+        sys.exit(f"error: {root}: no photos and no {split}/ shards")
+    predictor = Predictor.create(load_model(weights), PredictOptions(preview=False))
+    for shard in shards:
+        for sample in iter_shard(shard):
+            height, width = sample.photo.shape[-2:]
+            frame = flash_frames([sample.meta], height, width)
+            with torch.no_grad():
+                maps = predictor.maps(sample.photo.float(), frame)
+            yield sample.key, maps, (float(frame[0, 0]), float(frame[0, 1]))
+
+
+def network_maps(source: Path, split: str = "test", weights: Path | None = None) -> Iterator[Item]:
+    """The maps of every photo file in ``source`` or, without any, of every sample of its dataset
+    ``split`` (:func:`photo_maps`, :func:`shard_maps`)."""
+    from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS
+
+    photos = sorted(p for p in source.iterdir() if p.is_file() and p.suffix.lower() in PHOTO_EXTENSIONS)
+    return photo_maps(photos, weights) if photos else shard_maps(source, split, weights)
+
+
+def _worst(pairs: dict[str, tuple[float, float]]) -> dict[str, float]:
+    return {name: max(pair) for name, pair in pairs.items()}
+
+
+def measure(name: str, maps: Tensor, hotspot: tuple[float, float]) -> dict[str, Any]:
+    """One photo's row: the cut (timed) and the blend on the same repaired maps."""
+    from brdfgan.core.flash_mark import repair_flash_mark
+    from brdfgan.core.seamless import blend_reference, tiling_measures
+    from brdfgan.inference.pipeline import make_tileable
+
+    start, cpu = time.perf_counter(), time.process_time()
+    _, record = make_tileable(maps, hotspot)
+    seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
+    repaired, _ = repair_flash_mark(maps, hotspot)
+    blended, shifts = blend_reference(repaired)
+    blend = tiling_measures(blended, repaired, shifts)
+    return {
+        "name": name,
+        "size": int(maps.shape[-1]),
+        "seconds": seconds,
+        "cpu_seconds": cpu,
+        "repaired": {map_name: record.flash_mark.scores[map_name] for map_name in record.flash_mark.repaired},
+        "leak_scores": record.flash_mark.scores,
+        "wrap_before": _worst(record.wrap_ratio_before),
+        "cut": {"wrap": _worst(record.after.wrap_ratio), "copied": record.after.copied_fraction},
+        "blend": {"wrap": _worst(blend.wrap_ratio), "copied": blend.copied_fraction},
+    }
+
+
+def _large(maps: Tensor, hotspot: tuple[float, float], side: int) -> tuple[float, float]:
+    """Wall and CPU seconds of ``make_tileable`` on ``maps`` enlarged to ``side``²."""
+    from brdfgan.core.svbrdf import resize_maps
+    from brdfgan.inference.pipeline import make_tileable
+
+    factor = side / maps.shape[-1]
+    large = resize_maps(maps, side)
+    start, cpu = time.perf_counter(), time.process_time()
+    make_tileable(large, (hotspot[0] * factor, hotspot[1] * factor))
+    return time.perf_counter() - start, time.process_time() - cpu
+
+
+def _fmt(values: dict[str, float], digits: int = 2) -> str:
+    return " / ".join(f"{value:.{digits}f}" for value in values.values())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "source", nargs="?", type=Path, help="photo files or a dataset folder (default: the samples)"
+    )
+    parser.add_argument("--split", default="test", help="the dataset split when SOURCE holds shards")
+    parser.add_argument("--weights", type=Path, default=None, help="a .safetensors file (default: shipped)")
+    parser.add_argument(
+        "--large", type=int, default=1024, help="side of the timing on enlarged maps (0: skip)"
+    )
+    parser.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
+    parser.add_argument("--json", type=Path, default=None, help="write every row and the summary here")
+    args = parser.parse_args()
+    if args.threads is not None:
+        torch.set_num_threads(args.threads)
+    from importlib import resources
+
+    source = args.source or Path(str(resources.files("brdfgan") / "samples"))
+    if not source.is_dir():
+        sys.exit(f"error: {source}: not a folder")
+    items = network_maps(source, args.split, args.weights)
+
+    threads = torch.get_num_threads()
+    print(f"--tileable on {source} ({threads} threads); per map: base colour / normal / roughness / metallic")
+    columns = (
+        "photo",
+        "side",
+        "s (CPU s)",
+        "wrap before",
+        "wrap cut",
+        "wrap blend",
+        "copied cut",
+        "copied blend",
+    )
+    print("| " + " | ".join(columns) + " | repaired (score) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    rows: list[dict[str, Any]] = []
+    first: tuple[Tensor, tuple[float, float]] | None = None
+    for name, maps, hotspot in items:
+        first = first or (maps, hotspot)
+        row = measure(name, maps, hotspot)
+        rows.append(row)
+        repaired = ", ".join(f"{key} {score:.2f}" for key, score in row["repaired"].items()) or "—"
+        print(
+            f"| {name} | {row['size']} | {row['seconds']:.2f} ({row['cpu_seconds']:.2f}) "
+            f"| {max(row['wrap_before'].values()):.2f} "
+            f"| {_fmt(row['cut']['wrap'])} | {_fmt(row['blend']['wrap'])} | {_fmt(row['cut']['copied'], 3)} "
+            f"| {_fmt(row['blend']['copied'], 3)} | {repaired} |",
+            flush=True,
+        )
+    if not rows:
+        sys.exit(f"error: {source}: nothing to measure")
+    worst_wrap = max(max(row["cut"]["wrap"].values()) for row in rows)
+    least_copied = min(min(row["cut"]["copied"].values()) for row in rows)
+    summary: dict[str, Any] = {
+        "photos": len(rows),
+        "worst_wrap_cut": worst_wrap,
+        "worst_wrap_blend": max(max(row["blend"]["wrap"].values()) for row in rows),
+        "least_copied_cut": least_copied,
+        "least_copied_blend": min(min(row["blend"]["copied"].values()) for row in rows),
+        "median_copied_blend": statistics.median(v for row in rows for v in row["blend"]["copied"].values()),
+        "seconds": [min(row["seconds"] for row in rows), max(row["seconds"] for row in rows)],
+        "cpu_seconds": [min(row["cpu_seconds"] for row in rows), max(row["cpu_seconds"] for row in rows)],
+        "photos_repaired": sum(bool(row["repaired"]) for row in rows),
+        "meets_goals": worst_wrap <= WRAP_GOAL and least_copied >= COPIED_GOAL,
+    }
+    if args.large and first is not None:
+        summary[f"seconds_at_{args.large}"] = _large(*first, args.large)
+    print()
+    print(
+        f"{len(rows)} photos: worst wrap ratio {worst_wrap:.2f} (blend {summary['worst_wrap_blend']:.2f}; "
+        f"goal <= {WRAP_GOAL}), least copied fraction {least_copied:.3f} (blend "
+        f"{summary['least_copied_blend']:.3f}, median {summary['median_copied_blend']:.3f}; goal >= "
+        f"{COPIED_GOAL}), {summary['seconds'][0]:.2f}-{summary['seconds'][1]:.2f} s per photo (CPU "
+        f"{summary['cpu_seconds'][0]:.2f}-{summary['cpu_seconds'][1]:.2f} s), "
+        f"flash mark repaired in {summary['photos_repaired']}"
+    )
+    if args.large and first is not None:
+        wall, cpu = summary[f"seconds_at_{args.large}"]
+        print(f"make_tileable at {args.large}²: {wall:.1f} s (CPU {cpu:.1f} s)")
+    print("goals met" if summary["meets_goals"] else "GOALS NOT MET")
+    if args.json is not None:
+        args.json.write_text(json.dumps({"source": str(source), "rows": rows, "summary": summary}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
