@@ -198,8 +198,9 @@ def build_parser() -> argparse.ArgumentParser:
     predict.add_argument(
         "--tileable",
         action="store_true",
-        help="make every map wrap seamlessly (blended with its own half-shifted copies, the same way for "
-        "all maps); height and occlusion are then periodic too",
+        help="make every map wrap seamlessly: the flash mark repaired where it leaked into a map, then "
+        "the maps rolled by about half a side and each seam cut along a minimum-error path through "
+        "their copies, the same cut for all maps; height and occlusion are then periodic too",
     )
     predict.add_argument(
         "--normal-strength",
