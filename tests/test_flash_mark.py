@@ -98,3 +98,10 @@ def test_the_tileable_record_round_trips_through_material_json() -> None:
     assert min(document["copied_fraction"].values()) > 0.9
     assert max(max(pair) for pair in document["wrap_ratio_after"].values()) <= 1.2
     assert len(document["shifts"]) == 4 and document["shifts"][-1] == [0, 0]
+
+
+def test_maps_too_small_to_tile_are_a_user_error() -> None:
+    from brdfgan.errors import UserError
+
+    with pytest.raises(UserError, match="--tileable needs maps of at least 16×16, got 12×12"):
+        make_tileable(random_maps(12, 12), (6.0, 6.0))

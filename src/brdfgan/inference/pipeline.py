@@ -36,6 +36,7 @@ from torch import Tensor
 from brdfgan.core.flash_mark import FlashMark, repair_flash_mark
 from brdfgan.core.seamless import (
     MAP_NAMES,
+    MIN_SIDE,
     TilingMeasures,
     file_units,
     make_seamless,
@@ -47,7 +48,7 @@ from brdfgan.inference.intake.lens import FieldOfView, crop_field_of_view
 from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, read_photo
 from brdfgan.inference.intake.preprocess import Crop, CropSized, preprocess
 from brdfgan.inference.model.tiling import TilingConfig, predict_direct, predict_tiled
-from brdfgan.inference.model.weights import Model
+from brdfgan.inference.model.weights import Model, PredictError
 from brdfgan.inference.outputs.export import ExportOptions, recover_outputs, write_material
 from brdfgan.inference.outputs.preview import write_animation, write_preview
 from brdfgan.inference.outputs.viewer import write_viewer
@@ -221,6 +222,9 @@ def make_tileable(maps: Tensor, hotspot: tuple[float, float]) -> tuple[Tensor, T
 
     Shape: ``(8, H, W)`` → ``(8, H, W)``.
     """
+    height, width = maps.shape[-2:]
+    if min(height, width) < MIN_SIDE:
+        raise PredictError(f"--tileable needs maps of at least {MIN_SIDE}×{MIN_SIDE}, got {height}×{width}")
     repaired, mark = repair_flash_mark(maps, hotspot)
     tile = make_seamless(repaired)
     before = {name: wrap_ratios(image) for name, image in zip(MAP_NAMES, file_units(maps), strict=True)}
