@@ -85,12 +85,15 @@ def shard_maps(root: Path, split: str, weights: Path | None) -> Iterator[Item]:
 
 
 def network_maps(source: Path, split: str = "test", weights: Path | None = None) -> Iterator[Item]:
-    """The maps of every photo file in ``source`` or, without any, of every sample of its dataset
-    ``split`` (:func:`photo_maps`, :func:`shard_maps`)."""
+    """The maps of every sample of the dataset ``split`` when ``source`` is a dataset (it holds
+    ``dataset.json``; generation also leaves contact-sheet images there, which are not photos),
+    else of every photo file in it (:func:`shard_maps`, :func:`photo_maps`)."""
     from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS
 
+    if (source / "dataset.json").is_file():
+        return shard_maps(source, split, weights)
     photos = sorted(p for p in source.iterdir() if p.is_file() and p.suffix.lower() in PHOTO_EXTENSIONS)
-    return photo_maps(photos, weights) if photos else shard_maps(source, split, weights)
+    return photo_maps(photos, weights)
 
 
 def _worst(pairs: dict[str, tuple[float, float]]) -> dict[str, float]:
