@@ -471,12 +471,14 @@ def test_tile_option_policy_keeps_the_config_valid_and_tiles_above_one_tile() ->
 
 def test_image_statistics_are_frozen_in_tiles_like_the_norms() -> None:
     # The anchored network reads per-image values (ImageStatistic: the de-lit anchor's hotspot cap,
-    # the global track's feature moments): tiling records them in the statistics pass and every
-    # tile replays the whole photo's, so tiled inference reproduces the untiled network.
+    # the global track's feature moments and highlight profile): tiling records them in the
+    # statistics pass and every tile replays the whole photo's, so tiled inference reproduces the
+    # untiled network.
     from brdfgan.models.anchored import AnchoredUNet
 
     torch.manual_seed(0)
-    model = AnchoredUNet(width=4, depth=2, global_features=True, head_gain=10.0)  # depth 2: a small field
+    # depth 2: a small field; the highlight profile reads the photo and its flash frame.
+    model = AnchoredUNet(width=4, depth=2, global_features=True, highlight_profile=True, head_gain=10.0)
     with torch.no_grad():
         for parameter in model.parameters():
             parameter.add_(0.05 * torch.randn_like(parameter))

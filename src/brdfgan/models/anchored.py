@@ -36,6 +36,10 @@ but not the photo's content (hue lost, detail blurred, a period-2 checkerboard, 
   whose zero-initialised output is added to the heads, all but the normal slopes (a surface's mean
   tilt is no image-wide level; Deschaintre et al. 2018's reason for their
   track; tiling replays the whole photo's moments in every tile, as it does the norms' statistics).
+  With ``highlight_profile`` the track also reads the flash highlight's profile around the hotspot
+  (:class:`~brdfgan.models.image_statistics.HighlightProfile`): the lobe's width and height, from
+  which roughness and specular level are read, measured where they are instead of inferred from
+  feature moments.
 
 Inputs per pixel: ``log`` of the photo and of the anchor ``g · d``, and the four flash side
 channels (:func:`~brdfgan.core.flash_geometry.flash_side_channels`). Normalisation is
@@ -64,7 +68,7 @@ from brdfgan.core.flash_geometry import (
     flash_side_channels,
 )
 from brdfgan.core.svbrdf import join_maps, linear_to_srgb, normalize_normal
-from brdfgan.models.image_statistics import HotspotCap, ImageMoments
+from brdfgan.models.image_statistics import PROFILE_RINGS, HighlightProfile, HotspotCap, ImageMoments
 
 Shading = Literal["detached", "gradient", "none"]
 SHADINGS: tuple[str, ...] = ("detached", "gradient", "none")
@@ -167,6 +171,11 @@ class AnchoredUNet(nn.Module):
             metal share, exposure and colour, which a network of
             affine-free instance norms cannot otherwise see but through spatial patterns
             (Deschaintre et al. 2018's reason for their track).
+        highlight_profile: the global track also reads the flash highlight's profile around the
+            hotspot (:class:`~brdfgan.models.image_statistics.HighlightProfile`: the de-lit
+            photo's relative log luminance and clipped share per ring of angle from the hotspot),
+            the width and height of the specular lobe from which roughness and specular level are
+            read; needs ``global_features``.
 
     Shape:
         - photo: ``(B, 3, H, W)`` linear LDR in [0, 1]
@@ -185,6 +194,7 @@ class AnchoredUNet(nn.Module):
         anchor_blur: bool = False,
         correction_blur: bool = False,
         global_features: bool = False,
+        highlight_profile: bool = False,
     ) -> None:
         super().__init__()
         if width < 1 or depth < 1:
@@ -195,6 +205,8 @@ class AnchoredUNet(nn.Module):
             raise ValueError(f"anchor_gain must be positive, got {anchor_gain}")
         if not head_gain > 0:
             raise ValueError(f"head_gain must be positive, got {head_gain}")
+        if highlight_profile and not global_features:
+            raise ValueError("highlight_profile feeds the global track: it needs global_features=True")
         self.width, self.depth = int(width), int(depth)
         self.shading: Shading = shading
         self.anchored = bool(anchored)
@@ -203,6 +215,7 @@ class AnchoredUNet(nn.Module):
         self.anchor_blur = bool(anchor_blur)
         self.correction_blur = bool(correction_blur)
         self.global_features = bool(global_features)
+        self.highlight_profile = bool(highlight_profile)
         widths = [width * 2 ** min(level, 3) for level in range(depth + 1)]
         self.encoder = nn.ModuleList(
             _conv_block(INPUT_CHANNELS if level == 0 else widths[level - 1], widths[level])
@@ -215,13 +228,16 @@ class AnchoredUNet(nn.Module):
         self.log_anchor_gain = nn.Parameter(torch.tensor(math.log(anchor_gain)))
         self.hotspot_cap = HotspotCap()  # a module, so that tiles share the whole photo's cap
         self.moments = nn.ModuleList(ImageMoments() for _ in widths) if global_features else None
+        self.profile = HighlightProfile() if highlight_profile else None
         self.global_track: nn.Sequential | None = None
         if global_features:
             output = nn.Linear(GLOBAL_HIDDEN, GLOBAL_OUTPUTS)
             nn.init.zeros_(output.weight)
             nn.init.zeros_(output.bias)
             self.global_track = nn.Sequential(
-                nn.Linear(2 * sum(widths), GLOBAL_HIDDEN), nn.LeakyReLU(0.2, inplace=True), output
+                nn.Linear(2 * sum(widths) + (3 * PROFILE_RINGS if highlight_profile else 0), GLOBAL_HIDDEN),
+                nn.LeakyReLU(0.2, inplace=True),
+                output,
             )
 
     def config(self) -> dict[str, Any]:
@@ -236,6 +252,7 @@ class AnchoredUNet(nn.Module):
             "anchor_blur": self.anchor_blur,
             "correction_blur": self.correction_blur,
             "global_features": self.global_features,
+            "highlight_profile": self.highlight_profile,
         }
 
     @property
@@ -281,6 +298,8 @@ class AnchoredUNet(nn.Module):
             skips.append(x)
         levels = None  # per image and output channel: the global track's addition to the heads
         if self.global_track is not None:
+            if self.profile is not None:
+                moments.append(self.profile(photo, frame))
             levels = self.global_track(torch.cat(moments, dim=1))[:, :, None, None]
 
         material = self.material(skips)

@@ -34,8 +34,9 @@ the default ``stats_resolution`` of 1024: photos up to 1024 px on their longer s
 statistics.
 
 **Image statistics.** An :class:`~brdfgan.models.image_statistics.ImageStatistic` module (a per-image
-vector: the de-lit anchor's hotspot cap, a feature map's moments) has its output recorded in the
-same pass and replayed in every tile: every tile gets the whole photo's values.
+vector: the de-lit anchor's hotspot cap, a feature map's moments, the flash highlight's profile)
+has its output recorded in the same pass and replayed in every tile: every tile gets the whole
+photo's values.
 
 **Limitation: other global operations.** Only ``InstanceNorm2d`` and ``ImageStatistic`` are frozen. A
 model with other image-wide operations — :class:`brdfgan.models.deschaintre2018.Deschaintre2018`'s
@@ -241,7 +242,7 @@ def _frozen_forward(module: nn.InstanceNorm2d, entries: list[tuple[Tensor, ...]]
 def _replayed_output(entries: list[tuple[Tensor, ...]]) -> Callable:
     calls = 0
 
-    def forward(x: Tensor) -> Tensor:
+    def forward(x: Tensor, *_more: Tensor) -> Tensor:  # a statistic may read more inputs (a flash frame)
         nonlocal calls
         (value,) = entries[calls % len(entries)]  # in call order, as for the norms
         calls += 1
