@@ -4,7 +4,7 @@
 # procedural and scan test sets and on both OOD variants beside v3 and the trivial references,
 # the export into the package. One training at a time on the two threads.
 #
-#   scripts/default_model_v4.sh [compare|final|evaluate|refine|check_refine|export_weights]...
+#   scripts/default_model_v4.sh [compare|final|no_profile|evaluate|refine|check_refine|export_weights]...
 #   (default: compare final evaluate export_weights, in order)
 #
 # Long trainings resume: rerunning a stage continues each unfinished run from its last.ckpt.
@@ -43,9 +43,10 @@ compare() {
     local optimizer_steps=$steps
     [ "$name" = E_adversarial ] && steps=$((steps / 2)) && optimizer_steps=$((2 * steps))
     # The comparison's base is the recipe without the global track (G adds it; it won and is on in
-    # the config now).
+    # the config now) and so without the highlight profile, which came later (no_profile).
     # shellcheck disable=SC2086
-    $PY train.py experiment=anchored model.generator.global_features=false ${VARIANT[$name]} trainer.max_steps=$optimizer_steps \
+    $PY train.py experiment=anchored model.generator.global_features=false model.generator.highlight_profile=false \
+      ${VARIANT[$name]} trainer.max_steps=$optimizer_steps \
       model.total_steps=$steps trainer.max_epochs=1000 test=false seed=0 \
       hydra.run.dir=$OUT/compare/$name $(resume $OUT/compare/$name)
   done
@@ -63,10 +64,16 @@ final() {  # the chosen recipe (conf/experiment/anchored.yaml), two seeds, 6 000
   done
 }
 
+no_profile() {  # the final recipe without the highlight profile, seed 0: what the profile changed
+  $PY train.py experiment=anchored model.generator.highlight_profile=false test=false seed=0 data.seed=0 \
+    hydra.run.dir=$OUT/no_profile_seed0 $(resume $OUT/no_profile_seed0)
+}
+
 evaluate() {  # procedural and scan test sets, both OOD variants: v4 (two seeds), v3, the references
   local models="v4: $OUT/final_seed0/checkpoints/last.ckpt, v3: $V3"
   # seed 1 when it has finished (the first evaluation ran before it had)
   [ -f $OUT/final_seed1/checkpoints/last.ckpt ] && models="$models, v4_seed1: $OUT/final_seed1/checkpoints/last.ckpt"
+  [ -f $OUT/no_profile_seed0/checkpoints/last.ckpt ] && models="$models, v4_no_profile: $OUT/no_profile_seed0/checkpoints/last.ckpt"
   models="$models, mean_maps: $REF/mean_maps.safetensors, photo_basecolor: $REF/photo_basecolor.safetensors"
   models="$models, de_lit: $REF/de_lit.safetensors"
   # Grid samples fixed before v4 was evaluated on the test split: the first crop of the first

@@ -288,6 +288,7 @@ def test_experiment_anchored_composes_the_model_data_and_v3_losses(tmp_path: Pat
     assert cfg.data.data_dir.endswith("procedural_and_scans") and cfg.data.sensor.auto_white_balance
     assert cfg.loss.metallic_loss == "bce" and not cfg.loss.switches.adversarial
     assert cfg.model.generator.correction_blur and cfg.data.sensor.auto_white_balance_probability == 0.75
+    assert cfg.model.generator.global_features and cfg.model.generator.highlight_profile
 
 
 def test_the_global_track_sets_levels_but_never_tilts_the_normals() -> None:
