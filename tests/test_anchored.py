@@ -327,7 +327,9 @@ def _flat_photo(
 def test_the_highlight_profile_reads_the_lobe_width() -> None:
     from brdfgan.models.image_statistics import PROFILE_RINGS, HighlightProfile
 
-    profile = HighlightProfile()
+    def profile(photo: torch.Tensor, frame: torch.Tensor) -> torch.Tensor:
+        return HighlightProfile()(delit_photo(photo, frame, clip=False), photo, frame)
+
     # A matte surface: the de-lit photo is flat, so every ring reads ~0, nothing clipped.
     relative, clipped, present = profile(*_flat_photo(roughness=1.0, metallic=0.0))[0].split(PROFILE_RINGS)
     assert relative.abs().max() < 0.05 and clipped.max() == 0.0 and present.min() == 1.0

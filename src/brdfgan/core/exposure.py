@@ -35,6 +35,8 @@ LENS_ATTENUATION_Q = 0.65
 SATURATION_CONSTANT = 78.0
 # Rec. 709 / sRGB primaries, the colour space of our linear renderings.
 LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)
+# A linear value at or above this (1.0 = the file's or sensor's saturation) counts as clipped.
+SATURATION_LEVEL = 0.99
 
 
 def luminance(rgb: Tensor, dim: int = -3) -> Tensor:

@@ -94,12 +94,13 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.checks import check_shape
+from brdfgan.core.exposure import SATURATION_LEVEL
 from brdfgan.core.flash_geometry import check_flash_frame, resize_flash_frame
 from brdfgan.core.render import PointLights, render_point_lights
 from brdfgan.core.svbrdf import check_map_shape, linear_to_srgb, resize_maps
 from brdfgan.errors import UserError
 from brdfgan.inference.intake.photo import Photo, read_photo
-from brdfgan.inference.intake.preprocess import SATURATION_LEVEL, Crop, preprocess
+from brdfgan.inference.intake.preprocess import Crop, preprocess
 from brdfgan.inference.pipeline import unique_names
 from brdfgan.inference.refine import RefineConfig, refine_maps
 from brdfgan.io.atomic import write_text_atomic

@@ -299,7 +299,7 @@ class AnchoredUNet(nn.Module):
         levels = None  # per image and output channel: the global track's addition to the heads
         if self.global_track is not None:
             if self.profile is not None:
-                moments.append(self.profile(photo, frame))
+                moments.append(self.profile(delit, photo, frame))
             levels = self.global_track(torch.cat(moments, dim=1))[:, :, None, None]
 
         material = self.material(skips)

@@ -16,8 +16,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from brdfgan.core.delit import HOTSPOT_CLIP_FACTOR, HOTSPOT_CLIP_QUANTILE, delit_photo, hotspot_cap
-from brdfgan.core.exposure import luminance
+from brdfgan.core.delit import HOTSPOT_CLIP_FACTOR, HOTSPOT_CLIP_QUANTILE, hotspot_cap
+from brdfgan.core.exposure import SATURATION_LEVEL, luminance
 from brdfgan.core.flash_geometry import flash_offset_channels
 
 MOMENTS_EPS = 1e-5  # as InstanceNorm2d's eps: the log standard deviation of a constant map is finite
@@ -28,7 +28,6 @@ MOMENTS_EPS = 1e-5  # as InstanceNorm2d's eps: the log standard deviation of a c
 PROFILE_EDGES = (0.005, 0.01, 0.02, 0.04, 0.08, 0.16, 0.32)
 PROFILE_RINGS = len(PROFILE_EDGES) + 1
 PROFILE_LOG_EPS = 1e-3  # as the anchored network's log of linear values
-SATURATED = 0.99  # a linear photo value at or above this is taken as clipped by the sensor
 
 
 class ImageStatistic(nn.Module):
@@ -73,6 +72,8 @@ class HighlightProfile(ImageStatistic):
     """The flash highlight's profile: per ring around the hotspot (:data:`PROFILE_EDGES`, in
     tangents of the angle from it), the de-lit photo's mean log luminance over the whole image's,
     the share of the ring's pixels the sensor clipped, and whether the ring is in view at all.
+    It reads the de-lit photo its network has already computed (:func:`~brdfgan.core.delit.delit_photo`,
+    ``clip=False``) beside the photo it came from.
 
     Why: roughness and specular level are read from the width and height of the highlight, a
     feature at one place in the photo. A network of affine-free instance norms and a few
@@ -84,21 +85,22 @@ class HighlightProfile(ImageStatistic):
     does not reach them) read 0 with their flag 0.
 
     Shape:
+        - delit: ``(B, 3, H, W)`` the de-lit photo, hotspot not clipped
         - photo: ``(B, 3, H, W)`` linear LDR
         - frame: ``(B, 3)`` flash frame ``(x, y, s)``
         - output: ``(B, 3 · PROFILE_RINGS)``: the relative log luminances, the clipped shares, the flags
     """
 
-    def forward(self, photo: Tensor, frame: Tensor) -> Tensor:
+    def forward(self, delit: Tensor, photo: Tensor, frame: Tensor) -> Tensor:
         height, width = photo.shape[-2:]
-        log_lum = (luminance(delit_photo(photo, frame, clip=False)) + PROFILE_LOG_EPS).log().flatten(1)
+        log_lum = (luminance(delit) + PROFILE_LOG_EPS).log().flatten(1)
         radius = flash_offset_channels(frame, height, width).norm(dim=1).flatten(1)
         edges = torch.tensor(PROFILE_EDGES, dtype=radius.dtype, device=radius.device)
         rings = F.one_hot(torch.bucketize(radius, edges), PROFILE_RINGS).to(photo.dtype)  # (B, HW, K)
         count = rings.sum(dim=1)
         share = rings / count.clamp_min(1.0).unsqueeze(1)
         relative = torch.einsum("bp,bpk->bk", log_lum - log_lum.mean(dim=1, keepdim=True), share)
-        clipped = (photo.amax(dim=1) >= SATURATED).to(photo.dtype).flatten(1)
+        clipped = (photo.amax(dim=1) >= SATURATION_LEVEL).to(photo.dtype).flatten(1)
         clipped_share = torch.einsum("bp,bpk->bk", clipped, share)
         return torch.cat([relative, clipped_share, (count > 0).to(photo.dtype)], dim=1)
 

@@ -37,7 +37,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from brdfgan.core.checks import check_shape
-from brdfgan.core.exposure import auto_expose, luminance
+from brdfgan.core.exposure import SATURATION_LEVEL, auto_expose, luminance
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.flash_geometry import pixel_scale
 from brdfgan.inference.intake.photo import Photo, PhotoError
@@ -48,7 +48,6 @@ __all__ = [
     "HOTSPOT_SIGMA_FRACTION",
     "HOTSPOT_WORKING_SIZE",
     "OFF_CENTRE_WARNING_FRACTION",
-    "SATURATION_LEVEL",
     "Crop",
     "Preprocessed",
     "clipped_fraction",
@@ -65,10 +64,9 @@ HOTSPOT_SIGMA_FRACTION = 0.025
 HOTSPOT_CLAMP_QUANTILE = 0.99
 HOTSPOT_PEAK_FRACTION = 0.9
 
-# Clipping check: a value at or above this (linear, 1.0 = the file's saturation) counts as
-# clipped; the disc around the hotspot has this radius as a fraction of the crop side; warn when
-# more than this fraction of the disc is clipped.
-SATURATION_LEVEL = 0.99
+# Clipping check: a value at or above core.exposure.SATURATION_LEVEL counts as clipped; the disc
+# around the hotspot has this radius as a fraction of the crop side; warn when more than this
+# fraction of the disc is clipped.
 CLIP_DISC_FRACTION = 0.05
 CLIP_DISC_MIN_RADIUS = 2.0
 CLIPPED_WARNING_FRACTION = 0.01

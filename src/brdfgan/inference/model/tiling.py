@@ -242,7 +242,7 @@ def _frozen_forward(module: nn.InstanceNorm2d, entries: list[tuple[Tensor, ...]]
 def _replayed_output(entries: list[tuple[Tensor, ...]]) -> Callable:
     calls = 0
 
-    def forward(x: Tensor, *_more: Tensor) -> Tensor:  # a statistic may read more inputs (a flash frame)
+    def forward(x: Tensor, *_more: Tensor) -> Tensor:  # a statistic may read more inputs (a photo, a frame)
         nonlocal calls
         (value,) = entries[calls % len(entries)]  # in call order, as for the norms
         calls += 1
