@@ -4,7 +4,7 @@
 # procedural and scan test sets and on both OOD variants beside v3 and the trivial references,
 # the export into the package. One training at a time on the two threads.
 #
-#   scripts/default_model_v4.sh [compare|final|no_profile|evaluate|refine|check_refine|export_weights]...
+#   scripts/default_model_v4.sh [compare|final|no_profile|cross|evaluate|refine|check_refine|export_weights]...
 #   (default: compare final evaluate export_weights, in order)
 #
 # Long trainings resume: rerunning a stage continues each unfinished run from its last.ckpt.
@@ -69,11 +69,19 @@ no_profile() {  # the final recipe without the highlight profile, seed 0: what t
     hydra.run.dir=$OUT/no_profile_seed0 $(resume $OUT/no_profile_seed0)
 }
 
-evaluate() {  # procedural and scan test sets, both OOD variants: v4 (two seeds), v3, the references
-  local models="v4: $OUT/final_seed0/checkpoints/last.ckpt, v3: $V3"
-  # seed 1 when it has finished (the first evaluation ran before it had)
-  [ -f $OUT/final_seed1/checkpoints/last.ckpt ] && models="$models, v4_seed1: $OUT/final_seed1/checkpoints/last.ckpt"
-  [ -f $OUT/no_profile_seed0/checkpoints/last.ckpt ] && models="$models, v4_no_profile: $OUT/no_profile_seed0/checkpoints/last.ckpt"
+cross() {  # the final recipe with the cross-paired rendering loss, seed 0: what the pairing changed
+  $PY train.py experiment=anchored loss.rendering_pairing=cross test=false seed=0 data.seed=0 \
+    hydra.run.dir=$OUT/cross_seed0 $(resume $OUT/cross_seed0)
+}
+
+evaluate() {  # procedural and scan test sets, both OOD variants: the v4 runs there are, v3, the references
+  local models="v3: $V3" run
+  declare -A RUNS=([v4]=final_seed0 [v4_seed1]=final_seed1 [v4_no_profile]=no_profile_seed0 [v4_cross]=cross_seed0)
+  for run in v4 v4_seed1 v4_no_profile v4_cross; do  # those that have finished (the machine may be new)
+    if [ -f "$OUT/${RUNS[$run]}/checkpoints/last.ckpt" ]; then
+      models="$models, $run: $OUT/${RUNS[$run]}/checkpoints/last.ckpt"
+    fi
+  done
   models="$models, mean_maps: $REF/mean_maps.safetensors, photo_basecolor: $REF/photo_basecolor.safetensors"
   models="$models, de_lit: $REF/de_lit.safetensors"
   # Grid samples fixed before v4 was evaluated on the test split: the first crop of the first

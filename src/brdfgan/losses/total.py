@@ -30,7 +30,7 @@ from brdfgan.losses.adversarial import (
     lsgan_generator_loss,
 )
 from brdfgan.losses.parameter import MetallicLoss, parameter_loss
-from brdfgan.losses.rendering import RenderingLoss
+from brdfgan.losses.rendering import RenderingLoss, RenderPairing
 
 GENERATOR_WEIGHT = 0.25  # the paper's ¼
 FEATURE_WEIGHT = 0.01  # the paper's λ in the discriminator total
@@ -134,6 +134,8 @@ class GANLoss(nn.Module):
             :func:`~brdfgan.losses.parameter.metallic_bce`).
         normal_tilt_weight: weight of the squared slope error added to the normal term (0, the
             paper: none; see :func:`~brdfgan.losses.parameter.tilt_squared_error`).
+        rendering_pairing: ``"joint"`` (the paper) or ``"cross"``: which maps are rendered
+            together (see :func:`~brdfgan.losses.rendering.cross_paired`).
     """
 
     def __init__(
@@ -148,8 +150,16 @@ class GANLoss(nn.Module):
         feature_weight: float = FEATURE_WEIGHT,
         metallic_loss: MetallicLoss = "l1",
         normal_tilt_weight: float = 0.0,
+        rendering_pairing: RenderPairing = "joint",
     ) -> None:
         super().__init__()
+        if rendering_pairing not in ("joint", "cross"):
+            raise UserError(f"loss.rendering_pairing={rendering_pairing!r}: must be 'joint' or 'cross'")
+        if rendering_pairing == "cross" and rendering_sampling.num_configs % 2:
+            raise UserError(
+                f"loss.rendering_pairing=cross: needs an even number of rendering configurations, "
+                f"loss.rendering_sampling gives {rendering_sampling.num_configs}"
+            )
         if not normal_tilt_weight >= 0.0:
             raise UserError(f"loss.normal_tilt_weight={normal_tilt_weight}: must be >= 0")
         self.normal_tilt_weight = float(normal_tilt_weight)
@@ -162,7 +172,13 @@ class GANLoss(nn.Module):
         self.feature_weight = feature_weight
         self.metallic_loss: MetallicLoss = metallic_loss
         self.rendering_loss = (
-            RenderingLoss(rendering_sampling, seed=seed, plane_half_size=plane_half_size, compile=compile)
+            RenderingLoss(
+                rendering_sampling,
+                seed=seed,
+                plane_half_size=plane_half_size,
+                compile=compile,
+                pairing=rendering_pairing,
+            )
             if switches.rendering
             else None
         )
@@ -247,5 +263,6 @@ class GANLoss(nn.Module):
     def extra_repr(self) -> str:
         return (
             f"switches={self.switches}, weight={self.weight}, feature_weight={self.feature_weight}, "
-            f"metallic_loss={self.metallic_loss}, normal_tilt_weight={self.normal_tilt_weight}"
+            f"metallic_loss={self.metallic_loss}, normal_tilt_weight={self.normal_tilt_weight}, "
+            f"rendering_pairing={self.rendering_loss.pairing if self.rendering_loss is not None else None}"
         )
