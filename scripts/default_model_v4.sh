@@ -4,7 +4,7 @@
 # procedural and scan test sets and on both OOD variants beside v3 and the trivial references,
 # the export into the package. One training at a time on the two threads.
 #
-#   scripts/default_model_v4.sh [compare|final|no_profile|cross|evaluate|refine|check_refine|export_weights]...
+#   scripts/default_model_v4.sh [compare|final|no_profile|joint|evaluate|refine|check_refine|export_weights]...
 #   (default: compare final evaluate export_weights, in order)
 #
 # Long trainings resume: rerunning a stage continues each unfinished run from its last.ckpt.
@@ -43,9 +43,11 @@ compare() {
     local optimizer_steps=$steps
     [ "$name" = E_adversarial ] && steps=$((steps / 2)) && optimizer_steps=$((2 * steps))
     # The comparison's base is the recipe without the global track (G adds it; it won and is on in
-    # the config now) and so without the highlight profile, which came later (no_profile).
+    # the config now) and so without the highlight profile and the cross-paired rendering loss,
+    # which came later (no_profile, joint).
     # shellcheck disable=SC2086
     $PY train.py experiment=anchored model.generator.global_features=false model.generator.highlight_profile=false \
+      loss.rendering_pairing=joint \
       ${VARIANT[$name]} trainer.max_steps=$optimizer_steps \
       model.total_steps=$steps trainer.max_epochs=1000 test=false seed=0 \
       hydra.run.dir=$OUT/compare/$name $(resume $OUT/compare/$name)
@@ -64,20 +66,21 @@ final() {  # the chosen recipe (conf/experiment/anchored.yaml), two seeds, 6 000
   done
 }
 
-no_profile() {  # the final recipe without the highlight profile, seed 0: what the profile changed
-  $PY train.py experiment=anchored model.generator.highlight_profile=false test=false seed=0 data.seed=0 \
+no_profile() {  # the profile run (joint render) without the highlight profile, seed 0: what the profile changed
+  $PY train.py experiment=anchored model.generator.highlight_profile=false loss.rendering_pairing=joint \
+    test=false seed=0 data.seed=0 \
     hydra.run.dir=$OUT/no_profile_seed0 $(resume $OUT/no_profile_seed0)
 }
 
-cross() {  # the final recipe with the cross-paired rendering loss, seed 0: what the pairing changed
-  $PY train.py experiment=anchored loss.rendering_pairing=cross test=false seed=0 data.seed=0 \
-    hydra.run.dir=$OUT/cross_seed0 $(resume $OUT/cross_seed0)
+joint() {  # the final recipe with the paper's joint rendering loss, seed 0: what the cross pairing changed
+  $PY train.py experiment=anchored loss.rendering_pairing=joint test=false seed=0 data.seed=0 \
+    hydra.run.dir=$OUT/joint_seed0 $(resume $OUT/joint_seed0)
 }
 
 evaluate() {  # procedural and scan test sets, both OOD variants: the v4 runs there are, v3, the references
   local models="v3: $V3" run
-  declare -A RUNS=([v4]=final_seed0 [v4_seed1]=final_seed1 [v4_no_profile]=no_profile_seed0 [v4_cross]=cross_seed0)
-  for run in v4 v4_seed1 v4_no_profile v4_cross; do  # those that have finished (the machine may be new)
+  declare -A RUNS=([v4]=final_seed0 [v4_seed1]=final_seed1 [v4_no_profile]=no_profile_seed0 [v4_joint]=joint_seed0)
+  for run in v4 v4_seed1 v4_no_profile v4_joint; do  # those that have finished (the machine may be new)
     if [ -f "$OUT/${RUNS[$run]}/checkpoints/last.ckpt" ]; then
       models="$models, $run: $OUT/${RUNS[$run]}/checkpoints/last.ckpt"
     fi

@@ -277,7 +277,10 @@ def test_model_anchored_trains_and_validates_in_the_platform(tiny_data: Path) ->
 
 
 def test_experiment_anchored_composes_the_model_data_and_v3_losses(tmp_path: Path) -> None:
+    import hydra
+
     from brdfgan.config_check import check_config
+    from brdfgan.losses import GANLoss
     from brdfgan.training.run import CHECKED_GROUPS
     from tests.conftest import compose_train
 
@@ -289,6 +292,9 @@ def test_experiment_anchored_composes_the_model_data_and_v3_losses(tmp_path: Pat
     assert cfg.loss.metallic_loss == "bce" and not cfg.loss.switches.adversarial
     assert cfg.model.generator.correction_blur and cfg.data.sensor.auto_white_balance_probability == 0.75
     assert cfg.model.generator.global_features and cfg.model.generator.highlight_profile
+    loss = hydra.utils.instantiate(cfg.loss)  # the cross-paired rendering loss
+    assert isinstance(loss, GANLoss) and loss.rendering_loss is not None
+    assert loss.rendering_loss.pairing == "cross"
 
 
 def test_the_global_track_sets_levels_but_never_tilts_the_normals() -> None:
