@@ -122,9 +122,8 @@ def _direct_rendering_loss(
 ) -> torch.Tensor:
     """The rendering loss before issue 16: both map sets through the direct renderer."""
     from brdfgan.core.sampling import log_transform
-    from brdfgan.losses.rendering import configs_to
 
-    configs = configs_to(configs, pred.device, torch.float32)
+    configs = configs.to(pred.device, torch.float32)
     image = render(pred.float(), configs.camera_position, configs.lights, plane_half_size)
     with torch.no_grad():
         reference = render(target.float(), configs.camera_position, configs.lights, plane_half_size)

@@ -193,14 +193,7 @@ def test_cross_pairing_routes_each_error_to_its_half_and_gradients_to_the_predic
     # the joint maps under the odd-numbered configurations, halved (the other half is exact).
     pred = target.clone()
     pred[:, ROUGHNESS] = (pred[:, ROUGHNESS] + 0.2).clamp(max=1.0)
-    odd = rendering_module.RenderConfigs(
-        camera_position=configs.camera_position[:, 1::2],
-        lights=rendering_module.PointLights(
-            position=configs.lights.position[:, 1::2],
-            intensity=configs.lights.intensity[:, 1::2],
-            color=configs.lights.color[:, 1::2],
-        ),
-    )
+    odd = configs.map_tensors(lambda t: t[:, 1::2])
     torch.testing.assert_close(
         rendering_loss(pred, target, configs, pairing="cross"), rendering_loss(pred, target, odd) / 2
     )

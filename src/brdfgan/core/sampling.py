@@ -22,6 +22,7 @@ Everything is reproducible from a ``torch.Generator``.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -72,17 +73,27 @@ class RenderConfigs:
     camera_position: Tensor
     lights: PointLights
 
-    def to(self, device: torch.device | str, dtype: torch.dtype) -> RenderConfigs:
-        """The same configurations on ``device`` in ``dtype``."""
+    def map_tensors(self, fn: Callable[[Tensor], Tensor]) -> RenderConfigs:
+        """``fn`` applied to the camera and to each light tensor, all of which lead with the batch
+        and view axes ``(B, V, …)`` — the one place that lists the fields.
+
+        Example:
+            >>> configs = sample_rendering_loss_configs(2, generator=torch.Generator().manual_seed(0))
+            >>> odd = configs.map_tensors(lambda t: t[:, 1::2])
+            >>> tuple(odd.camera_position.shape), tuple(odd.lights.intensity.shape)
+            ((2, 5, 3), (2, 5, 1))
+        """
         lights = self.lights
         return RenderConfigs(
-            camera_position=self.camera_position.to(device=device, dtype=dtype),
+            camera_position=fn(self.camera_position),
             lights=PointLights(
-                position=lights.position.to(device=device, dtype=dtype),
-                intensity=lights.intensity.to(device=device, dtype=dtype),
-                color=lights.color.to(device=device, dtype=dtype),
+                position=fn(lights.position), intensity=fn(lights.intensity), color=fn(lights.color)
             ),
         )
+
+    def to(self, device: torch.device | str | None, dtype: torch.dtype) -> RenderConfigs:
+        """The same configurations on ``device`` in ``dtype`` (a no-op for tensors already there)."""
+        return self.map_tensors(lambda t: t.to(device=device, dtype=dtype))
 
     def configuration(self, index: int) -> RenderConfigs:
         """Configuration ``index`` alone, as a batch of the same size with ``V = 1`` (views).
@@ -99,16 +110,7 @@ class RenderConfigs:
             >>> torch.equal(third.lights.position[:, 0], configs.lights.position[:, 3])
             True
         """
-        view = slice(index, index + 1)
-        lights = self.lights
-        return RenderConfigs(
-            camera_position=self.camera_position[:, view],
-            lights=PointLights(
-                position=lights.position[:, view],
-                intensity=lights.intensity[:, view],
-                color=lights.color[:, view],
-            ),
-        )
+        return self.map_tensors(lambda t: t[:, index : index + 1])
 
     def expand(self, batch: int) -> RenderConfigs:
         """The configurations of a batch of 1 shared by every sample of a batch of ``batch``
@@ -132,15 +134,7 @@ class RenderConfigs:
             raise ValueError(
                 f"expand needs configurations of a batch of 1, got {self.camera_position.shape[0]}"
             )
-        lights = self.lights
-        return RenderConfigs(
-            camera_position=self.camera_position.expand(batch, -1, -1),
-            lights=PointLights(
-                position=lights.position.expand(batch, -1, -1, -1),
-                intensity=lights.intensity.expand(batch, -1, -1),
-                color=lights.color.expand(batch, -1, -1, -1),
-            ),
-        )
+        return self.map_tensors(lambda t: t.expand(batch, *t.shape[1:]))
 
 
 def sample_cosine_hemisphere(

@@ -46,23 +46,6 @@ ImageLossFn = Callable[[Tensor, Tensor, Tensor, PointLights, float], Tensor]
 RenderPairing = Literal["joint", "cross"]
 
 
-def configs_to(
-    configs: RenderConfigs, device: torch.device | str | None, dtype: torch.dtype
-) -> RenderConfigs:
-    """The configurations on ``device`` in ``dtype`` (a no-op for tensors already there)."""
-
-    def move(t: Tensor) -> Tensor:
-        return t.to(device=device, dtype=dtype)
-
-    lights = configs.lights
-    return RenderConfigs(
-        camera_position=move(configs.camera_position),
-        lights=PointLights(
-            position=move(lights.position), intensity=move(lights.intensity), color=move(lights.color)
-        ),
-    )
-
-
 def cross_paired(
     pred: Tensor, target: Tensor, configs: RenderConfigs
 ) -> tuple[Tensor, Tensor, RenderConfigs]:
@@ -97,16 +80,8 @@ def cross_paired(
         [target[:, BASECOLOR], pred[:, NORMAL], pred[:, ROUGHNESS], target[:, METALLIC]], dim=1
     )
 
-    def halves(t: Tensor) -> Tensor:  # (B, V, ...) -> (2B, V/2, ...): even configs, then odd
-        return torch.cat([t[:, 0::2], t[:, 1::2]])
-
-    lights = configs.lights
-    paired = RenderConfigs(
-        camera_position=halves(configs.camera_position),
-        lights=PointLights(
-            position=halves(lights.position), intensity=halves(lights.intensity), color=halves(lights.color)
-        ),
-    )
+    # (B, V, …) -> (2B, V/2, …): the even-numbered configurations, then the odd-numbered ones.
+    paired = configs.map_tensors(lambda t: torch.cat([t[:, 0::2], t[:, 1::2]]))
     return torch.cat([basecolor_metallic, normal_roughness]), torch.cat([target, target]), paired
 
 
@@ -191,7 +166,7 @@ def rendering_loss(
             f"configs were drawn for a batch of {configs.camera_position.shape[0]}, maps have {pred.shape[0]}"
         )
     dtype = torch.promote_types(pred.dtype, torch.float32)
-    configs = configs_to(configs, pred.device, dtype)
+    configs = configs.to(pred.device, dtype)
     check_scene_shapes(pred, configs.camera_position, configs.lights)
     pred, target = pred.to(dtype), target.detach().to(device=pred.device, dtype=dtype)
     if pairing == "cross":
