@@ -4,8 +4,8 @@
 # procedural and scan test sets and on both OOD variants beside v3 and the trivial references,
 # the export into the package. One training at a time on the two threads.
 #
-#   scripts/default_model_v4.sh [compare|final|no_profile|joint|evaluate|refine|check_refine|export_weights]...
-#   (default: compare final evaluate export_weights, in order)
+#   scripts/default_model_v4.sh [compare|final|fixres|no_profile|joint|evaluate|refine|check_refine|export_weights]...
+#   (default: compare final fixres evaluate export_weights, in order)
 #
 # Long trainings resume: rerunning a stage continues each unfinished run from its last.ckpt.
 set -euo pipefail
@@ -63,6 +63,13 @@ final() {  # the chosen recipe (conf/experiment/anchored.yaml), two seeds, 6 000
   for seed in ${SEEDS:-0 1}; do  # SEEDS="1": one seed per session
     $PY train.py experiment=anchored test=false seed=$seed data.seed=$seed hydra.run.dir=$OUT/final_seed$seed \
       $(resume $OUT/final_seed$seed)
+  done
+}
+
+fixres() {  # stage 2: each final run fine-tuned on whole 256² photos (conf/experiment/anchored_fixres.yaml), ~20 min each
+  for seed in ${SEEDS:-0 1}; do
+    $PY train.py experiment=anchored_fixres init_from=$OUT/final_seed$seed/checkpoints/last.ckpt test=false \
+      seed=$seed data.seed=$seed hydra.run.dir=$OUT/fixres_seed$seed $(resume $OUT/fixres_seed$seed)
   done
 }
 
@@ -150,7 +157,7 @@ prepare() {
   done
 }
 stages=("$@")
-[ ${#stages[@]} -gt 0 ] || stages=(compare final evaluate export_weights)
+[ ${#stages[@]} -gt 0 ] || stages=(compare final fixres evaluate export_weights)
 for stage in "${stages[@]}"; do
   # 2 400 photos, ~35 min
   [ -d data/procedural_and_scans ] || $PY generate.py dataset_spec=procedural_and_scans progress=false

@@ -297,6 +297,25 @@ def test_experiment_anchored_composes_the_model_data_and_v3_losses(tmp_path: Pat
     assert loss.rendering_loss.pairing == "cross"
 
 
+def test_experiment_anchored_fixres_fine_tunes_stage_one_on_whole_photos(tmp_path: Path) -> None:
+    from brdfgan.config_check import check_config
+    from brdfgan.training.run import CHECKED_GROUPS
+    from tests.conftest import compose_train
+
+    stage_one = compose_train(["experiment=anchored"], tmp_path)
+    cfg = compose_train(["experiment=anchored_fixres", "init_from=stage1/last.ckpt"], tmp_path)
+    check_config(cfg, CHECKED_GROUPS)
+    assert cfg.init_from == "stage1/last.ckpt"
+    # Whole photos (stage 1: 128² windows), 1 000 batches.
+    assert cfg.data.train_crop is None and stage_one.data.train_crop == 128
+    assert cfg.trainer.max_epochs * cfg.data.epoch_samples // cfg.data.batch_size == 1000
+    assert cfg.model.optimizer.lr < stage_one.model.optimizer.lr
+    # Everything else is stage 1's recipe: the model, the data, the losses.
+    assert cfg.model.generator == stage_one.model.generator
+    assert cfg.loss == stage_one.loss
+    assert cfg.data.data_dir == stage_one.data.data_dir and cfg.data.sensor == stage_one.data.sensor
+
+
 def test_the_global_track_sets_levels_but_never_tilts_the_normals() -> None:
     # A surface's mean tilt is not an image-wide level: the track feeds every material output and
     # the roughness, not the slopes (with them a trained network tilted every validation photo).
