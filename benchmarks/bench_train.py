@@ -14,11 +14,12 @@ Variants: ``before`` is the step as it was (the direct vector-field renderer of
 ``tests/render_reference.py``, eager, Adam's default loop); ``eager`` the factored renderer without
 compilation; ``after`` the training configs' defaults (the compiled loss, fused Adam), and rows
 with one option changed each (Adam not fused, ``channels_last``) so each option's effect is
-measured in the same run. Recipes: the default GAN step, v3's supervised step, v4's (the
-photo-anchored U-Net of ``experiment=anchored``; its rendering-loss share against the 10 % goal),
-the paper's width. Last, the shard loader's samples/s per worker at 512² for both formats.
+measured in the same run. Recipes: the default GAN step, v3's supervised step, v4's two stages
+(the photo-anchored U-Net of ``experiment=anchored`` on 128² windows, then
+``experiment=anchored_fixres`` on whole 256² photos; the rendering-loss share against the 10 %
+goal), the paper's width. Last, the shard loader's samples/s per worker at 512² for both formats.
 
-    python -m benchmarks.bench_train [--steps N] [--quick]
+    python -m benchmarks.bench_train [--steps N] [--quick] [--only v4] [--no-loader]
 """
 
 from __future__ import annotations
@@ -55,6 +56,9 @@ DEFAULT_RECIPE = ("experiment=default_model", "loss=full")
 V3_RECIPE = ("experiment=default_model",)
 # v4's step: the photo-anchored two-decoder U-Net (model=anchored), supervised, same crops and batch.
 V4_RECIPE = ("experiment=anchored",)
+# v4's second stage: the same networks fine-tuned on whole 256² photos, two a batch (init_from is
+# the warm start's file, not read by a benchmark).
+V4_STAGE2_RECIPE = ("experiment=anchored_fixres", "init_from=null")
 PAPER_WIDTH = ("experiment=default_model", "loss=full", "model=paper")  # the paper's networks (45.6 M + 2 D)
 
 VARIANT_OVERRIDES: dict[str, tuple[str, ...]] = {
@@ -73,6 +77,8 @@ def _cases(quick: bool) -> list[Case]:
     v3 = [Case(supervised, v, V3_RECIPE, 128, 4) for v in ("before", "after (defaults)")]
     anchored = "v4 recipe, anchored U-Net, supervised (128², batch 4)"
     v4 = [Case(anchored, v, V4_RECIPE, 128, 4) for v in ("before", "after (defaults)")]
+    whole = "v4 recipe stage 2, whole photos (256², batch 2)"
+    v4 += [Case(whole, v, V4_STAGE2_RECIPE, 256, 2) for v in ("before", "after (defaults)")]
     paper_variants = ("before", "after (defaults)") if quick else ("before", "eager", "after (defaults)")
     paper = [Case("paper width (256², batch 2)", v, PAPER_WIDTH, 256, 2) for v in paper_variants]
     return default + v3 + v4 + paper
@@ -294,6 +300,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=8, help="timed steps per case (after 3 warm-up steps)")
     parser.add_argument("--quick", action="store_true", help="fewer paper-width variants")
     parser.add_argument("--no-loader", action="store_true", help="skip the shard loader table")
+    parser.add_argument("--only", metavar="TEXT", help="only the recipes whose name contains TEXT (e.g. v4)")
     parser.add_argument("--case", help=argparse.SUPPRESS)
     args = parser.parse_args()
     cases = _cases(args.quick)
@@ -303,6 +310,8 @@ def main() -> None:
 
     rows = []
     for index, case in enumerate(cases):
+        if args.only is not None and args.only not in case.recipe:
+            continue
         command = [
             sys.executable,
             "-m",

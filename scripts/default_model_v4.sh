@@ -86,8 +86,10 @@ joint() {  # the final recipe with the paper's joint rendering loss, seed 0: wha
 
 evaluate() {  # procedural and scan test sets, both OOD variants: the v4 runs there are, v3, the references
   local models="v3: $V3" run
-  declare -A RUNS=([v4]=final_seed0 [v4_seed1]=final_seed1 [v4_no_profile]=no_profile_seed0 [v4_joint]=joint_seed0)
-  for run in v4 v4_seed1 v4_no_profile v4_joint; do  # those that have finished (the machine may be new)
+  # v4: the two stages; v4_stage1: stage 1 alone; the ablations are of stage 1.
+  declare -A RUNS=([v4]=fixres_seed0 [v4_seed1]=fixres_seed1 [v4_stage1]=final_seed0 [v4_stage1_seed1]=final_seed1
+                   [v4_no_profile]=no_profile_seed0 [v4_joint]=joint_seed0)
+  for run in v4 v4_seed1 v4_stage1 v4_stage1_seed1 v4_no_profile v4_joint; do  # those that have finished (the machine may be new)
     if [ -f "$OUT/${RUNS[$run]}/checkpoints/last.ckpt" ]; then
       models="$models, $run: $OUT/${RUNS[$run]}/checkpoints/last.ckpt"
     fi
@@ -107,12 +109,14 @@ evaluate() {  # procedural and scan test sets, both OOD variants: the v4 runs th
   $PY generate.py dataset_spec=ood_close progress=false
   $PY evaluate.py data=ood hydra.run.dir=$OUT/eval_ood_standard "ckpt={$models}"
   $PY evaluate.py data=ood_close hydra.run.dir=$OUT/eval_ood_close "ckpt={$models}"
+  $PY scripts/grid_figure.py $OUT/eval_test_procedural docs/default_model_v4_grid.png --models v4 v3 --panel 80
+  $PY scripts/grid_figure.py $OUT/eval_test_scans docs/default_model_v4_grid_scans.png --models v4 v3 --panel 80
 }
 
 refine() {  # test-time refinement re-chosen for v4 on the validation split's two parts
   # (the rule: the largest novel-light gain that raises no map's RMSE by more than 5 %), then the
   # chosen variant checked on the scan test set and both OOD variants.
-  local v4=$OUT/final_seed0/checkpoints/last.ckpt
+  local v4=$OUT/fixres_seed0/checkpoints/last.ckpt
   declare -A REFINE=(
     [default]="refine_steps=[20,60]"
     [no_roughness]="refine_steps=[60] refine.fit_roughness=false refine.learning_rate=0.05"
@@ -129,7 +133,7 @@ refine() {  # test-time refinement re-chosen for v4 on the validation split's tw
 
 check_refine() {  # REFINE_CHOSEN="<evaluate.py overrides>" on the scan test set and both OOD variants
   : "${REFINE_CHOSEN:?set REFINE_CHOSEN to the evaluate.py overrides of the chosen variant}"
-  local v4=$OUT/final_seed0/checkpoints/last.ckpt
+  local v4=$OUT/fixres_seed0/checkpoints/last.ckpt
   # shellcheck disable=SC2086
   $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_test_scans data.prepare=null \
     grid_samples=0 hydra.run.dir=$OUT/refine/chosen_test_scans "ckpt={v4: $v4}" $REFINE_CHOSEN
@@ -140,7 +144,7 @@ check_refine() {  # REFINE_CHOSEN="<evaluate.py overrides>" on the scan test set
 }
 
 export_weights() {
-  $PY -m brdfgan.cli export-weights $OUT/final_seed0 --out src/brdfgan/weights/default.safetensors \
+  $PY -m brdfgan.cli export-weights $OUT/fixres_seed0 --out src/brdfgan/weights/default.safetensors \
     --model-id brdfgan-default-v4 --metrics $OUT/eval_test_procedural/metrics.json --metrics-model v4 \
     --hardware "2 vCPU x86_64 (no GPU), 2 threads, one training at a time"
   $PY -m tests.test_shipped_weights                                        # refresh the stored statistics

@@ -3,7 +3,6 @@ resize-convolution (nearest ×2 + 3×3 conv, ``model=default_resize``) against c
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -19,7 +18,6 @@ from tests.conftest import compose_train
 
 TINY: dict[str, Any] = {"width": 8, "downsamplings": 3, "residual_blocks": 2}
 TARGET = "brdfgan.models.generator.Generator"
-WEIGHTS = Path(__file__).resolve().parents[1] / "src" / "brdfgan" / "weights"
 
 
 def count(module: nn.Module) -> int:
@@ -92,14 +90,19 @@ def test_transposed_is_unchanged_from_before_the_option() -> None:
     assert g.config() == {"in_channels": 3, **TINY}  # no upsampling key: configs stored before it match
 
 
-def test_shipped_weights_load_strictly_as_transposed() -> None:
-    card = json.loads((WEIGHTS / "default.json").read_text())
-    assert "upsampling" not in card["config"]
-    g = Generator(**card["config"])
-    g.load_state_dict(network_weights(WEIGHTS / "default.safetensors")["generator"], strict=True)
-    assert g.upsampling == "transposed"
-    loaded, _ = load_weights(WEIGHTS / "default.safetensors")
+def test_weights_stored_before_the_option_load_strictly_as_transposed(tmp_path: Path) -> None:
+    # v3 (brdfgan-default-v3, shipped until v4) was stored with no upsampling key in its config.
+    torch.manual_seed(0)
+    g = Generator(**TINY).eval()
+    old = save_weights(tmp_path / "v3.safetensors", g, target=TARGET, config=TINY, model_id="v3-era")
+    assert "upsampling" not in load_weights(old)[1]["config"]
+    rebuilt = Generator(**TINY)
+    rebuilt.load_state_dict(network_weights(old)["generator"], strict=True)
+    assert rebuilt.upsampling == "transposed"
+    loaded, _ = load_weights(old)
     assert isinstance(loaded, Generator) and loaded.upsampling == "transposed"
+    photo = torch.rand(1, 3, 32, 32)
+    torch.testing.assert_close(loaded(photo), g(photo))
 
 
 def test_resize_layers_and_parameter_count() -> None:
