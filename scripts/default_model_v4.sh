@@ -4,7 +4,7 @@
 # procedural and scan test sets and on both OOD variants beside v3 and the trivial references,
 # the export into the package. One training at a time on the two threads.
 #
-#   scripts/default_model_v4.sh [compare|final|fixres|no_profile|joint|evaluate|refine|check_refine|export_weights]...
+#   scripts/default_model_v4.sh [compare|final|fixres|no_profile|no_shading|joint|evaluate|refine|check_refine|export_weights]...
 #   (default: compare final fixres evaluate export_weights, in order)
 #
 # Long trainings resume: rerunning a stage continues each unfinished run from its last.ckpt.
@@ -77,6 +77,12 @@ no_profile() {  # the profile run (joint render) without the highlight profile, 
   $PY train.py experiment=anchored model.generator.highlight_profile=false loss.rendering_pairing=joint \
     test=false seed=0 data.seed=0 \
     hydra.run.dir=$OUT/no_profile_seed0 $(resume $OUT/no_profile_seed0)
+}
+
+no_shading() {  # stage 1 without the shading image, seed 0: the normals' learning curve against final_seed0
+  # (python -m scripts.learning_curve shading=$OUT/final_seed0 none=$OUT/no_shading_seed0 --metric val/normal_angle_deg)
+  $PY train.py experiment=anchored model.generator.shading=none test=false seed=0 data.seed=0 \
+    hydra.run.dir=$OUT/no_shading_seed0 $(resume $OUT/no_shading_seed0)
 }
 
 joint() {  # the final recipe with the paper's joint rendering loss, seed 0: what the cross pairing changed
