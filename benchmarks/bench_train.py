@@ -44,7 +44,7 @@ LABEL_PREFIX = "brdfgan/"
 @dataclass(frozen=True)
 class Case:
     recipe: str  # a row group of the table
-    variant: str  # before | eager | after | after+channels_last | after+fused_adam
+    variant: str  # a key of VARIANT_OVERRIDES, or an ablation's label (its overrides in the case's)
     overrides: tuple[str, ...]
     crop: int
     batch: int
@@ -56,6 +56,8 @@ DEFAULT_RECIPE = ("experiment=default_model", "loss=full")
 V3_RECIPE = ("experiment=default_model",)
 # v4's step: the photo-anchored two-decoder U-Net (model=anchored), supervised, same crops and batch.
 V4_RECIPE = ("experiment=anchored",)
+# The same without the surface decoder's shading image (issue 32's ablation: it bought no normals).
+V4_NO_SHADING_RECIPE = ("experiment=anchored", "model.generator.shading=none")
 # v4's second stage: the same networks fine-tuned on whole 256² photos, two a batch (init_from is
 # the warm start's file, not read by a benchmark).
 V4_STAGE2_RECIPE = ("experiment=anchored_fixres", "init_from=null")
@@ -77,6 +79,7 @@ def _cases(quick: bool) -> list[Case]:
     v3 = [Case(supervised, v, V3_RECIPE, 128, 4) for v in ("before", "after (defaults)")]
     anchored = "v4 recipe, anchored U-Net, supervised (128², batch 4)"
     v4 = [Case(anchored, v, V4_RECIPE, 128, 4) for v in ("before", "after (defaults)")]
+    v4 += [Case(anchored, "after, no shading image", V4_NO_SHADING_RECIPE, 128, 4)]
     whole = "v4 recipe stage 2, whole photos (256², batch 2)"
     v4 += [Case(whole, v, V4_STAGE2_RECIPE, 256, 2) for v in ("before", "after (defaults)")]
     paper_variants = ("before", "after (defaults)") if quick else ("before", "eager", "after (defaults)")
@@ -146,7 +149,8 @@ def _measure(case: Case, steps: int) -> dict[str, Any]:
     import brdfgan.losses.rendering as rendering_module
 
     torch.manual_seed(0)
-    cfg = _compose([*case.overrides, *VARIANT_OVERRIDES[case.variant]])
+    # An ablation's variant is a label: its overrides are in the case's.
+    cfg = _compose([*case.overrides, *VARIANT_OVERRIDES.get(case.variant, ())])
     loss = hydra.utils.instantiate(cfg.loss, _convert_="all")
     module = hydra.utils.instantiate(cfg.model, loss=loss, total_steps=10_000, metrics=None, _convert_="all")
     if case.variant == "before":  # the loss as it was: full (B, V, 3, H, W) vector fields, eager

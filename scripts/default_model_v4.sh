@@ -4,7 +4,7 @@
 # procedural and scan test sets and on both OOD variants beside v3 and the trivial references,
 # the export into the package. One training at a time on the two threads.
 #
-#   scripts/default_model_v4.sh [compare|final|fixres|no_profile|no_shading|joint|evaluate|refine|check_refine|export_weights]...
+#   scripts/default_model_v4.sh [compare|final|fixres|no_profile|no_shading|no_shading_fixres|normal_curve|joint|evaluate|refine|check_refine|export_weights]...
 #   (default: compare final fixres evaluate export_weights, in order)
 #
 # Long trainings resume: rerunning a stage continues each unfinished run from its last.ckpt.
@@ -66,11 +66,16 @@ final() {  # the chosen recipe (conf/experiment/anchored.yaml), two seeds, 6 000
   done
 }
 
-fixres() {  # stage 2: each final run fine-tuned on whole 256² photos (conf/experiment/anchored_fixres.yaml), ~20 min each
+fixres_from() {  # stage 2 (conf/experiment/anchored_fixres.yaml) of the stage-1 runs $OUT/$1_seed*, into $OUT/$2_seed*
+  local from=$1 to=$2; shift 2
   for seed in ${SEEDS:-0 1}; do
-    $PY train.py experiment=anchored_fixres init_from=$OUT/final_seed$seed/checkpoints/last.ckpt test=false \
-      seed=$seed data.seed=$seed hydra.run.dir=$OUT/fixres_seed$seed $(resume $OUT/fixres_seed$seed)
+    $PY train.py experiment=anchored_fixres init_from=$OUT/${from}_seed$seed/checkpoints/last.ckpt test=false \
+      seed=$seed data.seed=$seed "$@" hydra.run.dir=$OUT/${to}_seed$seed $(resume $OUT/${to}_seed$seed)
   done
+}
+
+fixres() {  # stage 2: each final run fine-tuned on whole 256² photos, ~20 min each
+  fixres_from final fixres
 }
 
 no_profile() {  # the profile run (joint render) without the highlight profile, seed 0: what the profile changed
@@ -80,9 +85,19 @@ no_profile() {  # the profile run (joint render) without the highlight profile, 
 }
 
 no_shading() {  # stage 1 without the shading image, seed 0: the normals' learning curve against final_seed0
-  # (python -m scripts.learning_curve shading=$OUT/final_seed0 none=$OUT/no_shading_seed0 --metric val/normal_angle_deg)
   $PY train.py experiment=anchored model.generator.shading=none test=false seed=0 data.seed=0 \
     hydra.run.dir=$OUT/no_shading_seed0 $(resume $OUT/no_shading_seed0)
+}
+
+no_shading_fixres() {  # stage 2 of no_shading_seed0: the recipe without the shading image, both stages
+  SEEDS=${SEEDS:-0} fixres_from no_shading no_shading_fixres model.generator.shading=none
+}
+
+normal_curve() {  # validation normal angle through both stages, with and without the shading image
+  $PY -m scripts.learning_curve "shading=$OUT/final_seed0+$OUT/fixres_seed0" \
+    "none=$OUT/no_shading_seed0+$OUT/no_shading_fixres_seed0" "shading, seed 1=$OUT/final_seed1+$OUT/fixres_seed1" \
+    --metric val/normal_angle_deg --reference "flat map=7.95" --out $OUT/normal_curve
+  cp $OUT/normal_curve.png docs/default_model_normal_curve.png  # the table is in docs/default_model.md
 }
 
 joint() {  # the final recipe with the paper's joint rendering loss, seed 0: what the cross pairing changed
@@ -92,10 +107,10 @@ joint() {  # the final recipe with the paper's joint rendering loss, seed 0: wha
 
 evaluate() {  # procedural and scan test sets, both OOD variants: the v4 runs there are, v3, the references
   local models="v3: $V3" run
-  # v4: the two stages; v4_stage1: stage 1 alone; the ablations are of stage 1.
+  # v4: the two stages; v4_stage1: stage 1 alone; the ablations are of stage 1 but v4_no_shading (both).
   declare -A RUNS=([v4]=fixres_seed0 [v4_seed1]=fixres_seed1 [v4_stage1]=final_seed0 [v4_stage1_seed1]=final_seed1
-                   [v4_no_profile]=no_profile_seed0 [v4_joint]=joint_seed0)
-  for run in v4 v4_seed1 v4_stage1 v4_stage1_seed1 v4_no_profile v4_joint; do  # those that have finished (the machine may be new)
+                   [v4_no_profile]=no_profile_seed0 [v4_joint]=joint_seed0 [v4_no_shading]=no_shading_fixres_seed0)
+  for run in v4 v4_seed1 v4_stage1 v4_stage1_seed1 v4_no_profile v4_joint v4_no_shading; do  # those that have finished (the machine may be new)
     if [ -f "$OUT/${RUNS[$run]}/checkpoints/last.ckpt" ]; then
       models="$models, $run: $OUT/${RUNS[$run]}/checkpoints/last.ckpt"
     fi

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 from PIL import Image
-from scripts.learning_curve import main, markdown_table, validation_curve
+from scripts.learning_curve import main, markdown_table, staged_curve, validation_curve
 
 
 def _write_version(run: Path, version: int, rows: list[tuple[int, str]]) -> None:
@@ -43,3 +43,18 @@ def test_the_script_writes_a_table_and_a_plot_and_refuses_bad_runs(
     errors = capsys.readouterr().err.splitlines()
     assert len(errors) == 3 and all(line.startswith("learning_curve: ") for line in errors)
     assert "missing" in errors[0] and "val/nothing" in errors[1] and "NAME=RUN_DIR" in errors[2]
+
+
+def test_a_staged_run_continues_after_the_previous_stages_last_step(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    stage1, stage2 = tmp_path / "stage1", tmp_path / "stage2"
+    _write_version(stage1, 0, [(1999, "7.9"), (5999, "7.8")])
+    _write_version(stage2, 0, [(999, "7.7")])  # a warm start: its step count restarts at 0
+    assert staged_curve([stage1, stage2], "val/normal_angle_deg") == {1999: 7.9, 5999: 7.8, 6999: 7.7}
+    out = tmp_path / "curve"
+    assert main([f"two={stage1}+{stage2}", "--reference", "flat map=7.95", "--out", str(out)]) == 0
+    table = out.with_suffix(".md").read_text()
+    assert "| 6999 | 7.7 |" in table and "flat map: 7.95" in table
+    assert main([f"two={stage1}", "--reference", "7.95", "--out", str(out)]) == 2
+    assert "--reference '7.95': expected LABEL=VALUE" in capsys.readouterr().err
