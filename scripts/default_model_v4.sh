@@ -142,8 +142,10 @@ refine() {  # test-time refinement re-chosen for v4 on the validation split's tw
     [default]="refine_steps=[20,60]"
     [no_roughness]="refine_steps=[60] refine.fit_roughness=false refine.learning_rate=0.05"
     [roughness_nuisance]="refine_steps=[60] refine.roughness_nuisance=true refine.learning_rate=0.05"
+    [basecolor_kept]="refine_steps=[20,60] refine.fit_basecolor=false"
+    [metallic_only]="refine_steps=[60] refine.fit_basecolor=false refine.fit_roughness=false"
   )
-  for variant in "${!REFINE[@]}"; do
+  for variant in ${REFINE_VARIANTS:-${!REFINE[@]}}; do  # REFINE_VARIANTS: some of them
     for part in procedural scans; do
       # shellcheck disable=SC2086
       $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_val_$part data.prepare=null \

@@ -155,6 +155,13 @@ def test_a_map_left_out_of_the_fit_keeps_its_prediction() -> None:
     result = refine_maps(photo, start, centred_flash_frame(1, 32, 32, FOV), config)
     torch.testing.assert_close(result.maps[3:7], _unchanged(start)[3:7])
     assert abs(float(result.maps[7].mean()) - 0.1) < 0.5 * abs(0.5 - 0.1)
+    # fit_basecolor=False as well: only metallic moves, and the base colour is the prediction's.
+    metallic_only = RefineConfig(
+        steps=40, learning_rate=0.05, ambient=False, fit_roughness=False, fit_basecolor=False
+    )
+    result = refine_maps(photo, start, centred_flash_frame(1, 32, 32, FOV), metallic_only)
+    torch.testing.assert_close(result.maps[:7], _unchanged(start)[:7])
+    assert abs(float(result.maps[7].mean()) - 0.1) < 0.5 * abs(0.5 - 0.1)
 
 
 def test_a_nuisance_roughness_is_fitted_jointly_but_not_returned() -> None:

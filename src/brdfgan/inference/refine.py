@@ -15,8 +15,9 @@ What is fitted (:class:`CaptureFit`; settings in
 
 - **one logit offset per map** — base colour (all channels alike: its level against the specular
   highlight, which the gain cannot set), roughness, metallic — so the network's normals and the
-  maps' spatial detail stay as predicted; ``fit_roughness=False`` keeps the roughness, and
-  ``roughness_nuisance`` fits its offset but returns the predicted roughness;
+  maps' spatial detail stay as predicted; ``fit_roughness=False`` keeps the roughness,
+  ``fit_basecolor=False`` the base colour, and ``roughness_nuisance`` fits the roughness's offset
+  but returns the predicted roughness;
 - a per-channel **gain** (log-parametrised): the photo's unknown exposure and white balance;
 - optionally a low-frequency **ambient irradiance** (a ``g × g`` grid per channel, bilinearly
   upsampled, times the diffuse albedo): light the flash model cannot explain — a room or the sky —
@@ -292,7 +293,9 @@ def refine_maps(
     camera_xy = hotspot_position(frame, photo.shape[-2], photo.shape[-1]).to(maps_full.device)
     prior = maps_to_parameters(prior_maps)
     # Which offsets move (roughness, metallic, base colour), and which the returned maps keep.
-    fitted = torch.tensor([float(config.fit_roughness), 1.0, 1.0], device=prior.device).view(1, 3, 1, 1)
+    fitted = torch.tensor(
+        [float(config.fit_roughness), 1.0, float(config.fit_basecolor)], device=prior.device
+    ).view(1, 3, 1, 1)
     returned = fitted * torch.tensor(
         [float(not config.roughness_nuisance), 1.0, 1.0], device=prior.device
     ).view(1, 3, 1, 1)

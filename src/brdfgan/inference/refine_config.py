@@ -28,6 +28,7 @@ class RefineConfig:
     ambient_grid: int = 4
     fit_flash_offset: bool = False  # fit the flash's offset from the lens (a 2-vector in the plane)
     fit_roughness: bool = True  # False: the roughness map is kept as predicted
+    fit_basecolor: bool = True  # False: the base colour is kept as predicted (gain and ambient still fitted)
     roughness_nuisance: bool = False  # with fit_roughness: fit the offset, return the predicted roughness
     clip_level: float = 0.98  # a pixel with a channel at or above this is clipped: a lower bound
 
