@@ -57,7 +57,7 @@ V3_RECIPE = ("experiment=default_model",)
 # v4's step: the photo-anchored two-decoder U-Net (model=anchored), supervised, same crops and batch.
 V4_RECIPE = ("experiment=anchored",)
 # The same without the surface decoder's shading image (issue 32's ablation: it bought no normals).
-V4_NO_SHADING_RECIPE = ("experiment=anchored", "model.generator.shading=none")
+V4_NO_SHADING_RECIPE = (*V4_RECIPE, "model.generator.shading=none")
 # v4's second stage: the same networks fine-tuned on whole 256² photos, two a batch (init_from is
 # the warm start's file, not read by a benchmark).
 V4_STAGE2_RECIPE = ("experiment=anchored_fixres", "init_from=null")

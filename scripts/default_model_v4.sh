@@ -14,6 +14,7 @@ PY=.venv/bin/python
 export OMP_NUM_THREADS=2
 OUT=logs/default_model_v4
 REF=src/brdfgan/weights/references
+SHIPPED=$OUT/fixres_seed0  # the run brdfgan-default-v4 was exported from (stage 2, seed 0)
 BUDGET_S=480  # training seconds per comparison run
 # Seconds per step of each variant on the 2-core machine (70-step probes; A and B share one
 # architecture): a run's steps are BUDGET_S / its step time, so each gets the same wall time.
@@ -137,7 +138,7 @@ evaluate() {  # procedural and scan test sets, both OOD variants: the v4 runs th
 refine() {  # test-time refinement re-chosen for v4 on the validation split's two parts
   # (the rule: the largest novel-light gain that raises no map's RMSE by more than 5 %), then the
   # chosen variant checked on the scan test set and both OOD variants.
-  local v4=$OUT/fixres_seed0/checkpoints/last.ckpt
+  local v4=$SHIPPED/checkpoints/last.ckpt
   declare -A REFINE=(
     [default]="refine_steps=[20,60]"
     [no_roughness]="refine_steps=[60] refine.fit_roughness=false refine.learning_rate=0.05"
@@ -156,7 +157,7 @@ refine() {  # test-time refinement re-chosen for v4 on the validation split's tw
 
 check_refine() {  # REFINE_CHOSEN="<evaluate.py overrides>" on the scan test set and both OOD variants
   : "${REFINE_CHOSEN:?set REFINE_CHOSEN to the evaluate.py overrides of the chosen variant}"
-  local v4=$OUT/fixres_seed0/checkpoints/last.ckpt
+  local v4=$SHIPPED/checkpoints/last.ckpt
   # shellcheck disable=SC2086
   $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_test_scans data.prepare=null \
     grid_samples=0 hydra.run.dir=$OUT/refine/chosen_test_scans "ckpt={v4: $v4}" $REFINE_CHOSEN
@@ -167,7 +168,7 @@ check_refine() {  # REFINE_CHOSEN="<evaluate.py overrides>" on the scan test set
 }
 
 export_weights() {
-  $PY -m brdfgan.cli export-weights $OUT/fixres_seed0 --out src/brdfgan/weights/default.safetensors \
+  $PY -m brdfgan.cli export-weights $SHIPPED --out src/brdfgan/weights/default.safetensors \
     --model-id brdfgan-default-v4 --metrics $OUT/eval_test_procedural/metrics.json --metrics-model v4 \
     --hardware "2 vCPU x86_64 (no GPU), 2 threads, one training at a time"
   $PY -m tests.test_shipped_weights                                        # refresh the stored statistics

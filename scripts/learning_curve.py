@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import itertools
 import sys
 from pathlib import Path
 
@@ -105,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, curve in curves.items():
         steps = sorted(curve)
         axes.plot(steps, [curve[step] for step in steps], marker="o", label=name)
-    for (label, value), style in zip(references, ["--", ":", "-."] * len(references), strict=False):
+    for (label, value), style in zip(references, itertools.cycle(["--", ":", "-."])):
         axes.axhline(value, color="grey", linestyle=style, label=label)
     axes.set_xlabel("optimizer step")
     axes.set_ylabel(args.metric)
