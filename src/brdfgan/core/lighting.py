@@ -33,7 +33,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from brdfgan.core.exposure import luminance_value
+from brdfgan.core.exposure import LUMINANCE_WEIGHTS, luminance_value
 
 # Sub-intervals per texel row of the quadrature behind the irradiance weights (error ~1e-6).
 _QUADRATURE_PER_ROW = 64
@@ -259,3 +259,84 @@ def normalize_environment(environment: Environment, target_irradiance: float) ->
     if not current > 0.0:
         raise ValueError("cannot normalise an environment that puts no light on the sample plane")
     return environment.scaled(target_irradiance / current)
+
+
+# ----------------------------------------------------------------------------- distant lights
+
+
+@lru_cache(maxsize=16)
+def _texel_solid_angles(height: int) -> np.ndarray:
+    # Row i is a point sample at θ_i = iπ/(H − 1) standing for the band of half a row either side;
+    # below the horizon the sample plane hides the light, so those rows weigh nothing.
+    delta = math.pi / (height - 1)
+    theta = np.arange(height) * delta
+    top = np.clip(theta - delta / 2.0, 0.0, math.pi / 2.0)
+    bottom = np.clip(theta + delta / 2.0, 0.0, math.pi / 2.0)
+    solid = (np.cos(top) - np.cos(bottom)) * (2.0 * math.pi / (2 * height))
+    solid.setflags(write=False)
+    return solid
+
+
+def environment_lights(
+    environment: Environment, count: int, generator: torch.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distant lights whose sum stands for the environment's upper hemisphere, plus its sun.
+
+    ``count`` texels are drawn, stratified, with probability proportional to their luminance times
+    their solid angle ``Ω``; each becomes a light along its texel's direction (jittered inside the
+    cell) carrying the irradiance ``L Ω / (count · p)`` at normal incidence, so the lights' sum is
+    an unbiased estimate of the environment's light on any surface; the sun comes last as one more
+    light (zero irradiance when there is none or it is set). Why lights: the project's renderer
+    shades point lights (:mod:`brdfgan.core.render`), and a few dozen lights drawn afresh for every
+    photo light each photo plausibly while the set of photos covers the environment.
+
+    Returns:
+        ``(directions, irradiance)``: unit world directions (+Z up) and RGB irradiance on a surface
+        facing each light, float64.
+
+    Shape:
+        - environment.radiance: ``(H, 2H, 3)``
+        - output: ``(count + 1, 3)``, ``(count + 1, 3)``
+
+    Example:
+        A constant sky of radiance 1 puts π on the upward-facing plane; the lights' cosine-weighted
+        sum estimates it without bias (exactly here, since every texel has the same luminance per
+        solid angle):
+
+        >>> sky = Environment(np.ones((16, 32, 3), np.float32))
+        >>> directions, irradiance = environment_lights(sky, 64, torch.Generator().manual_seed(0))
+        >>> round(float((irradiance[:, 1] * directions[:, 2]).sum() / math.pi), 2)
+        1.0
+    """
+    if count < 1:
+        raise ValueError(f"count must be >= 1, got {count}")
+    radiance = environment.radiance
+    check_equirect(radiance)
+    height, width = radiance.shape[:2]
+    solid = np.broadcast_to(_texel_solid_angles(height)[:, None], (height, width))
+    luma = np.einsum("hwc,c->hw", radiance.astype(np.float64), np.asarray(LUMINANCE_WEIGHTS))
+    weights = (np.maximum(luma, 0.0) * solid).ravel()
+    total = weights.sum()
+    directions = np.zeros((count + 1, 3))
+    irradiance = np.zeros((count + 1, 3))
+    u = torch.rand(count, 3, generator=generator, dtype=torch.float64).numpy()
+    if total > 0.0:
+        cdf = np.cumsum(weights) / total
+        strata = (np.arange(count) + u[:, 0]) / count
+        texels = np.minimum(np.searchsorted(cdf, strata, side="right"), weights.size - 1)
+        rows, cols = np.divmod(texels, width)
+        theta = np.clip((rows + u[:, 1] - 0.5) * (math.pi / (height - 1)), 0.0, math.pi / 2.0)
+        phi = (cols + u[:, 2]) * (2.0 * math.pi / width)
+        directions[:count] = np.stack(
+            [np.sin(theta) * np.sin(phi), np.sin(theta) * np.cos(phi), np.cos(theta)], axis=-1
+        )
+        # L·Ω / (count · p) with p = luma·Ω / total: the texel's colour at total / (count · luma).
+        colour = radiance[rows, cols].astype(np.float64)
+        irradiance[:count] = colour * (total / (count * luma[rows, cols]))[:, None]
+    sun = environment.sun
+    if sun is not None and sun.direction[2] > 0.0:
+        directions[count] = sun.direction
+        irradiance[count] = sun.irradiance
+    else:
+        directions[count] = (0.0, 0.0, 1.0)
+    return directions, irradiance

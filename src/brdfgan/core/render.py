@@ -198,14 +198,45 @@ def maps_in_view(maps: Tensor, pose: CameraPose, plane_half_size: float = 1.0) -
     """
     check_shape(maps, f"{NUM_CHANNELS} H W", name="maps")
     height, width = maps.shape[-2:]
+    grid = view_grid(pose, height, width, plane_half_size).to(maps.dtype)
+    return warp_maps_to_view(maps[None], grid[None])[0]
+
+
+def view_grid(pose: CameraPose, height: int, width: int, plane_half_size: float = 1.0) -> Tensor:
+    """Where each pixel of the photo taken from ``pose`` samples the texture-space square, as a
+    ``grid_sample`` grid (:func:`view_plane_points` in its coordinates).
+
+    Shape:
+        - output: ``(height, width, 2)`` float64
+    """
     points = torch.from_numpy(view_plane_points(pose, height, width) / plane_half_size)
     # grid_sample's (x, y) in [-1, 1] with align_corners=False are the outer texel edges: x = -1 is
     # the left edge (world -s), y = -1 the top edge (world +s, row 0 is +Y).
-    grid = torch.stack([points[..., 0], -points[..., 1]], dim=-1).to(maps.dtype)
-    warped = F.grid_sample(
-        maps[None], grid[None], mode="bilinear", padding_mode="border", align_corners=False
-    )[0]
-    warped[NORMAL] = normalize_normal(warped[NORMAL], dim=0)
+    return torch.stack([points[..., 0], -points[..., 1]], dim=-1)
+
+
+def warp_to_view(images: Tensor, grids: Tensor) -> Tensor:
+    """Texture-space images resampled (bilinearly) into the photos' pixels through their
+    :func:`view_grid`; points off the square take the nearest border texel.
+
+    Shape:
+        - images: ``(B, C, H, W)``; grids: ``(B, H', W', 2)``
+        - output: ``(B, C, H', W')``
+    """
+    return F.grid_sample(
+        images, grids.to(images), mode="bilinear", padding_mode="border", align_corners=False
+    )
+
+
+def warp_maps_to_view(maps: Tensor, grids: Tensor) -> Tensor:
+    """:func:`warp_to_view` for map sets: the normals renormalised after the interpolation.
+
+    Shape:
+        - maps: ``(B, 8, H, W)``; grids: ``(B, H', W', 2)``
+        - output: ``(B, 8, H', W')``
+    """
+    warped = warp_to_view(maps, grids)
+    warped[:, NORMAL] = normalize_normal(warped[:, NORMAL], dim=1)
     return warped
 
 

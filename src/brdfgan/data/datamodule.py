@@ -577,7 +577,7 @@ class ShardDataModule(L.LightningDataModule):
         prefetch_factor: int | None = None,
         epoch_samples: int | None = None,
         train_crop: int | None = None,
-        prepare: Callable[[], object] | None = None,
+        prepare: Callable[..., object] | None = None,
         sensor: SensorEffects | None = None,
         sensor_splits: Sequence[str] = ("train",),
         eval_sensor: SensorEffects | None = None,
@@ -793,7 +793,7 @@ class ShardDataModule(L.LightningDataModule):
             **options,
         )
 
-    def _loader(self, stream: ShardStream, *, persistent: bool) -> DataLoader:
+    def _loader(self, stream: IterableDataset, *, persistent: bool) -> DataLoader:
         return DataLoader(
             stream,
             batch_size=None,  # batches are formed in the workers

@@ -51,7 +51,6 @@ import torch
 from torch import Tensor
 
 from brdfgan import __version__
-from brdfgan.core.lighting import flash_irradiance
 from brdfgan.core.render import FlashCapture
 from brdfgan.core.svbrdf import InvalidMapsError, validate_maps
 from brdfgan.data.augment import CropSampling, random_crops
@@ -63,6 +62,7 @@ from brdfgan.data.lighting import (
     LightingDraw,
     build_environment_pools,
     draw_lighting,
+    flash_centre_irradiance,
     realize_lighting,
 )
 from brdfgan.data.material_source import PaintedMaterial, ScanSampling, paint_procedural, paint_scanned
@@ -386,9 +386,7 @@ class MitsubaPhotographer:
         r, g, b = blackbody_rgb(temperature_k)
         flash = (flash_intensity * r, flash_intensity * g, flash_intensity * b)
         position = capture.flash_position
-        distance = math.hypot(*position)  # the lens height exactly when the flash is at the lens
-        # I·cos/d² at the sample centre; cos = 1 for the flash straight above it.
-        centre_irradiance = flash_irradiance(flash, distance) * (position[2] / distance)
+        centre_irradiance = flash_centre_irradiance(flash, position)
         environment = realize_lighting(lighting, centre_irradiance, self.environment_resolution)
         result = render_capture(
             self.renderer,
@@ -820,11 +818,12 @@ def _shard_digest(path: Path) -> str:
     return digest
 
 
-def dataset_ready(spec: DatasetSpec, out_dir: str | os.PathLike[str]) -> bool:
-    """Whether ``out_dir`` holds the complete dataset of ``spec`` (spec file and all manifests)."""
+def dataset_ready(spec: DatasetSpec, out_dir: str | os.PathLike[str], splits: Sequence[str] = SPLITS) -> bool:
+    """Whether ``out_dir`` holds the complete dataset of ``spec`` (spec file and all manifests),
+    or those of its ``splits``."""
     root = Path(out_dir)
     spec_file = root / SPEC_FILE
-    if not spec_file.exists() or not all((root / s / "manifest.json").exists() for s in SPLITS):
+    if not spec_file.exists() or not all((root / s / "manifest.json").exists() for s in splits):
         return False
     try:
         return bool(_identity(json.loads(spec_file.read_text())) == _identity(spec.to_json()))
@@ -839,6 +838,7 @@ def ensure_dataset(
     generate: bool = True,
     generate_under: str | os.PathLike[str] | None = None,
     progress: bool = True,
+    splits: Sequence[str] = SPLITS,
 ) -> Path:
     """Generate the dataset into ``out_dir`` unless it is already complete (used to create the
     embedded default dataset on a fresh clone's first ``train.py``/``evaluate.py``).
@@ -848,14 +848,21 @@ def ensure_dataset(
     ``generate_under: ${paths.data_dir}``: the project's own data folder fills itself on first
     use, while a mistyped ``data.data_dir`` anywhere else is a :class:`DatasetConfigError` naming
     it, raised before anything is written. A complete dataset is used wherever it is.
+
+    ``splits`` limits all of this to those splits' shards (a model trained on photos rendered on
+    the fly, :mod:`brdfgan.data.rendered`, needs only the validation and test shards).
     """
-    if dataset_ready(spec, out_dir):
+    unknown = sorted(set(splits) - set(SPLITS))
+    if unknown:
+        raise DatasetConfigError(f"unknown split {unknown[0]!r}: expected some of {', '.join(SPLITS)}")
+    if dataset_ready(spec, out_dir, splits):
         return Path(out_dir)
     if not generate and not (generate_under is not None and _inside(out_dir, generate_under)):
         home = f" (only paths.data_dir={generate_under} fills itself on first use)" if generate_under else ""
         raise DatasetConfigError(f"data.data_dir={out_dir}: {_not_ready(spec, Path(out_dir))}{home}")
-    log.info("dataset %s is missing or incomplete: generating it", out_dir)
-    log.info("%s", run_generation(spec, out_dir, progress=progress).describe())
+    log.info("dataset %s is missing or incomplete: generating %s", out_dir, "/".join(splits))
+    positions = [k for k, job in enumerate(plan_shards(spec)) if job.split in splits]
+    log.info("%s", run_generation(spec, out_dir, shards=positions, progress=progress).describe())
     return Path(out_dir)
 
 

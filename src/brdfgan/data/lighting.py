@@ -33,7 +33,7 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
-from brdfgan.core.lighting import Environment, equirect_directions, normalize_environment
+from brdfgan.core.lighting import Environment, equirect_directions, flash_irradiance, normalize_environment
 from brdfgan.core.sampling import log_uniform
 from brdfgan.data.flash import blackbody_rgb
 from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, ordered
@@ -544,5 +544,20 @@ def draw_lighting(
 def realize_lighting(draw: LightingDraw, flash_irradiance_value: float, resolution: int) -> Environment:
     """The drawn environment, rotated and scaled so its plane irradiance is
     ``ratio · flash_irradiance_value``."""
-    environment = load_environment(draw.spec, resolution).rotated(draw.rotation_rad)
-    return normalize_environment(environment, draw.env_to_flash_ratio * flash_irradiance_value)
+    return balance_environment(load_environment(draw.spec, resolution), draw, flash_irradiance_value)
+
+
+def balance_environment(
+    environment: Environment, draw: LightingDraw, flash_irradiance_value: float
+) -> Environment:
+    """``environment`` (the draw's, however it was loaded) rotated by the draw and scaled so its
+    plane irradiance is ``ratio · flash_irradiance_value``."""
+    rotated = environment.rotated(draw.rotation_rad)
+    return normalize_environment(rotated, draw.env_to_flash_ratio * flash_irradiance_value)
+
+
+def flash_centre_irradiance(flash_rgb: Sequence[float], position: Sequence[float]) -> float:
+    """Luminance of the irradiance a flash of RGB radiant intensity ``flash_rgb`` (W/sr) at
+    ``position`` puts on the sample centre: ``I · cos θ / d²`` (cos θ = 1 straight above it)."""
+    distance = math.hypot(*position)
+    return flash_irradiance(flash_rgb, distance) * (position[2] / distance)

@@ -117,8 +117,10 @@ __all__ = [
     "Sample",
     "ShardError",
     "ShardInfo",
+    "decode_maps",
     "decode_sample",
     "digest_path",
+    "encode_maps",
     "encode_sample",
     "list_shards",
     "read_digest",
@@ -259,11 +261,7 @@ def encode_sample(sample: Sample, shard_format: str = "png") -> dict[str, bytes]
     except (TypeError, ValueError) as error:
         raise ShardError(f"sample {sample.key!r}: meta is not JSON-serialisable ({error})") from error
     photo = _quantise(sample.photo)
-    parts = split_maps(sample.maps)
-    # One quantisation for both formats (normals as (n + 1) / 2), so their values are identical.
-    maps = _quantise(
-        torch.cat([parts.basecolor, encode_normal(parts.normal), parts.roughness, parts.metallic])
-    )
+    maps = _quantise_maps(sample.maps)
     if shard_format == "u16z":
         return {"input.u16z": _encode_u16z(photo), "maps.u16z": _encode_u16z(maps), "meta.json": meta}
     return {
@@ -321,14 +319,9 @@ def decode_sample(record: Mapping[str, Any]) -> Sample:
         raise ShardError(f"{where} meta.json: invalid JSON ({error})") from error
     if not isinstance(meta, dict):
         raise ShardError(f"{where} meta.json: expected a JSON object, got {type(meta).__name__}")
-    unit_maps = _unit_float(maps)
-    normal = decode_normal(unit_maps[NORMAL])
-    if (normal[2] < -NORMAL_UNIT_TOLERANCE).any():
-        normal_member = "maps.u16z" if shard_format == "u16z" else "normal.png"
-        raise ShardError(
-            f"{where} {normal_member}: normals point into the surface (z < 0); not a (n + 1) / 2 map?"
-        )
-    unit_maps[NORMAL] = normal
+    unit_maps = _maps_from_quantised(
+        maps, f"{where} {'maps.u16z' if shard_format == 'u16z' else 'normal.png'}"
+    )
     try:
         return Sample(key=str(key), photo=_unit_float(photo), maps=unit_maps, meta=meta, check=False)
     except ShardError as error:
@@ -344,6 +337,52 @@ def _quantise(image: Tensor) -> np.ndarray:
     # float64 before scaling so that rounding to the nearest 16-bit level is exact.
     array = image.detach().to("cpu", torch.float64).numpy()
     return np.rint(np.clip(array, 0.0, 1.0) * _SCALE16).astype(np.uint16)
+
+
+def _quantise_maps(maps: Tensor) -> np.ndarray:
+    """The 16-bit values a map set is stored as, normals as ``(n + 1) / 2`` (one quantisation for
+    every format, so their values are identical).
+
+    Shape:
+        - maps: ``(8, H, W)``; output: ``(8, H, W)`` uint16
+    """
+    parts = split_maps(maps)
+    return _quantise(
+        torch.cat([parts.basecolor, encode_normal(parts.normal), parts.roughness, parts.metallic])
+    )
+
+
+def _maps_from_quantised(planes: np.ndarray, where: str) -> Tensor:
+    """Stored 16-bit map planes back to a map set, normals decoded and renormalised; ``where``
+    names the member in the error raised for normals pointing into the surface.
+
+    Shape:
+        - planes: ``(8, H, W)`` uint16; output: ``(8, H, W)`` float32
+    """
+    unit_maps = _unit_float(planes)
+    normal = decode_normal(unit_maps[NORMAL])
+    if (normal[2] < -NORMAL_UNIT_TOLERANCE).any():
+        raise ShardError(f"{where}: normals point into the surface (z < 0); not a (n + 1) / 2 map?")
+    unit_maps[NORMAL] = normal
+    return unit_maps
+
+
+def encode_maps(maps: Tensor) -> bytes:
+    """One map set as a ``.u16z`` payload (the ``maps.u16z`` member of a shard sample, alone).
+
+    Shape:
+        - maps: ``(8, H, W)``
+    """
+    return _encode_u16z(_quantise_maps(maps))
+
+
+def decode_maps(data: bytes, where: str) -> Tensor:
+    """The inverse of :func:`encode_maps`; a corrupt payload is a :class:`ShardError` naming ``where``.
+
+    Shape:
+        - output: ``(8, H, W)`` float32
+    """
+    return _maps_from_quantised(_decode_u16z(data, NUM_CHANNELS, where), where)
 
 
 def _unit_float(planes: np.ndarray) -> Tensor:

@@ -1,0 +1,587 @@
+"""Training photos rendered on the fly: a bank of material maps, fresh capture conditions for every
+draw, the project's torch renderer.
+
+Shards (:mod:`brdfgan.data.generation`) photograph each training material once or a few times,
+under one light each, and cost every fresh machine the whole generation before its first step.
+Here a training sample is drawn anew every time:
+
+1. **A material from the bank** (:class:`MaterialBank`): the training materials of a dataset spec
+   — the procedural families (mixed and recoloured as the spec says) painted once and cached on
+   disk, plus the spec's training scan sets read from their folder — one of them drawn at random,
+   a scan with the spec's ``scans.fraction``; a scan is recoloured afresh with its
+   ``recolor_probability``.
+2. **A crop** of it, as generation cuts one (the material's or the spec's crop sampling).
+3. **Capture conditions** from the spec: the camera (field of view, tilt, distance), the flash
+   (offset, intensity, colour temperature), the exposure error, and an environment of the training
+   pool rotated and balanced against the flash, turned into distant lights
+   (:func:`~brdfgan.core.lighting.environment_lights`).
+4. **The photo**: :func:`photograph_scenes` renders the flash and the distant lights with
+   :func:`~brdfgan.core.render.render_point_lights` (the BRDF of the rendering loss and of the
+   Mitsuba-checked conventions) in texture space, resamples it into the photo's pixels through the
+   camera (:func:`~brdfgan.core.render.view_grid`, the warp that aligns maps to shard photos) and
+   auto-exposes it off by the drawn error. This runs in
+   :meth:`RenderedDataModule.on_after_batch_transfer`, on the device the model trains on: the
+   CPU workers draw and crop, a GPU renders.
+5. **The phone** (``sensor``, :class:`~brdfgan.data.sensor.SensorEffects`) and the train crop, as
+   for shard photos.
+
+Validation and test stay Mitsuba shards (only those splits are generated), so no model is graded
+by the renderer it trained on. Every draw is a pure function of ``(seed, epoch, rank, batch,
+position)``: a resumed run sees the same photos as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import random
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+from torch.utils.data import DataLoader, IterableDataset, get_worker_info
+
+from brdfgan.core.exposure import auto_exposure_scale
+from brdfgan.core.lighting import Environment, SunLight, environment_lights
+from brdfgan.core.relight import SKY_LIGHT_DISTANCE
+from brdfgan.core.render import PointLights, render_point_lights, view_grid, warp_maps_to_view, warp_to_view
+from brdfgan.core.svbrdf import BASECOLOR, METALLIC
+from brdfgan.data.augment import random_crops
+from brdfgan.data.capture import CaptureDraw
+from brdfgan.data.datamodule import ShardDataModule, collate_samples, random_crop
+from brdfgan.data.flash import blackbody_rgb
+from brdfgan.data.generation import (
+    DatasetSpec,
+    derive_seed,
+    material_seed,
+    paint_material,
+    scan_materials,
+    single_torch_thread,
+    split_materials,
+    split_scan_sets,
+)
+from brdfgan.data.lighting import (
+    EnvironmentSpec,
+    balance_environment,
+    build_environment_pools,
+    draw_lighting,
+    flash_centre_irradiance,
+    load_environment,
+)
+from brdfgan.data.material_source import PaintedMaterial
+from brdfgan.data.materials.recolor import draw_recolor, recolor_basecolor
+from brdfgan.data.scanned import read_scanned_material, scanned_material_folders
+from brdfgan.data.shards import Sample, ShardError, decode_maps, encode_maps
+from brdfgan.data.spec_checks import DatasetConfigError
+from brdfgan.io.atomic import atomic_replace, write_text_atomic
+
+__all__ = [
+    "MaterialBank",
+    "PhotoScene",
+    "RenderedDataModule",
+    "RenderedStream",
+    "capture_scene",
+    "draw_scene",
+    "photograph_scenes",
+]
+
+log = logging.getLogger(__name__)
+
+BANK_VERSION = 1
+INDEX_FILE = "bank.json"
+# What of a dataset spec decides its training materials (the rest — crops, capture, lighting,
+# flash — is drawn per photo here); a bank is identified by these alone.
+_MATERIAL_KEYS = (
+    "seed",
+    "materials",
+    "families",
+    "material_resolution",
+    "test_fraction",
+    "val_fraction",
+    "mixing",
+    "recolor",
+    "scans",
+)
+
+
+def bank_identity(spec: DatasetSpec) -> dict[str, Any]:
+    """The parts of ``spec`` that decide its training materials, with the bank format version."""
+    description = spec.to_json()
+    return {"bank_version": BANK_VERSION, **{key: description.get(key) for key in _MATERIAL_KEYS}}
+
+
+class MaterialBank:
+    """The training materials of ``spec``, painted once into ``folder/<identity digest>/``.
+
+    :meth:`build` paints every procedural training material (each exactly as generation paints
+    it: same seed, family, partner, recolour) into ``m<index>.u16z`` (the maps' 16-bit shard
+    encoding), tabulates the training environments into ``environments.npz`` (so rendering needs
+    no Mitsuba) and writes ``bank.json`` last; a killed build resumes with the files it finished.
+    The training scan sets are read from ``spec.scans.folder`` when first drawn and kept in memory.
+    """
+
+    def __init__(self, spec: DatasetSpec, folder: str | Path, environment_resolution: int = 64) -> None:
+        if spec.scanned is not None:
+            raise DatasetConfigError(
+                "dataset_spec.scanned: a scanned dataset is test only; it has no training materials to bank"
+            )
+        if environment_resolution < 4:
+            raise DatasetConfigError(
+                f"data.bank.environment_resolution={environment_resolution}: must be >= 4"
+            )
+        self.spec = spec
+        identity = bank_identity(spec)
+        digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:16]
+        self.root = Path(folder) / digest
+        self.identity = identity
+        self.environment_resolution = environment_resolution
+        scans = scan_materials(spec)
+        self.procedural = tuple(i for i in split_materials(spec)["train"] if i not in scans)
+        if spec.scans.enabled:
+            folders = scanned_material_folders(str(spec.scans.folder), key="dataset_spec.scans.folder")
+            self.scan_folders = tuple(folders[i] for i in split_scan_sets(spec)["train"])
+        else:
+            self.scan_folders = ()
+        if not self.procedural and not self.scan_folders:
+            raise DatasetConfigError("dataset_spec: no training material to bank")
+        pools = build_environment_pools(spec.lighting, derive_seed(spec.seed, "lighting"))
+        self.environments = pools.train
+        self._scans: dict[int, Tensor] = {}
+        self._environments: dict[str, Environment] = {}
+        self._meta: dict[int, dict[str, Any]] = {}
+
+    # -- building -------------------------------------------------------------------------
+
+    def ready(self) -> bool:
+        """Whether the bank is complete (its ``bank.json`` written for this identity)."""
+        index = self.root / INDEX_FILE
+        if not index.exists():
+            return False
+        try:
+            return bool(json.loads(index.read_text())["identity"] == self.identity)
+        except (OSError, ValueError, KeyError):
+            return False
+
+    def material_path(self, index: int) -> Path:
+        return self.root / f"m{index:06d}.u16z"
+
+    def build(self, progress: bool = True) -> Path:
+        """Paint what is missing and write ``bank.json``; a complete bank is left as it is."""
+        from tqdm import tqdm
+
+        if self.ready():
+            return self.root
+        self.root.mkdir(parents=True, exist_ok=True)
+        materials: dict[str, Any] = {}
+        with single_torch_thread():  # the bytes of a material do not depend on the core count
+            for index in tqdm(self.procedural, desc="material bank", unit="material", disable=not progress):
+                path = self.material_path(index)
+                generator = torch.Generator().manual_seed(material_seed(self.spec.seed, index))
+                if path.exists():
+                    # Its metadata is cheap to redo exactly; the maps are what took the time.
+                    meta_only = paint_material(self.spec, "train", index, generator)
+                    materials[str(index)] = _material_meta(meta_only)
+                    continue
+                material = paint_material(self.spec, "train", index, generator)
+                with atomic_replace(path) as temp:
+                    temp.write_bytes(encode_maps(material.maps))
+                materials[str(index)] = _material_meta(material)
+        self._write_environments()
+        index_text = json.dumps(
+            {
+                "identity": self.identity,
+                "materials": materials,
+                "scan_sets": [folder.name for folder in self.scan_folders],
+                "environments": [spec.env_id for spec in self.environments],
+                "environment_resolution": self.environment_resolution,
+            },
+            sort_keys=True,
+        )
+        write_text_atomic(self.root / INDEX_FILE, index_text)
+        return self.root
+
+    def _write_environments(self) -> None:
+        arrays: dict[str, np.ndarray] = {}
+        for spec in self.environments:
+            environment = load_environment(spec, self.environment_resolution)
+            arrays[f"{spec.env_id}/radiance"] = environment.radiance
+            if environment.sun is not None:
+                arrays[f"{spec.env_id}/sun"] = np.asarray(
+                    [*environment.sun.direction, *environment.sun.irradiance], dtype=np.float64
+                )
+        with atomic_replace(self.root / "environments.npz", keep_suffix=True) as temp:
+            np.savez(temp, allow_pickle=False, **arrays)
+
+    # -- drawing --------------------------------------------------------------------------
+
+    def environment(self, spec: EnvironmentSpec) -> Environment:
+        """A training environment as tabulated in the bank."""
+        if not self._environments:
+            with np.load(self.root / "environments.npz") as data:
+                for env in self.environments:
+                    sun = data.get(f"{env.env_id}/sun")
+                    self._environments[env.env_id] = Environment(
+                        np.asarray(data[f"{env.env_id}/radiance"], dtype=np.float32),
+                        None if sun is None else SunLight(_triple(sun[:3]), _triple(sun[3:])),
+                    )
+        return self._environments[spec.env_id]
+
+    def draw(self, generator: torch.Generator) -> PaintedMaterial:
+        """A material at random: a training scan set with probability ``scans.fraction`` (freshly
+        recoloured with ``scans.recolor_probability``), else a banked procedural material."""
+        u = torch.rand(3, generator=generator, dtype=torch.float64).tolist()
+        use_scan = self.scan_folders and (not self.procedural or u[0] < self.spec.scans.fraction)
+        if use_scan:
+            which = min(int(u[1] * len(self.scan_folders)), len(self.scan_folders) - 1)
+            return self._scan_material(which, u[2], generator)
+        index = self.procedural[min(int(u[1] * len(self.procedural)), len(self.procedural) - 1)]
+        path = self.material_path(index)
+        try:
+            maps = decode_maps(path.read_bytes(), str(path))
+        except OSError as error:
+            raise ShardError(
+                f"{path}: cannot read the banked material ({error}); delete {self.root}"
+            ) from error
+        meta = self._material_meta(index)
+        return PaintedMaterial(maps, meta["family"], meta["parameters"], meta["extra"])
+
+    def _material_meta(self, index: int) -> dict[str, Any]:
+        if not self._meta:
+            recorded = json.loads((self.root / INDEX_FILE).read_text())["materials"]
+            self._meta = {int(key): value for key, value in recorded.items()}
+        return self._meta[index]
+
+    def _scan_material(self, which: int, recolor_draw: float, generator: torch.Generator) -> PaintedMaterial:
+        folder = self.scan_folders[which]
+        if which not in self._scans:
+            self._scans[which] = read_scanned_material(folder, self.spec.scans.resolution)
+        maps = self._scans[which]
+        extra: dict[str, Any] = {}
+        recolor = replace(self.spec.recolor, probability=self.spec.scans.recolor_probability)
+        if recolor.probability > 0 and recolor_draw < recolor.probability:
+            draw = draw_recolor(recolor, generator)
+            maps = maps.clone()
+            maps[BASECOLOR] = recolor_basecolor(maps[BASECOLOR], maps[METALLIC], draw)
+            extra["recolor"] = draw.to_json()
+        return PaintedMaterial(maps, f"scanned/{folder.name}", {}, extra, self.spec.scans.crop)
+
+
+def _material_meta(material: PaintedMaterial) -> dict[str, Any]:
+    return {"family": material.family, "parameters": material.parameters, "extra": material.extra}
+
+
+def _triple(values: np.ndarray) -> tuple[float, float, float]:
+    return (float(values[0]), float(values[1]), float(values[2]))
+
+
+# ----------------------------------------------------------------------------- one photo's scene
+
+
+@dataclass(frozen=True)
+class PhotoScene:
+    """Everything one training photo is rendered from.
+
+    Shape:
+        - maps: ``(8, R, R)`` texture space; camera_position: ``(3,)``
+        - light_position, light_rgb: ``(K, 3)`` world units and W/sr (the flash first)
+        - grid: ``(R, R, 2)`` the photo's :func:`~brdfgan.core.render.view_grid`
+    """
+
+    key: str
+    maps: Tensor
+    camera_position: Tensor
+    light_position: Tensor
+    light_rgb: Tensor
+    grid: Tensor
+    exposure_ev: float
+    meta: dict[str, Any]
+
+
+def draw_scene(bank: MaterialBank, key: str, seed: int, environment_lights_count: int) -> PhotoScene:
+    """One training photo's scene, a pure function of ``seed``: a bank material and a crop of it,
+    the capture, flash and lighting draws of the spec (as :func:`~brdfgan.data.generation.material_samples`
+    draws them for a Mitsuba render) with the environment as ``environment_lights_count`` distant
+    lights plus its sun."""
+    spec = bank.spec
+    generator = torch.Generator().manual_seed(seed)
+    material = bank.draw(generator)
+    crops, transforms = random_crops(material.maps, 1, spec.resolution, generator, material.crop or spec.crop)
+    lighting = draw_lighting(bank.environments, spec.lighting, generator)
+    flash_intensity, temperature = spec.flash.sample(generator)
+    capture = spec.capture.sample(generator)
+    red, green, blue = blackbody_rgb(temperature)
+    flash_rgb = (flash_intensity * red, flash_intensity * green, flash_intensity * blue)
+    environment = balance_environment(
+        bank.environment(lighting.spec), lighting, flash_centre_irradiance(flash_rgb, capture.flash_position)
+    )
+    meta = {
+        "split": "train",
+        "family": material.family,
+        "parameters": material.parameters,
+        **material.extra,
+        "crop": transforms[0].to_json(),
+        "lighting": lighting.to_json(),
+        "flash": {"intensity_w_sr": flash_intensity, "temperature_k": temperature},
+        "capture": capture.to_json(spec.resolution),
+        "render": {"renderer": "torch", "seed": seed, "environment_lights": environment_lights_count},
+        "maps_view": "photo",
+    }
+    lights = environment_lights(environment, environment_lights_count, generator)
+    return capture_scene(key, crops[0], capture, flash_rgb, lights, meta)
+
+
+def capture_scene(
+    key: str,
+    maps: Tensor,
+    capture: CaptureDraw,
+    flash_rgb: tuple[float, float, float],
+    distant_lights: tuple[np.ndarray, np.ndarray],
+    meta: dict[str, Any],
+) -> PhotoScene:
+    """The scene of a photo of ``maps`` taken as ``capture`` says, lit by the flash (RGB radiant
+    intensity, W/sr) and ``distant_lights`` (:func:`~brdfgan.core.lighting.environment_lights`:
+    directions and irradiance), the latter placed as point lights far away (the placement of
+    :func:`~brdfgan.core.relight.render_sky`).
+
+    Shape:
+        - maps: ``(8, R, R)``; distant_lights: ``(L, 3)``, ``(L, 3)``
+    """
+    directions, irradiance = distant_lights
+    positions = np.concatenate([np.asarray([capture.flash_position]), directions * SKY_LIGHT_DISTANCE])
+    rgb = np.concatenate([np.asarray([flash_rgb]), irradiance * SKY_LIGHT_DISTANCE**2])
+    resolution = maps.shape[-1]
+    return PhotoScene(
+        key=key,
+        maps=maps,
+        camera_position=torch.tensor(capture.camera.origin, dtype=torch.float32),
+        light_position=torch.from_numpy(positions).float(),
+        light_rgb=torch.from_numpy(rgb).float(),
+        grid=view_grid(capture.camera, resolution, resolution, capture.plane_half_size).float(),
+        exposure_ev=capture.exposure_ev,
+        meta=meta,
+    )
+
+
+def photograph_scenes(
+    maps: Tensor,
+    camera_position: Tensor,
+    light_position: Tensor,
+    light_rgb: Tensor,
+    grids: Tensor,
+    exposure_ev: Tensor,
+) -> tuple[Tensor, Tensor, Tensor]:
+    """Photos of a batch of scenes: the point-light render from each camera in texture space,
+    resampled into the photo's pixels, auto-exposed off by the drawn error (``clip(hdr · scale ·
+    2^ev, 0, 1)`` as :func:`~brdfgan.core.exposure.auto_expose`), with the maps resampled alike.
+
+    Returns:
+        ``(photos, maps_in_view, exposure_scale)``: linear LDR photos, the maps as the photos show
+        them, the scales applied.
+
+    Shape:
+        - maps: ``(B, 8, R, R)``; camera_position: ``(B, 3)``
+        - light_position, light_rgb: ``(B, K, 3)``; grids: ``(B, R, R, 2)``; exposure_ev: ``(B,)``
+        - output: ``(B, 3, R, R)``, ``(B, 8, R, R)``, ``(B,)``
+    """
+    batch, count = light_position.shape[:2]
+    lights = PointLights(
+        position=light_position.unsqueeze(1),
+        intensity=light_rgb.new_ones(batch, 1, count),
+        color=light_rgb.unsqueeze(1),
+    )
+    hdr = render_point_lights(maps, camera_position.unsqueeze(1), lights)[:, 0]
+    hdr = warp_to_view(hdr, grids).clamp_min(0.0)
+    scale = auto_exposure_scale(hdr) * torch.pow(2.0, exposure_ev.to(hdr))
+    photos = (hdr * scale[:, None, None, None]).clamp(0.0, 1.0)
+    return photos, warp_maps_to_view(maps, grids), scale
+
+
+# ----------------------------------------------------------------------------- streaming
+
+
+def _mix(*parts: int | str) -> int:
+    return derive_seed(*parts) & 0x7FFFFFFFFFFFFFFF
+
+
+def collate_scenes(scenes: Sequence[PhotoScene]) -> dict[str, Any]:
+    """A batch of scenes (what :class:`RenderedStream` yields, before rendering).
+
+    Shape:
+        - output["scene_maps"]: ``(B, 8, R, R)``; output["camera_position"]: ``(B, 3)``
+        - output["light_position"], output["light_rgb"]: ``(B, K, 3)``
+        - output["grid"]: ``(B, R, R, 2)``; output["exposure_ev"]: ``(B,)``
+        - output["key"]: list of B str; output["meta"]: list of B dict
+    """
+    return {
+        "scene_maps": torch.stack([scene.maps for scene in scenes]).float(),
+        "camera_position": torch.stack([scene.camera_position for scene in scenes]),
+        "light_position": torch.stack([scene.light_position for scene in scenes]),
+        "light_rgb": torch.stack([scene.light_rgb for scene in scenes]),
+        "grid": torch.stack([scene.grid for scene in scenes]),
+        "exposure_ev": torch.tensor([scene.exposure_ev for scene in scenes], dtype=torch.float32),
+        "key": [scene.key for scene in scenes],
+        "meta": [scene.meta for scene in scenes],
+    }
+
+
+class RenderedStream(IterableDataset):
+    """Batches of training scenes, ``batches_per_epoch`` an epoch, for one rank.
+
+    Batch ``b`` of epoch ``e`` is a pure function of ``(seed, e, rank, b)``; DataLoader workers
+    take every ``num_workers``-th batch, which is the order the DataLoader yields them in, so
+    skipping the first ``skip_batches`` batches reproduces a resumed run's position exactly.
+    """
+
+    def __init__(
+        self,
+        bank: MaterialBank,
+        *,
+        batch_size: int,
+        batches_per_epoch: int,
+        seed: int,
+        rank: int = 0,
+        environment_lights: int = 16,
+    ) -> None:
+        super().__init__()
+        self.bank = bank
+        self.batch_size = batch_size
+        self.batches_per_epoch = batches_per_epoch
+        self.seed = seed
+        self.rank = rank
+        self.environment_lights = environment_lights
+        self.epoch = 0
+        self.skip_batches = 0
+
+    def __len__(self) -> int:
+        return self.batches_per_epoch
+
+    def __iter__(self) -> Iterator[dict[str, Any]]:
+        info = get_worker_info()
+        worker, num_workers = (0, 1) if info is None else (info.id, info.num_workers)
+        epoch, skip = self.epoch, self.skip_batches
+        self.epoch += 1
+        self.skip_batches = 0
+        return self._batches(epoch, range(skip, self.batches_per_epoch)[worker::num_workers])
+
+    def _batches(self, epoch: int, batches: Sequence[int]) -> Iterator[dict[str, Any]]:
+        for batch in batches:
+            scenes = []
+            for position in range(self.batch_size):
+                key = f"train-e{epoch}-r{self.rank}-b{batch}-{position}"
+                seed = _mix(self.seed, "rendered", epoch, self.rank, batch, position)
+                scenes.append(draw_scene(self.bank, key, seed, self.environment_lights))
+            yield collate_scenes(scenes)
+
+
+class RenderedDataModule(ShardDataModule):
+    """:class:`~brdfgan.data.datamodule.ShardDataModule` whose training photos are rendered on
+    the fly from ``bank`` (module docstring); validation and test read Mitsuba shards from
+    ``data_dir``, and :meth:`prepare_data` generates only the splits the run needs.
+
+    Args:
+        bank: the training materials (its spec is the one the validation and test shards are
+            generated with).
+        environment_lights: distant lights each photo's environment becomes.
+        epoch_samples: training photos an epoch (there is no split to count).
+        **kwargs: as :class:`~brdfgan.data.datamodule.ShardDataModule` (``train_split`` is unused).
+    """
+
+    def __init__(
+        self,
+        data_dir: str,
+        bank: MaterialBank,
+        *,
+        epoch_samples: int,
+        environment_lights: int = 16,
+        **kwargs: Any,
+    ) -> None:
+        if environment_lights < 1:
+            raise DatasetConfigError(f"data.environment_lights={environment_lights}: must be >= 1")
+        super().__init__(data_dir, epoch_samples=epoch_samples, train_split=None, **kwargs)
+        self.hparams.pop("bank", None)  # checkpoints hold plain values only
+        self.bank = bank
+        self.environment_lights = environment_lights
+
+    def prepare_data(self) -> None:
+        self.bank.build()
+        if self._prepare is not None:
+            self._prepare(splits=self._shard_splits())
+
+    def _shard_splits(self) -> tuple[str, ...]:
+        """The shard splits this run reads: validation when fitting or validating, test when
+        testing (all without a trainer)."""
+        fn = None if self.trainer is None else self.trainer.state.fn
+        wanted = {"fit": ("val",), "validate": ("val",), "test": ("test",), "predict": ("test",)}
+        splits = wanted.get(str(fn.value) if fn is not None else "", ("val", "test"))
+        return tuple(split for split in splits if self.splits[split] is not None)
+
+    @property
+    def train_batches_per_epoch(self) -> int:
+        assert self.epoch_samples is not None
+        return max(1, self.epoch_samples // (self._world_size * self.batch_size))
+
+    def num_samples(self, kind: str = "train") -> int:
+        if kind == "train":
+            assert self.epoch_samples is not None
+            return self.epoch_samples
+        return super().num_samples(kind)
+
+    def train_dataloader(self) -> DataLoader:
+        stream = RenderedStream(
+            self.bank,
+            batch_size=self.batch_size,
+            batches_per_epoch=self.train_batches_per_epoch,
+            seed=self.seed,
+            rank=self._rank,
+            environment_lights=self.environment_lights,
+        )
+        stream.epoch, stream.skip_batches = self._train_position()
+        self.teardown("fit")
+        self._train_loader = self._loader(stream, persistent=self.num_workers > 0)
+        return self._train_loader
+
+    def on_after_batch_transfer(self, batch: Any, dataloader_idx: int) -> Any:
+        """Render the photos of a batch of scenes where the batch now is (a shard batch passes)."""
+        if not isinstance(batch, Mapping) or "scene_maps" not in batch:
+            return batch
+        return self.photograph(batch)
+
+    def photograph(self, batch: Mapping[str, Any]) -> dict[str, Any]:
+        """A batch of scenes as the training batch of :func:`~brdfgan.data.datamodule.collate_samples`:
+        rendered (:func:`photograph_scenes`, on the batch's device), through ``sensor`` and the
+        train crop on the CPU, back on the batch's device."""
+        device = batch["scene_maps"].device
+        with torch.no_grad():
+            photos, maps, scales = photograph_scenes(
+                batch["scene_maps"],
+                batch["camera_position"],
+                batch["light_position"],
+                batch["light_rgb"],
+                batch["grid"],
+                batch["exposure_ev"],
+            )
+        samples = []
+        for key, photo, aligned, scale, meta in zip(
+            batch["key"], photos.cpu(), maps.cpu(), scales.tolist(), batch["meta"], strict=True
+        ):
+            sample = Sample(key, photo, aligned, {**meta, "exposure_scale": scale}, check=False)
+            seed = int(meta["render"]["seed"])
+            if self.sensor is not None and self.sensor.enabled:
+                sensed, record = self.sensor.apply(
+                    sample.photo,
+                    torch.Generator().manual_seed(_mix(seed, "sensor")),
+                    illuminant_rgb=self.sensor.flash_illuminant(sample.meta),
+                )
+                sample = Sample(key, sensed, aligned, {**sample.meta, "sensor": record}, check=False)
+            if self.train_crop is not None:
+                sample = random_crop(sample, self.train_crop, random.Random(_mix(seed, "crop")))
+            samples.append(sample)
+        collated = collate_samples(samples)
+        for name in ("photo", "maps", "flash"):
+            collated[name] = collated[name].to(device)
+        return collated

@@ -1,0 +1,223 @@
+"""Training photos rendered on the fly (brdfgan.data.rendered): the environment as distant lights,
+the torch photo against Mitsuba's, the material bank, the stream's determinism, the DataModule."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import hydra
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+from brdfgan.core.lighting import Environment, SunLight, environment_lights, upper_hemisphere_irradiance_rgb
+from brdfgan.core.svbrdf import NORMAL, flat_maps, normalize_normal, validate_maps
+from brdfgan.data.capture import CaptureDraw, CaptureSampling
+from brdfgan.data.flash import blackbody_rgb
+from brdfgan.data.generation import DatasetSpec, MitsubaPhotographer, material_seed, paint_material
+from brdfgan.data.lighting import (
+    LightingConfig,
+    LightingDraw,
+    balance_environment,
+    flash_centre_irradiance,
+    load_environment,
+    room_spec,
+    sunsky_spec,
+)
+from brdfgan.data.rendered import (
+    MaterialBank,
+    RenderedDataModule,
+    RenderedStream,
+    capture_scene,
+    collate_scenes,
+    photograph_scenes,
+)
+from brdfgan.data.shards import decode_maps
+from tests.conftest import compose_train, random_maps
+
+RES = 64
+TINY_SPEC = DatasetSpec(
+    materials=6, material_resolution=64, resolution=32, test_fraction=0.2, val_fraction=0.2
+)
+
+
+def _smooth_maps(seed: int) -> torch.Tensor:
+    # Per-texel noise is the worst case for resampling a tilted view; real maps are smoother.
+    maps = random_maps(RES, RES, seed=seed)
+    smooth = F.avg_pool2d(F.pad(maps[None], (2, 2, 2, 2), mode="replicate"), 5, 1)[0]
+    smooth[NORMAL] = normalize_normal(smooth[NORMAL], dim=0)
+    return smooth
+
+
+def _photo(maps: torch.Tensor, capture: CaptureDraw, flash, lights) -> torch.Tensor:  # type: ignore[no-untyped-def]
+    batch = collate_scenes([capture_scene("k", maps, capture, flash, lights, {})])
+    photos, _, _ = photograph_scenes(
+        batch["scene_maps"], batch["camera_position"], batch["light_position"],
+        batch["light_rgb"], batch["grid"], batch["exposure_ev"],
+    )  # fmt: skip
+    return photos[0]
+
+
+def test_environment_lights_estimate_the_environment_without_bias() -> None:
+    environment = load_environment(room_spec(3, 0), 32)
+    truth = upper_hemisphere_irradiance_rgb(environment.radiance)
+    estimates = []
+    for seed in range(200):
+        directions, irradiance = environment_lights(environment, 16, torch.Generator().manual_seed(seed))
+        assert np.allclose(np.linalg.norm(directions, axis=1), 1.0) and (directions[:, 2] >= 0).all()
+        estimates.append((irradiance * directions[:, 2:3]).sum(axis=0))
+    mean = np.mean(estimates, axis=0)
+    assert np.allclose(mean, truth, rtol=0.03), (mean, truth)
+
+
+def test_environment_lights_put_the_sun_last_and_nothing_for_a_black_sky() -> None:
+    sun = SunLight((0.0, 0.6, 0.8), (3.0, 2.0, 1.0))
+    black = Environment(np.zeros((8, 16, 3), np.float32), sun)
+    directions, irradiance = environment_lights(black, 4, torch.Generator().manual_seed(0))
+    assert directions.shape == irradiance.shape == (5, 3)
+    assert np.allclose(irradiance[:4], 0.0)
+    assert np.allclose(directions[4], sun.direction) and np.allclose(irradiance[4], sun.irradiance)
+    set_sun = Environment(np.zeros((8, 16, 3), np.float32), SunLight((0.0, 0.6, -0.8), (3.0, 2.0, 1.0)))
+    assert np.allclose(environment_lights(set_sun, 4, torch.Generator())[1], 0.0)
+    with pytest.raises(ValueError, match="count"):
+        environment_lights(black, 0, torch.Generator())
+
+
+@pytest.mark.parametrize(
+    ("environment", "ratio", "tolerance"),
+    [(room_spec(0, 1), 0.05, 0.015), (room_spec(1, 1), 1.0, 0.03), (sunsky_spec(0, 2), 1.0, 0.03)],
+    ids=["room-faint", "room-even", "sunsky-even"],
+)
+def test_torch_photo_agrees_with_mitsuba(environment, ratio: float, tolerance: float) -> None:  # type: ignore[no-untyped-def]
+    # A tilted, closer camera with the flash off the lens and an environment: the same draws
+    # through Mitsuba (256 spp) and through photograph_scenes (the mean of 8 light draws).
+    spec = DatasetSpec(
+        materials=5, material_resolution=RES, resolution=RES, spp=256, lighting=LightingConfig(resolution=32)
+    )
+    maps = _smooth_maps(3)
+    capture = CaptureDraw(fov_deg=50.0, tilt_deg=3.0, tilt_axis_deg=30.0, distance_drawn=0.95,
+                          distance_factor=0.95, flash_offset=0.05, flash_offset_angle_deg=70.0)  # fmt: skip
+    draw = LightingDraw(environment, 1.0, ratio)
+    mitsuba, _ = MitsubaPhotographer(spec)(maps, draw, 2.0, 5000.0, capture, 7)
+    flash = tuple(2.0 * c for c in blackbody_rgb(5000.0))
+    balanced = balance_environment(
+        load_environment(environment, 32), draw, flash_centre_irradiance(flash, capture.flash_position)
+    )
+    photos = torch.stack(
+        [
+            _photo(maps, capture, flash, environment_lights(balanced, 64, torch.Generator().manual_seed(s)))
+            for s in range(8)
+        ]
+    )
+    difference = float((photos.mean(0) - mitsuba).abs().mean() / mitsuba.mean())
+    assert difference < tolerance
+
+
+def test_torch_photo_shows_the_tilted_views_hotspot_where_mitsuba_does() -> None:
+    # Rendered in texture space, then warped into the photo: a glossy uniform sample's highlight
+    # sits where the mirror geometry puts it, in both renderers.
+    spec = DatasetSpec(
+        materials=5, material_resolution=RES, resolution=RES, spp=64, lighting=LightingConfig(resolution=16)
+    )
+    maps = flat_maps(RES, RES, roughness=0.3)
+    capture = CaptureDraw(fov_deg=40.0, tilt_deg=10.0, tilt_axis_deg=60.0, distance_drawn=0.9,
+                          distance_factor=0.9, flash_offset=0.2, flash_offset_angle_deg=20.0)  # fmt: skip
+    draw = LightingDraw(room_spec(0, 1), 0.0, 1e-4)
+    mitsuba, _ = MitsubaPhotographer(spec)(maps, draw, 2.0, 6500.0, capture, 1)
+    ours = _photo(maps, capture, (2.0, 2.0, 2.0), (np.zeros((1, 3)), np.zeros((1, 3))))
+    hotspot = torch.tensor(capture.hotspot_px(RES))
+    for photo in (mitsuba, ours):
+        peak = int(photo.mean(0).flatten().argmax())
+        assert torch.dist(torch.tensor([peak % RES + 0.5, peak // RES + 0.5]), hotspot) < 1.5
+
+
+@pytest.fixture(scope="module")
+def bank(tmp_path_factory: pytest.TempPathFactory) -> MaterialBank:
+    bank = MaterialBank(TINY_SPEC, tmp_path_factory.mktemp("banks"), environment_resolution=16)
+    bank.build(progress=False)
+    return bank
+
+
+def test_bank_holds_the_training_materials_as_generation_paints_them(bank: MaterialBank) -> None:
+    index = bank.procedural[0]
+    painted = paint_material(
+        TINY_SPEC, "train", index, torch.Generator().manual_seed(material_seed(0, index))
+    )
+    banked = decode_maps(bank.material_path(index).read_bytes(), "test")
+    assert torch.allclose(banked[:3], painted.maps[:3], atol=1 / 65535) and torch.allclose(
+        banked[6:], painted.maps[6:], atol=1 / 65535
+    )
+    assert torch.allclose(banked[NORMAL], painted.maps[NORMAL], atol=1e-4)
+    recorded = json.loads((bank.root / "bank.json").read_text())
+    assert recorded["materials"][str(index)]["family"] == painted.family
+    assert sorted(int(k) for k in recorded["materials"]) == sorted(bank.procedural)
+
+
+def test_bank_build_resumes_and_leaves_a_complete_bank_alone(bank: MaterialBank) -> None:
+    stamps = {path.name: path.stat().st_mtime_ns for path in bank.root.iterdir()}
+    bank.build(progress=False)
+    assert {path.name: path.stat().st_mtime_ns for path in bank.root.iterdir()} == stamps
+    # A killed build: one material and the index missing. The rebuild restores the same bytes.
+    victim = bank.material_path(bank.procedural[-1])
+    before = victim.read_bytes()
+    victim.unlink()
+    (bank.root / "bank.json").unlink()
+    assert not bank.ready()
+    MaterialBank(TINY_SPEC, bank.root.parent, environment_resolution=16).build(progress=False)
+    assert victim.read_bytes() == before and bank.ready()
+
+
+def test_bank_folder_follows_the_materials_not_the_capture(tmp_path: Path) -> None:
+    same = MaterialBank(replace(TINY_SPEC, capture=CaptureSampling(fov_min_deg=30.0)), tmp_path)
+    other = MaterialBank(replace(TINY_SPEC, seed=1), tmp_path)
+    assert same.root == MaterialBank(TINY_SPEC, tmp_path).root != other.root
+
+
+def test_stream_is_a_pure_function_of_seed_epoch_and_batch(bank: MaterialBank) -> None:
+    def batches(seed: int, epoch: int = 0, skip: int = 0) -> list[dict]:
+        stream = RenderedStream(bank, batch_size=2, batches_per_epoch=4, seed=seed, environment_lights=4)
+        stream.epoch, stream.skip_batches = epoch, skip
+        return list(stream)
+
+    first, again = batches(0), batches(0)
+    assert len(first) == 4
+    for a, b in zip(first, again, strict=True):
+        assert torch.equal(a["scene_maps"], b["scene_maps"]) and torch.equal(a["light_rgb"], b["light_rgb"])
+    resumed = batches(0, skip=2)
+    assert [b["key"] for b in resumed] == [b["key"] for b in first[2:]]
+    assert torch.equal(resumed[0]["light_position"], first[2]["light_position"])
+    assert not torch.equal(batches(0, epoch=1)[0]["light_rgb"], first[0]["light_rgb"])
+    assert not torch.equal(batches(1)[0]["light_rgb"], first[0]["light_rgb"])
+
+
+def test_datamodule_renders_training_photos_and_generates_only_the_eval_shards(tmp_path: Path) -> None:
+    cfg = compose_train(
+        ["debug=default", "data=rendered", "dataset_spec@data.prepare.spec=tiny",
+         "data.data_dir=${paths.data_dir}/tiny", "data.epoch_samples=8", "data.batch_size=2",
+         "data.environment_lights=4", "data.bank.environment_resolution=16", "data.train_crop=32"],
+        tmp_path,
+    )  # fmt: skip
+    module = hydra.utils.instantiate(cfg.data, _convert_="all")
+    assert isinstance(module, RenderedDataModule)
+    module.prepare_data()
+    data = tmp_path / "data" / "tiny"
+    assert (data / "val" / "manifest.json").exists() and (data / "test" / "manifest.json").exists()
+    assert not list((data / "train").glob("*.tar"))  # its folder is made, never filled
+    module.setup("fit")
+    assert module.train_batches_per_epoch == 4 and len(module.val_dataloader()) >= 1
+    scenes = next(iter(module.train_dataloader()))
+    batch = module.on_after_batch_transfer(scenes, 0)
+    photo, maps = batch["photo"], batch["maps"]
+    assert photo.shape == (2, 3, 32, 32) == (maps.shape[0], 3, *maps.shape[2:])
+    assert float(photo.min()) >= 0.0 and float(photo.max()) <= 1.0 and float(photo.mean()) > 0.01
+    for sample in maps:
+        validate_maps(sample)
+    assert batch["flash"].shape == (2, 3)
+    assert all(meta["render"]["renderer"] == "torch" and "sensor" in meta for meta in batch["meta"])
+    # A shard batch (validation) passes through unchanged.
+    val_batch = next(iter(module.val_dataloader()))
+    assert module.on_after_batch_transfer(val_batch, 0) is val_batch
+    module.teardown("fit")
