@@ -15,6 +15,7 @@ import torch.nn.functional as F
 
 from brdfgan.core.lighting import Environment, SunLight, environment_lights, upper_hemisphere_irradiance_rgb
 from brdfgan.core.svbrdf import NORMAL, flat_maps, normalize_normal, validate_maps
+from brdfgan.data.augment import random_crops
 from brdfgan.data.capture import CaptureDraw, CaptureSampling
 from brdfgan.data.flash import blackbody_rgb
 from brdfgan.data.generation import DatasetSpec, MitsubaPhotographer, material_seed, paint_material
@@ -29,11 +30,13 @@ from brdfgan.data.lighting import (
 )
 from brdfgan.data.rendered import (
     MaterialBank,
+    ReliefSampling,
     RenderedDataModule,
     RenderedStream,
     capture_scene,
     collate_scenes,
     photograph_scenes,
+    sample_relief,
 )
 from brdfgan.data.shards import decode_maps
 from tests.conftest import compose_train, random_maps
@@ -221,3 +224,45 @@ def test_datamodule_renders_training_photos_and_generates_only_the_eval_shards(t
     val_batch = next(iter(module.val_dataloader()))
     assert module.on_after_batch_transfer(val_batch, 0) is val_batch
     module.teardown("fit")
+
+
+def test_relief_sampling_swaps_and_bumps_the_normals_only(bank: MaterialBank) -> None:
+    crop = random_crops(
+        bank.draw(torch.Generator().manual_seed(0)).maps, 1, 32, torch.Generator().manual_seed(1)
+    )[0][0]
+    swapped, record = sample_relief(
+        bank, crop, ReliefSampling(swap_probability=1.0), torch.Generator().manual_seed(2)
+    )
+    assert set(record) == {"swap"} and not torch.equal(swapped[NORMAL], crop[NORMAL])
+    assert torch.equal(swapped[:3], crop[:3]) and torch.equal(swapped[6:], crop[6:])
+    flat = crop.clone()
+    flat[NORMAL] = torch.tensor([0.0, 0.0, 1.0]).view(3, 1, 1)
+    sampling = ReliefSampling(bump_probability=1.0, bump_slope_min=0.1, bump_slope_max=0.1)
+    bumped, record = sample_relief(bank, flat, sampling, torch.Generator().manual_seed(3))
+    slopes = -bumped[NORMAL][:2] / bumped[NORMAL][2:]
+    assert record["bumps"]["rms_slope"] == pytest.approx(0.1)
+    assert float(slopes.square().sum(0).mean().sqrt()) == pytest.approx(0.1, rel=1e-4)
+    validate_maps(bumped)
+    same, record = sample_relief(bank, crop, ReliefSampling(), torch.Generator().manual_seed(2))
+    assert same is crop and record == {}
+
+
+def test_relief_sampling_leaves_every_other_draw_of_the_photo_as_it_was(bank: MaterialBank) -> None:
+    from brdfgan.data.rendered import draw_scene
+
+    plain = draw_scene(bank, "k", 5, 4)
+    bumped = draw_scene(bank, "k", 5, 4, ReliefSampling(swap_probability=1.0, bump_probability=1.0))
+    assert torch.equal(plain.light_rgb, bumped.light_rgb) and torch.equal(plain.grid, bumped.grid)
+    assert torch.equal(plain.maps[:3], bumped.maps[:3]) and not torch.equal(
+        plain.maps[NORMAL], bumped.maps[NORMAL]
+    )
+    assert set(bumped.meta["relief"]) == {"swap", "bumps"} and "relief" not in plain.meta
+
+
+def test_relief_sampling_names_a_bad_key() -> None:
+    from brdfgan.data.spec_checks import DatasetConfigError
+
+    with pytest.raises(DatasetConfigError, match=r"data\.relief\.swap_probability"):
+        ReliefSampling(swap_probability=1.5)
+    with pytest.raises(DatasetConfigError, match=r"data\.relief"):
+        ReliefSampling(bump_slope_min=0.3, bump_slope_max=0.1)

@@ -36,8 +36,8 @@ import hashlib
 import json
 import logging
 import random
-from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +50,8 @@ from brdfgan.core.exposure import auto_exposure_scale
 from brdfgan.core.lighting import Environment, SunLight, environment_lights
 from brdfgan.core.relight import SKY_LIGHT_DISTANCE
 from brdfgan.core.render import PointLights, render_point_lights, view_grid, warp_maps_to_view, warp_to_view
-from brdfgan.core.svbrdf import BASECOLOR, METALLIC
+from brdfgan.core.sampling import log_uniform
+from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, normalize_normal
 from brdfgan.data.augment import random_crops
 from brdfgan.data.capture import CaptureDraw
 from brdfgan.data.datamodule import ShardDataModule, collate_samples, random_crop
@@ -74,15 +75,17 @@ from brdfgan.data.lighting import (
     load_environment,
 )
 from brdfgan.data.material_source import PaintedMaterial
+from brdfgan.data.materials.noise import fbm
 from brdfgan.data.materials.recolor import draw_recolor, recolor_basecolor
 from brdfgan.data.scanned import read_scanned_material, scanned_material_folders
 from brdfgan.data.shards import Sample, ShardError, decode_maps, encode_maps
-from brdfgan.data.spec_checks import DatasetConfigError
+from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, ordered
 from brdfgan.io.atomic import atomic_replace, write_text_atomic
 
 __all__ = [
     "MaterialBank",
     "PhotoScene",
+    "ReliefSampling",
     "RenderedDataModule",
     "RenderedStream",
     "capture_scene",
@@ -279,6 +282,105 @@ def _triple(values: np.ndarray) -> tuple[float, float, float]:
     return (float(values[0]), float(values[1]), float(values[2]))
 
 
+# ----------------------------------------------------------------------------- relief
+
+
+@dataclass(frozen=True)
+class ReliefSampling:
+    """Relief laid over a drawn material's crop, so a share of the photos shows relief that its
+    base colour does not outline (off by default: every material as painted).
+
+    A painted material's relief and albedo come from one height field — grout is both a dark line
+    and a groove — so a network can read either from the other; in a share of the photos here they
+    are independent:
+
+    - ``swap_probability``: the crop takes the normals of another bank material's crop;
+    - ``bump_probability``: smooth relief is added to the normals (broad bumps and dents to fine
+      grain): an fbm height of ``cells`` base cells across the crop (log-uniform in
+      ``[bump_cells_min, bump_cells_max]``, four octaves), scaled to an RMS slope log-uniform in
+      ``[bump_slope_min, bump_slope_max]``, its slopes added to the crop's.
+
+    Checked on construction, naming the keys under ``data.relief``.
+    """
+
+    swap_probability: float = 0.0
+    bump_probability: float = 0.0
+    bump_slope_min: float = 0.02
+    bump_slope_max: float = 0.25
+    bump_cells_min: int = 2
+    bump_cells_max: int = 32
+
+    def __post_init__(self) -> None:
+        key = "data.relief"
+        in_range(f"{key}.swap_probability", self.swap_probability, 0.0, 1.0)
+        in_range(f"{key}.bump_probability", self.bump_probability, 0.0, 1.0)
+        in_range(f"{key}.bump_slope_min", self.bump_slope_min, 0.0, 2.0, low_open=True)
+        in_range(f"{key}.bump_slope_max", self.bump_slope_max, 0.0, 2.0, low_open=True)
+        ordered(key, self, "bump_slope_min", "bump_slope_max")
+        integer(f"{key}.bump_cells_min", self.bump_cells_min, minimum=1)
+        integer(f"{key}.bump_cells_max", self.bump_cells_max, minimum=1)
+        ordered(key, self, "bump_cells_min", "bump_cells_max")
+
+
+def add_relief(normal: Tensor, height: Tensor, rms_slope: float) -> Tensor:
+    """``normal`` with the slopes of ``height`` (scaled to an RMS slope of ``rms_slope``) added to
+    its own: slopes ``(−n_x/n_z, −n_y/n_z)`` add where heights add.
+
+    Shape:
+        - normal: ``(3, H, W)`` unit; height: ``(1, H, W)`` any scale
+        - output: ``(3, H, W)`` unit
+
+    Example:
+        A flat map plus a periodic ripple scaled to an RMS slope of 0.1: the result's slopes
+        have that RMS, and they point down the ripple (normals lean away from rising height):
+
+        >>> x = torch.arange(16.0)
+        >>> ripple = torch.sin(2 * torch.pi * x / 16).expand(1, 16, 16).clone()
+        >>> flat = torch.tensor([0.0, 0.0, 1.0]).view(3, 1, 1).expand(3, 16, 16)
+        >>> bumped = add_relief(flat, ripple, 0.1)
+        >>> slopes = -bumped[:2] / bumped[2:]
+        >>> round(float(slopes.square().sum(0).mean().sqrt()), 4), bool(bumped[0, 0, 0] < 0)
+        (0.1, True)
+    """
+    from brdfgan.data.materials.base import height_to_normal
+
+    bump = height_to_normal(height)
+    bump_slopes = -bump[:2] / bump[2:]
+    rms = float(bump_slopes.square().sum(0).mean().sqrt())
+    slopes = -normal[:2] / normal[2:].clamp_min(1e-6)
+    if rms > 0.0:
+        slopes = slopes + bump_slopes * (rms_slope / rms)
+    return normalize_normal(torch.cat([-slopes, torch.ones_like(height)]), dim=0)
+
+
+def sample_relief(
+    bank: MaterialBank, maps: Tensor, sampling: ReliefSampling, generator: torch.Generator
+) -> tuple[Tensor, dict[str, Any]]:
+    """The crop ``maps`` with :class:`ReliefSampling`'s relief (swapped, then bumped, as drawn from
+    ``generator``; the same number of draws whatever happens) and what was drawn.
+
+    Shape:
+        - maps: ``(8, R, R)``; output: ``(8, R, R)``
+    """
+    u = torch.rand(4, generator=generator, dtype=torch.float64).tolist()
+    record: dict[str, Any] = {}
+    out = maps
+    if u[0] < sampling.swap_probability:
+        partner = bank.draw(generator)
+        crops, _ = random_crops(partner.maps, 1, maps.shape[-1], generator, partner.crop or bank.spec.crop)
+        out = maps.clone()
+        out[NORMAL] = crops[0][NORMAL]
+        record["swap"] = {"family": partner.family}
+    if u[1] < sampling.bump_probability:
+        slope = log_uniform(u[2], sampling.bump_slope_min, sampling.bump_slope_max)
+        cells = round(log_uniform(u[3], sampling.bump_cells_min, sampling.bump_cells_max))
+        height = fbm(maps.shape[-1], cells, generator, octaves=4)[None]
+        out = out.clone() if out is maps else out
+        out[NORMAL] = add_relief(out[NORMAL], height, slope)
+        record["bumps"] = {"rms_slope": slope, "cells": cells}
+    return out, record
+
+
 # ----------------------------------------------------------------------------- one photo's scene
 
 
@@ -302,7 +404,13 @@ class PhotoScene:
     meta: dict[str, Any]
 
 
-def draw_scene(bank: MaterialBank, key: str, seed: int, environment_lights_count: int) -> PhotoScene:
+def draw_scene(
+    bank: MaterialBank,
+    key: str,
+    seed: int,
+    environment_lights_count: int,
+    relief: ReliefSampling = ReliefSampling(),
+) -> PhotoScene:
     """One training photo's scene, a pure function of ``seed``: a bank material and a crop of it,
     the capture, flash and lighting draws of the spec (as :func:`~brdfgan.data.generation.material_samples`
     draws them for a Mitsuba render) with the environment as ``environment_lights_count`` distant
@@ -332,7 +440,11 @@ def draw_scene(bank: MaterialBank, key: str, seed: int, environment_lights_count
         "maps_view": "photo",
     }
     lights = environment_lights(environment, environment_lights_count, generator)
-    return capture_scene(key, crops[0], capture, flash_rgb, lights, meta)
+    # Drawn last: switching the relief sampling on leaves every other draw of the photo as it was.
+    maps, relief_record = sample_relief(bank, crops[0], relief, generator)
+    if relief_record:
+        meta["relief"] = relief_record
+    return capture_scene(key, maps, capture, flash_rgb, lights, meta)
 
 
 def capture_scene(
@@ -374,10 +486,13 @@ def photograph_scenes(
     light_rgb: Tensor,
     grids: Tensor,
     exposure_ev: Tensor,
+    render: Callable[..., Tensor] = render_point_lights,
 ) -> tuple[Tensor, Tensor, Tensor]:
     """Photos of a batch of scenes: the point-light render from each camera in texture space,
     resampled into the photo's pixels, auto-exposed off by the drawn error (``clip(hdr · scale ·
     2^ev, 0, 1)`` as :func:`~brdfgan.core.exposure.auto_expose`), with the maps resampled alike.
+
+    ``render`` is :func:`~brdfgan.core.render.render_point_lights` or a compiled copy of it.
 
     Returns:
         ``(photos, maps_in_view, exposure_scale)``: linear LDR photos, the maps as the photos show
@@ -394,7 +509,7 @@ def photograph_scenes(
         intensity=light_rgb.new_ones(batch, 1, count),
         color=light_rgb.unsqueeze(1),
     )
-    hdr = render_point_lights(maps, camera_position.unsqueeze(1), lights)[:, 0]
+    hdr = render(maps, camera_position.unsqueeze(1), lights)[:, 0]
     hdr = warp_to_view(hdr, grids).clamp_min(0.0)
     scale = auto_exposure_scale(hdr) * torch.pow(2.0, exposure_ev.to(hdr))
     photos = (hdr * scale[:, None, None, None]).clamp(0.0, 1.0)
@@ -446,9 +561,11 @@ class RenderedStream(IterableDataset):
         seed: int,
         rank: int = 0,
         environment_lights: int = 16,
+        relief: ReliefSampling = ReliefSampling(),
     ) -> None:
         super().__init__()
         self.bank = bank
+        self.relief = relief
         self.batch_size = batch_size
         self.batches_per_epoch = batches_per_epoch
         self.seed = seed
@@ -474,7 +591,7 @@ class RenderedStream(IterableDataset):
             for position in range(self.batch_size):
                 key = f"train-e{epoch}-r{self.rank}-b{batch}-{position}"
                 seed = _mix(self.seed, "rendered", epoch, self.rank, batch, position)
-                scenes.append(draw_scene(self.bank, key, seed, self.environment_lights))
+                scenes.append(draw_scene(self.bank, key, seed, self.environment_lights, self.relief))
             yield collate_scenes(scenes)
 
 
@@ -487,6 +604,9 @@ class RenderedDataModule(ShardDataModule):
         bank: the training materials (its spec is the one the validation and test shards are
             generated with).
         environment_lights: distant lights each photo's environment becomes.
+        relief: relief laid over the drawn materials (:class:`ReliefSampling`; default: none).
+        compile_renderer: render through ``torch.compile`` (training photos have one shape, so
+            it compiles once; worth it for runs of more than a few hundred steps).
         epoch_samples: training photos an epoch (there is no split to count).
         **kwargs: as :class:`~brdfgan.data.datamodule.ShardDataModule` (``train_split`` is unused).
     """
@@ -498,14 +618,21 @@ class RenderedDataModule(ShardDataModule):
         *,
         epoch_samples: int,
         environment_lights: int = 16,
+        relief: ReliefSampling | None = None,
+        compile_renderer: bool = False,
         **kwargs: Any,
     ) -> None:
         if environment_lights < 1:
             raise DatasetConfigError(f"data.environment_lights={environment_lights}: must be >= 1")
         super().__init__(data_dir, epoch_samples=epoch_samples, train_split=None, **kwargs)
+        self.relief = relief or ReliefSampling()
         self.hparams.pop("bank", None)  # checkpoints hold plain values only
+        self.hparams["relief"] = asdict(self.relief)
         self.bank = bank
         self.environment_lights = environment_lights
+        self._render = (
+            torch.compile(render_point_lights, dynamic=False) if compile_renderer else render_point_lights
+        )
 
     def prepare_data(self) -> None:
         self.bank.build()
@@ -539,6 +666,7 @@ class RenderedDataModule(ShardDataModule):
             seed=self.seed,
             rank=self._rank,
             environment_lights=self.environment_lights,
+            relief=self.relief,
         )
         stream.epoch, stream.skip_batches = self._train_position()
         self.teardown("fit")
@@ -564,6 +692,7 @@ class RenderedDataModule(ShardDataModule):
                 batch["light_rgb"],
                 batch["grid"],
                 batch["exposure_ev"],
+                self._render,
             )
         samples = []
         for key, photo, aligned, scale, meta in zip(
