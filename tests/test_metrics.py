@@ -45,6 +45,9 @@ SCALAR_KEYS = (
     "basecolor_saturation_ratio",
     "basecolor_hue_error_deg",
     *CHECKERBOARD_KEYS,
+    "false_metal",
+    "relief_leak",
+    "relief_leak/slope",
 )
 
 

@@ -45,7 +45,8 @@ ROWS = (("rmse/diffuse", "diffuse"), ("rmse/specular", "specular"), ("rmse/norma
 # Columns of the runs table, in this order, where any run has them.
 METRICS = (("rmse/diffuse", "diffuse"), ("rmse/specular", "specular"), ("rmse/roughness", "roughness"),
            ("rmse/basecolor", "base colour"), ("rmse/metallic", "metallic"), ("rmse/normal", "normal"),
-           ("normal_angle_deg", "normal °"), ("rerender_rmse", "re-render"))  # fmt: skip
+           ("normal_angle_deg", "normal °"), ("rerender_rmse", "re-render"), ("false_metal", "false metal"),
+           ("relief_leak", "relief leak"))  # fmt: skip
 UNSET = "–"  # a key a run did not set (its default)
 
 

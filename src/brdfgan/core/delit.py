@@ -30,6 +30,7 @@ from brdfgan.core.brdf import evaluate_brdf
 from brdfgan.core.checks import check_shape
 from brdfgan.core.exposure import luminance
 from brdfgan.core.flash_geometry import check_flash_frame, flash_offset_channels
+from brdfgan.core.svbrdf import normalize_normal
 
 # The hotspot is clipped at this multiple of the de-lit luminance's upper quartile: a glossy
 # highlight is several times brighter than the albedo around it, a matte one's peak is not
@@ -61,26 +62,46 @@ def flat_flash_falloff(frame: Tensor, height: int, width: int) -> Tensor:
     return (1.0 + offsets.square().sum(dim=1, keepdim=True)).pow(-1.5)
 
 
+def flash_render(
+    basecolor_linear: Tensor, normal: Tensor, roughness: Tensor, metallic: Tensor, frame: Tensor
+) -> Tensor:
+    """The flash photo of a surface with these maps, relative to the flash's irradiance at the
+    hotspot: ``π f(l, v) max(n·l, 0) / (1 + |o|²)`` with the flash at the lens (``l = v =
+    (−o, 1)/√(1 + |o|²)`` from each pixel towards the flash, ``o`` its offset from the hotspot in
+    camera distances, :func:`~brdfgan.core.flash_geometry.flash_offset_channels`) and ``n`` the
+    renormalised normal. With flat normals it is :func:`flat_flash_render`.
+
+    Shape:
+        - basecolor_linear, normal: ``(B, 3, H, W)``; roughness, metallic: ``(B, 1, H, W)``
+        - frame: ``(B, 3)`` flash frame ``(x, y, s)``
+        - output: ``(B, 3, H, W)``, non-negative
+    """
+    dims = check_shape(basecolor_linear, "B 3 H W", name="basecolor_linear")
+    check_shape(normal, "B 3 H W", name="normal", dims=dims)
+    check_flash_frame(frame, dims["B"])
+    offsets = flash_offset_channels(frame.to(basecolor_linear.dtype), dims["H"], dims["W"])
+    distance_squared = 1.0 + offsets.square().sum(dim=1, keepdim=True)  # camera distances²
+    towards_flash = torch.cat([-offsets, torch.ones_like(offsets[:, :1])], dim=1) / distance_squared.sqrt()
+    unit = normalize_normal(normal)
+    cosine = (unit * towards_flash).sum(dim=1, keepdim=True).clamp_min(0.0)
+    brdf = evaluate_brdf(basecolor_linear, unit, roughness, metallic, towards_flash, towards_flash)
+    return math.pi * brdf * cosine / distance_squared
+
+
 def flat_flash_render(basecolor_linear: Tensor, roughness: Tensor, metallic: Tensor, frame: Tensor) -> Tensor:
-    """The flash photo of a *flat* surface with these maps, relative to the flash's irradiance at
-    the hotspot: ``π f(l, v) (1 + |o|²)^(−3/2)`` with the flash at the lens (``l = v``, from each
-    pixel towards the flash: ``(−o, 1)/√(1 + |o|²)``), so a white Lambertian surface gives the
-    falloff itself and 1 at the hotspot. The photo divided by it is the **shading image**: what the
-    surface's relief (and light the flash model does not explain) did to the photo.
+    """The flash photo of a *flat* surface with these maps (:func:`flash_render` with normals
+    +Z): ``π f(l, v) (1 + |o|²)^(−3/2)``, so a white Lambertian surface gives the falloff itself
+    and 1 at the hotspot. The photo divided by it is the **shading image**: what the surface's
+    relief (and light the flash model does not explain) did to the photo.
 
     Shape:
         - basecolor_linear: ``(B, 3, H, W)``; roughness, metallic: ``(B, 1, H, W)``
         - frame: ``(B, 3)``
         - output: ``(B, 3, H, W)``
     """
-    height, width = basecolor_linear.shape[-2:]
-    offsets = flash_offset_channels(frame.to(basecolor_linear.dtype), height, width)
-    towards_flash = torch.cat([-offsets, torch.ones_like(offsets[:, :1])], dim=1)
-    towards_flash = towards_flash / towards_flash.norm(dim=1, keepdim=True)
-    flat = torch.zeros_like(towards_flash)
+    flat = torch.zeros_like(basecolor_linear)
     flat[:, 2] = 1.0
-    brdf = evaluate_brdf(basecolor_linear, flat, roughness, metallic, towards_flash, towards_flash)
-    return math.pi * brdf * (1.0 + offsets.square().sum(dim=1, keepdim=True)).pow(-1.5)
+    return flash_render(basecolor_linear, flat, roughness, metallic, frame)
 
 
 def hotspot_cap(

@@ -55,9 +55,12 @@ def evaluate_models(
     """Metric values per model name. ``make_metrics()`` builds a fresh metric per model; every
     model sees the same batches in the same order. The flash positions of ``batch["meta"]``
     (:func:`~brdfgan.metrics.hotspot_centres`) go to the metrics as ``hotspot``; a batch without
-    ``meta`` has them at the image centres. ``flash_frame``: ``"recorded"`` passes the batches'
-    flash frames to the models, ``"centred"`` the frame of a photo centred on its hotspot with the
-    default field of view (what ``brdfgan predict`` assumes without EXIF)."""
+    ``meta`` has them at the image centres. The recorded flash frames ``batch["flash"]`` go to the
+    metrics as ``flash`` whatever ``flash_frame`` says (the geometry of the true relief shading,
+    :class:`~brdfgan.metrics.ReliefLeak`; without them, photos centred on their hotspot).
+    ``flash_frame``: ``"recorded"`` passes the batches' flash frames to the models, ``"centred"``
+    the frame of a photo centred on its hotspot with the default field of view (what ``brdfgan
+    predict`` assumes without EXIF)."""
     if flash_frame not in FLASH_FRAME_SOURCES:
         raise UserError(f"flash_frame={flash_frame!r}: must be {' or '.join(map(repr, FLASH_FRAME_SOURCES))}")
     metrics = {name: make_metrics().to(device) for name in models}
@@ -68,11 +71,12 @@ def evaluate_models(
         truth = batch["maps"].to(device)
         meta = batch.get("meta")
         hotspot = None if meta is None else hotspot_centres(meta, *truth.shape[-2:]).to(device)
+        recorded = batch.get("flash")
+        recorded = None if recorded is None else recorded.to(device)
         # None: each network's own default, the photo centred on its hotspot with the default FOV.
-        flash = batch.get("flash") if flash_frame == "recorded" else None
-        flash = None if flash is None else flash.to(device)
+        flash = recorded if flash_frame == "recorded" else None
         for name, model in models.items():
-            metrics[name].update(model(photo, flash), truth, hotspot=hotspot)
+            metrics[name].update(model(photo, flash), truth, hotspot=hotspot, flash=recorded)
     return {name: {k: float(v) for k, v in metric.compute().items()} for name, metric in metrics.items()}
 
 
@@ -97,13 +101,20 @@ def write_results(results: Mapping[str, Mapping[str, float]], out_dir: str | os.
 def markdown_table(results: Mapping[str, Mapping[str, float]]) -> str:
     """Per-map RMSE at full and downscaled resolution, angular and re-render error, the base
     colour's saturation ratio (predicted / true: 1 right, < 1 greyed) and hue error (degrees), the
-    checkerboard ratios (predicted / true period-2 power per map: 1 right, ≫ 1 a checkerboard), and
-    the hotspot ratios of the predicted maps (RMSE near the flash highlight / elsewhere), per
-    model."""
+    checkerboard ratios (predicted / true period-2 power per map: 1 right, ≫ 1 a checkerboard), the
+    false metal (mean predicted metallic on dielectric truth: 0 right), the relief leak and its
+    slope (the base colour's error against the true relief shading: 0 right, 1 the relief copied
+    into it), and the hotspot ratios of the predicted maps (RMSE near the flash highlight /
+    elsewhere), per model."""
     columns = [(f"rmse/{m}", f"{m}") for m in ALL_MAPS] + [(f"rmse256/{m}", f"{m} ↓256") for m in PAPER_MAPS]
     columns += [("normal_angle_deg", "normal °"), ("rerender_rmse", "re-render")]
     columns += [("basecolor_saturation_ratio", "sat ratio"), ("basecolor_hue_error_deg", "hue °")]
     columns += [(f"checkerboard/{m}", f"chk {label}") for m, label in CHECKERBOARD_COLUMNS.items()]
+    columns += [
+        ("false_metal", "false metal"),
+        ("relief_leak", "relief leak"),
+        ("relief_leak/slope", "leak slope"),
+    ]
     columns += [(f"hotspot/{m}", f"hot {label}") for m, label in HOTSPOT_COLUMNS.items()]
     present = [(key, label) for key, label in columns if any(key in v for v in results.values())]
     lines = ["| model | " + " | ".join(label for _, label in present) + " |"]

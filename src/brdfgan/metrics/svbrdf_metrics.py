@@ -67,6 +67,20 @@ Definitions (``pred`` and ``true`` in the 8-channel layout of :mod:`brdfgan.core
   dataset. 1 = the truth's level of period-2 structure, ≫ 1 = the checkerboard of transposed
   convolutions, < 1 = smoother than the truth; two flat maps score 1. Full rationale above
   :data:`CHECKERBOARD_QUANTISATION`.
+
+- **False metal** (:class:`FalseMetal`, :func:`false_metal`): the mean predicted metallic over
+  every texel of the dataset whose true metallic is below :data:`DIELECTRIC_THRESHOLD` (0.1):
+  how much metal a model reads into dielectrics. 0 = none, 1 = every dielectric called a metal;
+  NaN when the dataset holds no dielectric texel.
+
+- **Relief leak** (:class:`ReliefLeak`, :func:`relief_leak`): per sample, the Pearson correlation
+  over its texels between the base colour's error ``log Y(p) − log Y(t)`` (``Y`` the luminance of
+  the linear base colour) and the true **relief shading** ``log Y(R_n(t)) − log Y(R_flat(t))``
+  (:func:`relief_shading`: the sample's flash photo of the true maps over the same photo with flat
+  normals, under its flash frame), averaged over the samples that have relief;
+  ``relief_leak/slope``: the mean regression slope of that error on the shading. +1 (slope 1) =
+  the base colour carries the relief shading, 0 = its error has nothing to do with the relief.
+  Full definition and rationale above :data:`RELIEF_LOG_FLOOR`.
 """
 
 from __future__ import annotations
@@ -83,7 +97,15 @@ from torchmetrics import Metric, MetricCollection
 
 from brdfgan.config_check import ConfigValueError
 from brdfgan.core.checks import check_shape
-from brdfgan.core.flash_geometry import hotspot_disk
+from brdfgan.core.delit import flash_render
+from brdfgan.core.exposure import luminance
+from brdfgan.core.flash_geometry import (
+    DEFAULT_FOV_DEG,
+    FLASH_FRAME_SIZE,
+    centred_flash_frame,
+    check_flash_frame,
+    hotspot_disk,
+)
 from brdfgan.core.render import render_point_lights
 from brdfgan.core.sampling import (
     RenderConfigs,
@@ -951,10 +973,264 @@ class HotspotError(Metric):
         return result
 
 
+# ---------------------------------------------------------------- dielectric read as metal
+#
+# Why a threshold on the truth, and why 0.1: scanned metallic maps are nearly binary but hold soft
+# values — the edges of rust patches, dirt on metal, JPEG ringing — and dielectrics scanned at a few
+# hundredths (rust at 0.05–0.1). The measure asks how much metal a model reads into what is clearly
+# dielectric, so it takes the texels whose truth is below 0.1 and leaves the ambiguous ones between
+# 0.1 and 0.5 to neither class: with a cut at 0.5 they would count as dielectrics, and on the OOD
+# tiled facade the truth itself would score ~0.26 (docs/training.md, "Evaluation"). The measure is
+# the predicted metallic itself, not its error against the soft truth: a dielectric should read 0,
+# and a set whose dielectrics are scanned at 0.08 says so in its own (truth) score. A ratio of sums
+# over every dielectric texel of the dataset, like the saturation ratio: exact whatever the split.
+
+# True metallic below this is a dielectric texel (see the comment above).
+DIELECTRIC_THRESHOLD = 0.1
+
+
+def _false_metal_sums(pred: Tensor, true: Tensor) -> tuple[Tensor, Tensor]:
+    """``(Σ predicted metallic, count)`` over the texels whose true metallic is below
+    :data:`DIELECTRIC_THRESHOLD`: float64 and int64 scalars."""
+    dielectric = split_maps(true).metallic < DIELECTRIC_THRESHOLD
+    metallic = torch.where(dielectric, split_maps(pred).metallic, 0.0)
+    return metallic.sum(dtype=torch.float64), dielectric.sum()
+
+
+def false_metal(pred: Tensor, true: Tensor) -> Tensor:
+    """Mean predicted metallic over every texel of every sample whose true metallic is below
+    :data:`DIELECTRIC_THRESHOLD`: 0 when no dielectric is read as metal, 1 when every one is. NaN
+    when no true texel is dielectric.
+
+    Shape:
+        - pred, true: ``(*, 8, H, W)``
+        - output: float64 scalar
+    """
+    check_map_pair(pred, true)
+    return _ratio(*_false_metal_sums(pred, true))
+
+
+class FalseMetal(Metric):
+    """:func:`false_metal` over a whole dataset: the predicted metallic summed over the dielectric
+    texels and their count accumulate over the updates, the mean is taken in ``compute``.
+
+    Shape:
+        - pred, true: ``(B, 8, H, W)`` or ``(8, H, W)``
+        - compute: float64 scalar (NaN before any update or without a dielectric texel)
+    """
+
+    is_differentiable = False
+    higher_is_better = False
+    full_state_update = False
+
+    sum_metallic: Tensor
+    texels: Tensor
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.add_state("sum_metallic", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("texels", torch.zeros((), dtype=torch.int64), dist_reduce_fx="sum")
+
+    def update(self, pred: Tensor, true: Tensor) -> None:
+        pred, true = _as_batch(pred, true)
+        total, texels = _false_metal_sums(pred, true)
+        self.sum_metallic += total
+        self.texels += texels
+
+    def compute(self) -> Tensor:
+        return _ratio(self.sum_metallic, self.texels)
+
+
+# ---------------------------------------------------------------- relief shading in the base colour
+#
+# Up to exposure, the photo is the flash render of the true maps with their normals. The **relief
+# shading** is what the normals did to that render: the render over the same render with flat
+# normals, of luminance, in log, under the sample's flash frame (flash at the lens,
+# brdfgan.core.flash_geometry):
+#
+#     y = log Y(R_n(t)) − log Y(R_flat(t))                         (relief_shading)
+#
+# It is the shading image of brdfgan.core.delit.flat_flash_render computed from the truth instead
+# of the photo: the tilt's diffuse cosine and the glints relief makes in the specular lobe — what
+# the photo shows of the relief — and no environment light, noise or exposure.
+#
+# A base colour that has not separated relief from albedo is the truth times that shading, so its
+# error in log luminance, x = log Y(p) − log Y(t) (Y of the linear base colour), is y itself.
+# Hence logs: the correlation of x with y is then exactly 1 whatever the truth's texture (the
+# linear difference Y(t)·(S − 1) correlates with S less the more contrast the texture has), and a
+# global level error (a scaled albedo) is a constant, which the sample's mean removes.
+#
+# Per sample, over its texels (x̃, ỹ: x and y minus the sample's means):
+#
+#     r = Σ x̃ỹ / sqrt(Σ x̃² Σ ỹ²)     the Pearson correlation, "relief_leak"
+#     b = Σ x̃ỹ / Σ ỹ²                the regression slope, "relief_leak/slope"
+#
+# The correlation says how much of the base colour's error the relief explains, the slope how much
+# of the relief shading (in log) the base colour carries: a partial leak p = t·S^k has r = 1 and
+# b = k, an independent error r ≈ b ≈ 0. Over a dataset, the mean of r and of b over the samples
+# with relief: every sample counts once whatever the strength of its relief (a pooled correlation
+# would follow the roughest surfaces). Per-sample values summed with a count: exact whatever the
+# batch split or the processes.
+#
+# Edge cases. A sample whose shading varies less than RELIEF_MIN_STD (std of y: flat normals, or
+# relief below half an 8-bit step at mid-grey) has no relief to leak and is skipped. An error that
+# varies less than ERROR_MIN_STD (the truth itself, a global level error up to float rounding) has
+# r = 0, not 0/0 or a correlation of rounding noise. Luminances are floored at RELIEF_LOG_FLOOR
+# before the log: a black prediction and a texel turned away from the flash stay finite.
+
+# Floor of the luminances before the log, for the linear base colour (sRGB ≈ 0.013: darker than
+# any material's albedo) and for the renders (in units of a white matte surface at the hotspot,
+# where the render is 1: about one 8-bit step of a photo exposed for such a surface).
+RELIEF_LOG_FLOOR = 1e-3
+# A sample has relief when the std of its log relief shading reaches this (1 %).
+RELIEF_MIN_STD = 1e-2
+# The base colour's log-luminance error varies when its std reaches this (0.1 %).
+ERROR_MIN_STD = 1e-3
+
+
+def _log_luminance(rgb: Tensor) -> Tensor:
+    """``log max(Y, RELIEF_LOG_FLOOR)`` of linear RGB ``(B, 3, H, W)``: ``(B, 1, H, W)``."""
+    return luminance(rgb).clamp_min(RELIEF_LOG_FLOOR).log()
+
+
+def relief_shading(maps: Tensor, frame: Tensor) -> Tensor:
+    """The log relief shading of map sets under their flash frames: ``log Y(R_n) − log Y(R_flat)``,
+    ``R_n`` the :func:`flash_render` of the maps, ``R_flat`` the same with flat normals, ``Y`` the
+    luminance floored at :data:`RELIEF_LOG_FLOOR` (definition in the comment above it). Exactly 0
+    for flat normals; negative where relief turns the surface from the flash.
+
+    Shape:
+        - maps: ``(B, 8, H, W)``
+        - frame: ``(B, 3)`` flash frame ``(x, y, s)``
+        - output: ``(B, 1, H, W)``
+    """
+    check_shape(maps, "B 8 H W", name="maps")
+    parts = split_maps(maps)
+    linear = srgb_to_linear(parts.basecolor)
+    flat = torch.zeros_like(parts.normal)
+    flat[:, 2] = 1.0
+    relief = flash_render(linear, parts.normal, parts.roughness, parts.metallic, frame)
+    plain = flash_render(linear, flat, parts.roughness, parts.metallic, frame)
+    return _log_luminance(relief) - _log_luminance(plain)
+
+
+def basecolor_log_error(pred: Tensor, true: Tensor) -> Tensor:
+    """The base colour's error in log luminance, ``log Y(p) − log Y(t)``, ``Y`` the luminance of the
+    linear base colour floored at :data:`RELIEF_LOG_FLOOR`.
+
+    Shape:
+        - pred, true: ``(*, 8, H, W)``
+        - output: ``(*, 1, H, W)``
+    """
+    check_map_pair(pred, true)
+    return _log_luminance(srgb_to_linear(split_maps(pred).basecolor)) - _log_luminance(
+        srgb_to_linear(split_maps(true).basecolor)
+    )
+
+
+def _relief_leak_terms(pred: Tensor, true: Tensor, frame: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """Per sample ``(r, b, has_relief)``: the correlation and slope of the base colour's log error
+    on the true relief shading (0 for a sample without relief), and whether it has relief."""
+    error = basecolor_log_error(pred, true).flatten(1)
+    shading = relief_shading(true, frame).flatten(1)
+    error = error - error.mean(dim=1, keepdim=True)
+    shading = shading - shading.mean(dim=1, keepdim=True)
+    cross = (error * shading).sum(dim=1)
+    error_power, shading_power = error.square().sum(dim=1), shading.square().sum(dim=1)
+    texels = error.shape[1]
+    has_relief = shading_power >= texels * RELIEF_MIN_STD**2
+    varies = has_relief & (error_power >= texels * ERROR_MIN_STD**2)
+    zero = torch.zeros_like(cross)
+    # The guards keep the unused branch of torch.where finite; every used denominator is positive.
+    correlation = torch.where(varies, cross / (error_power * shading_power).clamp_min(1e-300).sqrt(), zero)
+    slope = torch.where(has_relief, cross / shading_power.clamp_min(1e-300), zero)
+    return correlation, slope, has_relief
+
+
+def _relief_leak_values(correlation: Tensor, slope: Tensor, samples: Tensor) -> dict[str, Tensor]:
+    """``{"relief_leak": Σ r / n, "relief_leak/slope": Σ b / n}``; NaN for ``n = 0``."""
+    return {"relief_leak": _ratio(correlation, samples), "relief_leak/slope": _ratio(slope, samples)}
+
+
+def relief_leak(pred: Tensor, true: Tensor, frame: Tensor) -> dict[str, Tensor]:
+    """How much of the true relief shading the predicted base colour carries: per sample the
+    correlation ``r`` and the slope ``b`` of the base colour's log-luminance error
+    (:func:`basecolor_log_error`) on the true relief shading (:func:`relief_shading`) over its
+    texels, each minus its sample mean, averaged over the samples with relief (definitions in the
+    comment above :data:`RELIEF_LOG_FLOOR`). ``relief_leak``: +1 when the base colour is the truth
+    times the shading (or any power of it), 0 for the truth or an error independent of the relief,
+    −1 for the inverse; ``relief_leak/slope``: 1 for the full shading, 0 for none. Both NaN when no
+    sample has relief.
+
+    Shape:
+        - pred, true: ``(B, 8, H, W)``
+        - frame: ``(B, 3)`` flash frame ``(x, y, s)`` of the samples' photos
+        - output: ``{"relief_leak": float64 scalar, "relief_leak/slope": float64 scalar}``
+    """
+    check_map_pair(pred, true)
+    check_shape(pred, "B 8 H W", name="maps")
+    correlation, slope, has_relief = _relief_leak_terms(pred.double(), true.double(), frame.double())
+    return _relief_leak_values(correlation.sum(), slope.sum(), has_relief.sum())
+
+
+class ReliefLeak(Metric):
+    """:func:`relief_leak` over a whole dataset: the per-sample correlations and slopes of the
+    samples with relief are summed over the updates, with their count; the means are taken in
+    ``compute``. Computed in float64.
+
+    ``update(pred, true, flash=None)``: ``flash`` holds the flash frame of each sample's photo
+    (``batch["flash"]``, :func:`brdfgan.data.datamodule.flash_frames`), the geometry of its relief
+    shading; ``None`` assumes photos centred on their hotspot with the default field of view
+    (:func:`~brdfgan.core.flash_geometry.centred_flash_frame`).
+
+    ``compute()`` returns ``{"relief_leak": mean r, "relief_leak/slope": mean b}`` (float64
+    scalars, NaN before any sample with relief).
+
+    Shape:
+        - pred, true: ``(B, 8, H, W)`` or ``(8, H, W)``
+        - flash: ``(B, 3)`` (``(1, 3)`` or ``(3,)`` for unbatched maps)
+    """
+
+    is_differentiable = False
+    higher_is_better = None  # 0 is best; −1 is a base colour shaded the wrong way
+    full_state_update = False
+
+    sum_correlation: Tensor
+    sum_slope: Tensor
+    samples: Tensor
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.add_state("sum_correlation", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("sum_slope", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("samples", torch.zeros((), dtype=torch.int64), dist_reduce_fx="sum")
+
+    def update(self, pred: Tensor, true: Tensor, flash: Tensor | None = None) -> None:
+        unbatched = pred.ndim == 3
+        pred, true = _as_batch(pred, true)
+        batch, _, height, width = pred.shape
+        if flash is None:
+            frame = centred_flash_frame(batch, height, width, DEFAULT_FOV_DEG, device=pred.device)
+        else:
+            frame = flash.detach().to(pred.device)
+            if unbatched and frame.shape == (FLASH_FRAME_SIZE,):
+                frame = frame.unsqueeze(0)
+            check_flash_frame(frame, batch)
+        frame = frame.to(torch.float64)
+        correlation, slope, has_relief = _relief_leak_terms(pred.double(), true.double(), frame)
+        self.sum_correlation += correlation.sum()
+        self.sum_slope += slope.sum()
+        self.samples += has_relief.sum()
+
+    def compute(self) -> dict[str, Tensor]:
+        return _relief_leak_values(self.sum_correlation, self.sum_slope, self.samples)
+
+
 class SVBRDFMetrics(MetricCollection):
-    """All evaluation metrics behind one ``update(pred_maps, true_maps, hotspot=None)``, computed
-    as a flat dict. ``hotspot`` (the flash positions, :func:`hotspot_centres`) reaches only
-    :class:`HotspotError`: torchmetrics' ``MetricCollection.update`` passes each child only the
+    """All evaluation metrics behind one ``update(pred_maps, true_maps, hotspot=None, flash=None)``,
+    computed as a flat dict. ``hotspot`` (the flash positions, :func:`hotspot_centres`) reaches
+    only :class:`HotspotError` and ``flash`` (the photos' flash frames, ``batch["flash"]``) only
+    :class:`ReliefLeak`: torchmetrics' ``MetricCollection.update`` passes each child only the
     keyword arguments its ``update`` signature names (``Metric._filter_kwargs``).
 
     Keys of ``compute()`` (float64 scalars, with the collection's optional ``prefix``):
@@ -964,8 +1240,11 @@ class SVBRDFMetrics(MetricCollection):
     ``basecolor_saturation_ratio`` (:class:`SaturationRatio`, 1 = right, < 1 = greyed),
     ``basecolor_hue_error_deg`` (:class:`HueError`),
     ``checkerboard/{basecolor,normal,roughness,metallic}`` and ``…/pooled`` (:class:`CheckerboardRatio`,
-    predicted / true period-2 power: 1 = right, ≫ 1 = checkerboard artefact, < 1 = smoother)
-    and, with ``hotspot``, ``hotspot/<map>`` (:class:`HotspotError`; with ``hotspot_rmse`` also
+    predicted / true period-2 power: 1 = right, ≫ 1 = checkerboard artefact, < 1 = smoother),
+    ``false_metal`` (:class:`FalseMetal`, mean predicted metallic on dielectric truth: 0 = right),
+    ``relief_leak`` and ``relief_leak/slope`` (:class:`ReliefLeak`, correlation and slope of the
+    base colour's error on the true relief shading: 0 = right, +1 = the relief is in the base
+    colour) and, with ``hotspot``, ``hotspot/<map>`` (:class:`HotspotError`; with ``hotspot_rmse`` also
     ``hotspot/<map>/inside`` and ``/outside``). Log them with
     ``log_dict(metrics.compute())`` — Lightning's ``log_dict(metrics)`` expects scalar metrics.
 
@@ -1016,6 +1295,8 @@ class SVBRDFMetrics(MetricCollection):
         metrics["basecolor_saturation_ratio"] = SaturationRatio(**kw)
         metrics["basecolor_hue_error_deg"] = HueError(**kw)
         metrics["checkerboard"] = CheckerboardRatio(prefix="checkerboard/", **kw)
+        metrics["false_metal"] = FalseMetal(**kw)
+        metrics["relief_leak"] = ReliefLeak(**kw)
         if hotspot:
             metrics["hotspot"] = HotspotError(
                 hotspot_radius_fraction, albedo_space=albedo_space, rmse=hotspot_rmse, prefix="hotspot/", **kw
