@@ -63,6 +63,24 @@ def luminance(rgb: Tensor, dim: int = -3) -> Tensor:
     return (rgb * weights).sum(dim=dim, keepdim=True)
 
 
+def log_luminance(rgb: Tensor, floor: float = 1e-3) -> Tensor:
+    """``log max(Y, floor)`` of linear RGB images, ``Y`` their :func:`luminance`: the floor keeps
+    black and shadowed pixels finite (1e-3 is about one 8-bit step of a photo exposed for white).
+
+    Shape:
+        - rgb: ``(*, 3, H, W)``
+        - output: ``(*, 1, H, W)``
+
+    Example:
+        White is 0; black is floored:
+
+        >>> rgb = torch.tensor([1.0, 0.0]).view(1, 1, 2, 1).expand(1, 3, 2, 1)
+        >>> [round(v, 3) for v in log_luminance(rgb).flatten().tolist()]
+        [0.0, -6.908]
+    """
+    return luminance(rgb).clamp_min(floor).log()
+
+
 def luminance_value(rgb: Sequence[float] | np.ndarray) -> float:
     """:func:`luminance` of one colour given as plain numbers (light colours, irradiances)."""
     return float(luminance(torch.as_tensor(rgb, dtype=torch.float64), dim=-1))

@@ -91,6 +91,7 @@ __all__ = [
     "capture_scene",
     "draw_scene",
     "photograph_scenes",
+    "render_scenes",
 ]
 
 log = logging.getLogger(__name__)
@@ -241,7 +242,7 @@ class MaterialBank:
         use_scan = self.scan_folders and (not self.procedural or u[0] < self.spec.scans.fraction)
         if use_scan:
             which = min(int(u[1] * len(self.scan_folders)), len(self.scan_folders) - 1)
-            return self._scan_material(which, u[2], generator)
+            return self.scan_material(which, u[2], generator)
         index = self.procedural[min(int(u[1] * len(self.procedural)), len(self.procedural) - 1)]
         path = self.material_path(index)
         try:
@@ -259,7 +260,9 @@ class MaterialBank:
             self._meta = {int(key): value for key, value in recorded.items()}
         return self._meta[index]
 
-    def _scan_material(self, which: int, recolor_draw: float, generator: torch.Generator) -> PaintedMaterial:
+    def scan_material(self, which: int, recolor_draw: float, generator: torch.Generator) -> PaintedMaterial:
+        """Training scan set ``which`` (read once, then kept), recoloured when ``recolor_draw`` is
+        below ``scans.recolor_probability`` with a draw from ``generator``."""
         folder = self.scan_folders[which]
         if which not in self._scans:
             self._scans[which] = read_scanned_material(folder, self.spec.scans.resolution)
@@ -479,6 +482,33 @@ def capture_scene(
     )
 
 
+def render_scenes(
+    maps: Tensor,
+    camera_position: Tensor,
+    light_position: Tensor,
+    light_rgb: Tensor,
+    grids: Tensor,
+    render: Callable[..., Tensor] = render_point_lights,
+) -> Tensor:
+    """The linear HDR photos of a batch of scenes, before exposure: the point-light render from
+    each camera in texture space, resampled into the photo's pixels. ``render`` is
+    :func:`~brdfgan.core.render.render_point_lights` or a compiled copy of it.
+
+    Shape:
+        - maps: ``(B, 8, R, R)``; camera_position: ``(B, 3)``
+        - light_position, light_rgb: ``(B, K, 3)``; grids: ``(B, R, R, 2)``
+        - output: ``(B, 3, R, R)``
+    """
+    batch, count = light_position.shape[:2]
+    lights = PointLights(
+        position=light_position.unsqueeze(1),
+        intensity=light_rgb.new_ones(batch, 1, count),
+        color=light_rgb.unsqueeze(1),
+    )
+    hdr = render(maps, camera_position.unsqueeze(1), lights)[:, 0]
+    return warp_to_view(hdr, grids).clamp_min(0.0)
+
+
 def photograph_scenes(
     maps: Tensor,
     camera_position: Tensor,
@@ -488,11 +518,9 @@ def photograph_scenes(
     exposure_ev: Tensor,
     render: Callable[..., Tensor] = render_point_lights,
 ) -> tuple[Tensor, Tensor, Tensor]:
-    """Photos of a batch of scenes: the point-light render from each camera in texture space,
-    resampled into the photo's pixels, auto-exposed off by the drawn error (``clip(hdr · scale ·
-    2^ev, 0, 1)`` as :func:`~brdfgan.core.exposure.auto_expose`), with the maps resampled alike.
-
-    ``render`` is :func:`~brdfgan.core.render.render_point_lights` or a compiled copy of it.
+    """Photos of a batch of scenes: :func:`render_scenes` auto-exposed off by the drawn error
+    (``clip(hdr · scale · 2^ev, 0, 1)`` as :func:`~brdfgan.core.exposure.auto_expose`), with the
+    maps resampled into the photos' pixels alike.
 
     Returns:
         ``(photos, maps_in_view, exposure_scale)``: linear LDR photos, the maps as the photos show
@@ -503,14 +531,7 @@ def photograph_scenes(
         - light_position, light_rgb: ``(B, K, 3)``; grids: ``(B, R, R, 2)``; exposure_ev: ``(B,)``
         - output: ``(B, 3, R, R)``, ``(B, 8, R, R)``, ``(B,)``
     """
-    batch, count = light_position.shape[:2]
-    lights = PointLights(
-        position=light_position.unsqueeze(1),
-        intensity=light_rgb.new_ones(batch, 1, count),
-        color=light_rgb.unsqueeze(1),
-    )
-    hdr = render(maps, camera_position.unsqueeze(1), lights)[:, 0]
-    hdr = warp_to_view(hdr, grids).clamp_min(0.0)
+    hdr = render_scenes(maps, camera_position, light_position, light_rgb, grids, render)
     scale = auto_exposure_scale(hdr) * torch.pow(2.0, exposure_ev.to(hdr))
     photos = (hdr * scale[:, None, None, None]).clamp(0.0, 1.0)
     return photos, warp_maps_to_view(maps, grids), scale

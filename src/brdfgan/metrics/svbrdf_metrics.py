@@ -98,7 +98,7 @@ from torchmetrics import Metric, MetricCollection
 from brdfgan.config_check import ConfigValueError
 from brdfgan.core.checks import check_shape
 from brdfgan.core.delit import flash_render
-from brdfgan.core.exposure import luminance
+from brdfgan.core.exposure import log_luminance
 from brdfgan.core.flash_geometry import (
     DEFAULT_FOV_DEG,
     FLASH_FRAME_SIZE,
@@ -1089,8 +1089,8 @@ ERROR_MIN_STD = 1e-3
 
 
 def _log_luminance(rgb: Tensor) -> Tensor:
-    """``log max(Y, RELIEF_LOG_FLOOR)`` of linear RGB ``(B, 3, H, W)``: ``(B, 1, H, W)``."""
-    return luminance(rgb).clamp_min(RELIEF_LOG_FLOOR).log()
+    """:func:`~brdfgan.core.exposure.log_luminance` floored at :data:`RELIEF_LOG_FLOOR`."""
+    return log_luminance(rgb, RELIEF_LOG_FLOOR)
 
 
 def relief_shading(maps: Tensor, frame: Tensor) -> Tensor:

@@ -1,0 +1,514 @@
+"""Relief statistics of normal maps and what a photo shows of them (issue 46, item 1).
+
+Three questions, one group of pure functions each (definitions in each docstring; the measured
+tables are in docs/data.md, "Relief: what the training data shows and what a photo can show"):
+
+- **Realism: what relief the maps hold.** :func:`tilt_deg` (a texel's angle from +Z; its mean is
+  the angle a flat map scores), :func:`flat_share`, :func:`flat_window_share`,
+  :func:`steep_angle_share` and :func:`slope_band_energy` (how the slope field's power spreads
+  over octaves of spatial frequency).
+- **Observability: what a photo can show of it.** :func:`scene_relief_shading` (the photo with its
+  relief over the same photo with flat normals, in log luminance, rendered as a training photo is
+  rendered), :func:`delivered_noise_log` and :func:`srgb8_rounding_log` (the photo's noise in the
+  same units), :func:`observable_mask` and :func:`observable_angle`.
+- **The sensor: how much of a photo's detail is relief.** :func:`relief_share`.
+
+Everything is in photo pixels (a photo of ``(B, 3, H, W)``), or texels of a map, and takes
+``(B, …)`` batches; nothing here draws random numbers.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+
+import torch
+from torch import Tensor
+
+from brdfgan.core.checks import check_shape
+from brdfgan.core.exposure import LUMINANCE_WEIGHTS, auto_exposure_scale, log_luminance, luminance
+from brdfgan.core.filtering import gaussian_blur
+from brdfgan.core.svbrdf import NORMAL, linear_to_srgb, srgb_to_linear
+from brdfgan.data.rendered import render_scenes
+from brdfgan.losses.parameter import TILT_Z_MIN
+
+__all__ = [
+    "FLAT_DEG",
+    "FLAT_WINDOW",
+    "FLAT_WINDOW_DEG",
+    "HIGH_PASS_FRACTION",
+    "LOG_FLOOR",
+    "SLOPE_BANDS",
+    "STEEP_DEG",
+    "delivered_noise_log",
+    "flat_share",
+    "flat_window_share",
+    "high_pass",
+    "observable_angle",
+    "observable_mask",
+    "relief_share",
+    "scene_relief_shading",
+    "slope_band_energy",
+    "slope_field",
+    "srgb8_rounding_log",
+    "steep_angle_share",
+    "tilt_deg",
+]
+
+# A texel is flat below this tilt: a slope of 0.9 %, under a tenth of an 8-bit step of shading
+# change for a flash at the lens (1 − cos 0.5° = 4e-5).
+FLAT_DEG = 0.5
+# A window (side in texels, of a 256² crop: a quarter of its side) is nearly flat when its mean
+# tilt is below FLAT_WINDOW_DEG: a patch a network sees no relief in at all.
+FLAT_WINDOW = 64
+FLAT_WINDOW_DEG = 1.0
+# Steep: tan 17° ≈ 0.31, a slope that turns the diffuse shading of a flash 30° off the
+# normal by about a sixth: grout edges, cracks, tile bevels.
+STEEP_DEG = 17.0
+# Octave band edges of the slope spectrum in cycles per pixel: periods of > 32, 16–32, 8–16, 4–8
+# and < 4 pixels (the last reaches 1.4 px in the spectrum's corners).
+SLOPE_BANDS = (0.0, 1.0 / 32.0, 1.0 / 16.0, 1.0 / 8.0, 1.0 / 4.0, math.inf)
+# Linear luminance floor before a log, in units of the exposed photo (1 = white): about three
+# 8-bit sRGB codes above black, so black pixels and shadows stay finite.
+LOG_FLOOR = 1e-3
+# The high-pass of relief_share: Gaussian σ as a fraction of the photo's shorter side. A flash's
+# falloff and its specular lobe vary over a quarter of the side or more; 1/16 removes them and
+# keeps the relief's grout lines, cracks and grain.
+HIGH_PASS_FRACTION = 1.0 / 16.0
+
+
+# ----------------------------------------------------------------------------- realism
+
+
+def tilt_deg(normal: Tensor) -> Tensor:
+    """Each texel's tilt: the angle in degrees between its normal and +Z,
+    ``atan2(sqrt(n_x² + n_y²), n_z)`` (any positive length: the angle of the direction). The
+    mean over a map is the angle a flat map scores against it (:class:`~brdfgan.metrics.
+    svbrdf_metrics.NormalAngularError` with a flat prediction), "the flat map's angle".
+
+    Shape:
+        - normal: ``(*, 3, H, W)``, z ≥ 0
+        - output: ``(*, H, W)`` in [0, 90]
+
+    Example:
+        >>> normal = torch.tensor([[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, -2.0, 0.0]]).T.reshape(3, 1, 3)
+        >>> [round(v, 3) for v in tilt_deg(normal).flatten().tolist()]
+        [0.0, 45.0, 90.0]
+    """
+    check_shape(normal, "* 3 H W", name="normal")
+    x, y, z = normal.unbind(dim=-3)
+    return torch.rad2deg(torch.atan2(torch.hypot(x, y), z))
+
+
+def _check_threshold(name: str, value: float) -> None:
+    if not 0.0 < value < 90.0:
+        raise ValueError(f"{name} must lie in (0, 90) degrees, got {value}")
+
+
+def flat_share(normal: Tensor, threshold_deg: float = FLAT_DEG) -> Tensor:
+    """The share of texels whose :func:`tilt_deg` is below ``threshold_deg``.
+
+    Shape:
+        - normal: ``(*, 3, H, W)``
+        - output: ``(*)`` in [0, 1]
+
+    Example:
+        A flat map is all flat; a map tilted 1° in its left half is half flat:
+
+        >>> normal = torch.zeros(3, 4, 4)
+        >>> normal[2] = 1.0
+        >>> flat_share(normal).item()
+        1.0
+        >>> normal[0, :, :2] = math.tan(math.radians(1.0))
+        >>> flat_share(normal).item()
+        0.5
+    """
+    _check_threshold("threshold_deg", threshold_deg)
+    return (tilt_deg(normal) < threshold_deg).to(normal.dtype).mean(dim=(-2, -1))
+
+
+def steep_angle_share(normal: Tensor, threshold_deg: float = STEEP_DEG) -> Tensor:
+    """The share of the flat map's angle (the summed :func:`tilt_deg`) carried by texels steeper
+    than ``threshold_deg``: ``Σ θ·[θ > threshold] / Σ θ``; 0 for a flat map (no angle to carry).
+
+    Shape:
+        - normal: ``(*, 3, H, W)``
+        - output: ``(*)`` in [0, 1]
+
+    Example:
+        One texel of 30° among fifteen of 2°: it is a sixteenth of the texels and half the angle:
+
+        >>> normal = torch.zeros(3, 4, 4)
+        >>> normal[2] = 1.0
+        >>> normal[0] = math.tan(math.radians(2.0))
+        >>> normal[0, 0, 0] = math.tan(math.radians(30.0))
+        >>> round(steep_angle_share(normal).item(), 4)
+        0.5
+        >>> normal[0] = 0.0
+        >>> steep_angle_share(normal).item()
+        0.0
+    """
+    _check_threshold("threshold_deg", threshold_deg)
+    tilt = tilt_deg(normal)
+    total = tilt.sum(dim=(-2, -1))
+    steep = (tilt * (tilt > threshold_deg)).sum(dim=(-2, -1))
+    return torch.where(
+        total > 0, steep / total.clamp_min(torch.finfo(tilt.dtype).tiny), torch.zeros_like(total)
+    )
+
+
+def flat_window_share(
+    normal: Tensor, window: int = FLAT_WINDOW, threshold_deg: float = FLAT_WINDOW_DEG
+) -> Tensor:
+    """The share of ``window × window`` windows whose mean :func:`tilt_deg` is below
+    ``threshold_deg``. The windows tile the map from its top-left corner without overlap; a
+    remainder narrower than a window at the right or bottom is left out.
+
+    Shape:
+        - normal: ``(*, 3, H, W)``, H and W ≥ ``window``
+        - output: ``(*)`` in [0, 1]
+
+    Example:
+        A 4 × 8 map in two 4² windows, the right one holding a 10° texel (mean 0.6°) — flat at
+        1°, not at 0.5°:
+
+        >>> normal = torch.zeros(3, 4, 8)
+        >>> normal[2] = 1.0
+        >>> normal[0, 0, 7] = math.tan(math.radians(10.0))
+        >>> flat_window_share(normal, window=4).item()
+        1.0
+        >>> flat_window_share(normal, window=4, threshold_deg=0.5).item()
+        0.5
+    """
+    dims = check_shape(normal, "* 3 H W", name="normal")
+    _check_threshold("threshold_deg", threshold_deg)
+    if not 1 <= window <= min(dims["H"], dims["W"]):
+        raise ValueError(
+            f"window must lie in [1, {min(dims['H'], dims['W'])}] (the map's side), got {window}"
+        )
+    tilt = tilt_deg(normal)
+    flat = tilt.reshape(-1, 1, dims["H"], dims["W"])
+    means = torch.nn.functional.avg_pool2d(flat, window, stride=window)
+    share = (means < threshold_deg).to(normal.dtype).mean(dim=(-3, -2, -1))
+    return share.reshape(tilt.shape[:-2])
+
+
+def slope_field(normal: Tensor) -> Tensor:
+    """The surface slopes ``(s_x, s_y) = (−n_x/n_z, −n_y/n_z)`` (height gained per unit of
+    distance along +x and +y, the convention of :func:`~brdfgan.data.materials.base.height_to_normal`),
+    n_z clamped at :data:`~brdfgan.losses.parameter.TILT_Z_MIN` so grazing normals stay finite.
+
+    Shape:
+        - normal: ``(*, 3, H, W)``
+        - output: ``(*, 2, H, W)``
+
+    Example:
+        >>> slope_field(torch.tensor([0.6, 0.0, 0.8]).view(3, 1, 1)).flatten().tolist()
+        [-0.75, -0.0]
+    """
+    check_shape(normal, "* 3 H W", name="normal")
+    z = normal[..., 2:3, :, :].clamp_min(TILT_Z_MIN)
+    return -normal[..., :2, :, :] / z
+
+
+def slope_band_energy(normal: Tensor, bands: Sequence[float] = SLOPE_BANDS) -> Tensor:
+    """How the slope field's power spreads over spatial frequency: per band ``[f_k, f_{k+1})`` of
+    radial frequency ``f = sqrt(f_x² + f_y²)`` (cycles per pixel, ``bands`` the edges, increasing),
+    the share of the power of :func:`slope_field` (both components summed) that lies in it.
+
+    The spectrum is that of each slope component minus its mean (the map's mean slope is a tilt of
+    the whole sample, not relief), times a 2-D Hann window (a map need not tile: the window keeps
+    the jump at its borders from leaking power into every band), summed over the FFT bins of each
+    band, divided by the sum over all bins but the zero frequency. The shares of bands that cover
+    all frequencies (the default: 0 to ∞) sum to 1; a map without slope variation has all 0.
+
+    Shape:
+        - normal: ``(*, 3, H, W)``
+        - output: ``(*, len(bands) − 1)``
+
+    Example:
+        Five ripples across a 64² map (12.8 pixels long) put their power in the 8–16-pixel band
+        (the third of the default edges: 1/16 to 1/8 cycles per pixel):
+
+        >>> x = torch.arange(64.0)
+        >>> normal = torch.zeros(3, 64, 64)
+        >>> normal[0], normal[2] = 0.1 * torch.sin(2 * math.pi * 5 * x / 64), 1.0
+        >>> [round(v, 2) for v in slope_band_energy(normal).tolist()]
+        [0.0, 0.0, 1.0, 0.0, 0.0]
+    """
+    dims = check_shape(normal, "* 3 H W", name="normal")
+    edges = [float(edge) for edge in bands]
+    if len(edges) < 2 or edges[0] < 0 or any(high <= low for low, high in itertools.pairwise(edges)):
+        raise ValueError(f"bands must be at least two increasing, non-negative edges, got {list(bands)}")
+    height, width = dims["H"], dims["W"]
+    slopes = slope_field(normal.to(torch.float64))
+    slopes = slopes - slopes.mean(dim=(-2, -1), keepdim=True)
+    hann = torch.outer(
+        torch.hann_window(height, periodic=False, dtype=torch.float64),
+        torch.hann_window(width, periodic=False, dtype=torch.float64),
+    )
+    power = torch.fft.fft2(slopes * hann).abs().square().sum(dim=-3)  # (*, H, W)
+    fy = torch.fft.fftfreq(height, dtype=torch.float64).view(height, 1)
+    fx = torch.fft.fftfreq(width, dtype=torch.float64).view(1, width)
+    radius = torch.hypot(fx, fy)
+    power[..., 0, 0] = 0.0
+    total = power.sum(dim=(-2, -1))
+    shares = []
+    for low, high in itertools.pairwise(edges):
+        inside = (radius >= low) & (radius < high)
+        band = (power * inside).sum(dim=(-2, -1))
+        shares.append(torch.where(total > 0, band / total.clamp_min(1e-300), torch.zeros_like(total)))
+    return torch.stack(shares, dim=-1).to(normal.dtype)
+
+
+# ----------------------------------------------------------------------------- observability
+
+
+def _log_luminance(rgb: Tensor) -> Tensor:
+    return log_luminance(rgb, LOG_FLOOR)
+
+
+def scene_relief_shading(
+    maps: Tensor,
+    camera_position: Tensor,
+    light_position: Tensor,
+    light_rgb: Tensor,
+    grids: Tensor,
+    exposure_ev: Tensor,
+) -> Tensor:
+    """What the relief does to a training photo: ``log Y(P_n) − log Y(P_flat)``, ``P_n`` the photo
+    of the scene as :func:`~brdfgan.data.rendered.photograph_scenes` takes it (the flash at its
+    offset and the environment's distant lights, :func:`~brdfgan.core.render.render_point_lights`,
+    resampled into the photo's pixels, auto-exposed off by the drawn error and clipped to [0, 1])
+    and ``P_flat`` the same photo of the maps with flat normals **at ``P_n``'s exposure**; ``Y`` the
+    luminance floored at :data:`LOG_FLOOR` (:func:`log_luminance`).
+
+    Exactly 0 for flat normals, and where both photos clip or sink below the floor (a photo shows no
+    relief there); negative where the relief turns the surface from the light. Independent of the
+    lights' overall intensity (the auto exposure).
+
+    Shape:
+        - maps: ``(B, 8, R, R)`` texture space; camera_position: ``(B, 3)``
+        - light_position, light_rgb: ``(B, K, 3)``; grids: ``(B, R', R', 2)``; exposure_ev: ``(B,)``
+        - output: ``(B, 1, R', R')``
+
+    Example:
+        A white plane with a ridge (normals tilted 20° left and right) under a light straight above
+        the camera: the ridge's texels are darker than flat (``cos 20°`` less light, and less
+        specular), the rest unchanged:
+
+        >>> from brdfgan.core.render import nominal_camera, view_grid
+        >>> from brdfgan.core.svbrdf import flat_maps
+        >>> maps = flat_maps(8, 8, basecolor=(0.8, 0.8, 0.8), roughness=0.5, batch=(1,))
+        >>> maps[0, 3, :, 3], maps[0, 3, :, 4] = -math.sin(math.radians(20)), math.sin(math.radians(20))
+        >>> maps[0, 5, :, 3:5] = math.cos(math.radians(20))
+        >>> camera = torch.tensor([[0.0, 0.0, 2.4142]])
+        >>> grid = view_grid(nominal_camera(45.0), 8, 8).float()[None]
+        >>> lights = (camera[:, None], torch.ones(1, 1, 3))
+        >>> shading = scene_relief_shading(maps, camera, *lights, grid, torch.zeros(1))
+        >>> bool((shading[0, 0, :, 3:5] < -0.06).all()), shading[0, 0, :, :3].abs().max().item()
+        (True, 0.0)
+    """
+    dims = check_shape(maps, "B 8 R R", name="maps")
+    check_shape(camera_position, "B 3", name="camera_position", dims=dims)
+    dims = check_shape(light_position, "B K 3", name="light_position", dims=dims)
+    check_shape(light_rgb, "B K 3", name="light_rgb", dims=dims)
+    check_shape(grids, "B S S 2", name="grids", dims=dims)
+    check_shape(exposure_ev, "B", name="exposure_ev", dims=dims)
+    flat = maps.clone()
+    flat[:, NORMAL] = 0.0
+    flat[:, NORMAL.start + 2] = 1.0
+    relief_hdr = render_scenes(maps, camera_position, light_position, light_rgb, grids)
+    flat_hdr = render_scenes(flat, camera_position, light_position, light_rgb, grids)
+    scale = (auto_exposure_scale(relief_hdr) * torch.pow(2.0, exposure_ev.to(relief_hdr)))[
+        :, None, None, None
+    ]
+    return _log_luminance((relief_hdr * scale).clamp(0.0, 1.0)) - _log_luminance(
+        (flat_hdr * scale).clamp(0.0, 1.0)
+    )
+
+
+def high_pass(image: Tensor, sigma_px: float) -> Tensor:
+    """``image − gaussian_blur(image, sigma_px)``, mirrored at the border
+    (:func:`~brdfgan.core.filtering.gaussian_blur`): the detail finer than about ``sigma_px``.
+
+    Shape:
+        - image: ``(B, C, H, W)``
+        - output: same
+
+    Example:
+        A constant has no detail:
+
+        >>> bool(high_pass(torch.full((1, 1, 8, 8), 3.0), 2.0).abs().max() < 1e-6)
+        True
+    """
+    check_shape(image, "B C H W", name="image")
+    return image - gaussian_blur(image, sigma_px, "reflect")
+
+
+def relief_share(photo: Tensor, relief_log_ratio: Tensor, sigma_px: float | None = None) -> Tensor:
+    """The share of a photo's detail variation that is relief: per photo, the squared Pearson
+    correlation over its pixels between the high-passed log luminance of the photo
+    (:func:`log_luminance`, :func:`high_pass`) and the high-passed relief log ratio
+    (:func:`scene_relief_shading`), ``sigma_px`` the high-pass's σ (default: :data:`HIGH_PASS_FRACTION`
+    of the shorter side, which removes the flash's falloff and lobe).
+
+    1: the photo's detail is the relief's shading up to scale (a uniform albedo photographed
+    clean); it falls as albedo texture, noise, JPEG or processing add detail that is not relief,
+    or remove the relief's. 0 where the relief ratio or the photo has no detail. The high-passes
+    are taken in the inputs' precision, the correlation in float64.
+
+    Shape:
+        - photo: ``(B, 3, H, W)`` linear
+        - relief_log_ratio: ``(B, 1, H, W)``, or ``(1, 1, H, W)`` for deliveries of one photo
+        - output: ``(B,)`` in [0, 1]
+
+    Example:
+        A photo that is a smooth falloff times the relief's shading is nearly all relief (the
+        mirrored border leaves a trace of the ramp); a second, unrelated texture as strong as the
+        relief makes it about half:
+
+        >>> g = torch.Generator().manual_seed(0)
+        >>> relief = 0.1 * torch.randn(1, 1, 32, 32, generator=g)
+        >>> falloff = torch.linspace(-1.0, 0.0, 32).view(1, 1, 1, 32)
+        >>> photo = (falloff + relief).exp().expand(1, 3, 32, 32)
+        >>> round(relief_share(photo, relief).item(), 2)
+        0.98
+        >>> texture = 0.1 * torch.randn(1, 1, 32, 32, generator=g)
+        >>> round(relief_share((falloff + relief + texture).exp().expand(1, 3, 32, 32), relief).item(), 1)
+        0.5
+    """
+    dims = check_shape(photo, "B 3 H W", name="photo")
+    ratio_dims = check_shape(
+        relief_log_ratio, "N 1 H W", name="relief_log_ratio", dims={"H": dims["H"], "W": dims["W"]}
+    )
+    if ratio_dims["N"] not in (1, dims["B"]):
+        raise ValueError(
+            f"relief_log_ratio must hold 1 or {dims['B']} (the photos') ratios, got {ratio_dims['N']}"
+        )
+    sigma = HIGH_PASS_FRACTION * min(dims["H"], dims["W"]) if sigma_px is None else sigma_px
+    x = high_pass(_log_luminance(photo), sigma).flatten(1).to(torch.float64)
+    y = high_pass(relief_log_ratio, sigma).flatten(1).to(torch.float64)
+    x = x - x.mean(dim=1, keepdim=True)
+    y = y - y.mean(dim=1, keepdim=True)
+    power = x.square().sum(dim=1) * y.square().sum(dim=1)
+    share = (x * y).sum(dim=1).square() / power.clamp_min(1e-300)
+    return torch.where(power > 0, share, torch.zeros_like(share)).to(photo.dtype)
+
+
+def delivered_noise_log(delivered: Tensor, reference: Tensor, sigma_px: float = 2.0) -> Tensor:
+    """The noise a delivery added, per pixel, in log luminance: the local RMS (a Gaussian window
+    of ``sigma_px``) of ``d − mean(d)``, ``d = log Y(delivered) − log Y(reference)``
+    (:func:`log_luminance`), the reference being the same photo delivered without the noisy steps
+    (e.g. a sensor's shot/read noise and JPEG switched off, every other draw equal). The mean is
+    removed because the auto exposure of the two differs by a constant.
+
+    Shape:
+        - delivered, reference: ``(B, 3, H, W)`` linear
+        - output: ``(B, 1, H, W)`` ≥ 0
+
+    Example:
+        Multiplicative noise of 5 % is 0.05 in log units:
+
+        >>> g = torch.Generator().manual_seed(0)
+        >>> reference = torch.full((1, 3, 64, 64), 0.2)
+        >>> delivered = reference * (1 + 0.05 * torch.randn(1, 1, 64, 64, generator=g))
+        >>> round(delivered_noise_log(delivered, reference, 4.0).mean().item(), 2)
+        0.05
+    """
+    dims = check_shape(delivered, "B 3 H W", name="delivered")
+    check_shape(reference, "B 3 H W", name="reference", dims=dims)
+    difference = _log_luminance(delivered) - _log_luminance(reference)
+    difference = difference - difference.mean(dim=(-2, -1), keepdim=True)
+    return gaussian_blur(difference.square(), sigma_px, "reflect").clamp_min(0.0).sqrt()
+
+
+def srgb8_rounding_log(linear: Tensor) -> Tensor:
+    """The noise of rounding a photo to 8-bit sRGB codes (as a JPEG file holds it and ``brdfgan
+    predict`` decodes it), per pixel, in log luminance: each channel's rounding error uniform over
+    its code step ``δ_c`` (the linear distance between the codes around its value), so
+    ``σ_Y² = Σ w_c² δ_c² / 12`` with ``w`` the luminance weights, divided by the luminance
+    (floored at :data:`LOG_FLOOR`). ``linear`` holds the values the file encodes (before any later
+    exposure).
+
+    Shape:
+        - linear: ``(B, 3, H, W)`` in [0, 1]
+        - output: ``(B, 1, H, W)``
+
+    Example:
+        A grey of 0.2 (sRGB code 124) has code steps of 0.0035 (1.7 % of it), so
+        ``σ = 0.75 · 0.0035 / √12 / 0.2 = 0.0038`` in log units (0.75: the norm of the luminance
+        weights); the darker a pixel, the larger:
+
+        >>> grey = torch.tensor([0.2, 0.02]).view(1, 1, 2, 1).expand(1, 3, 2, 1)
+        >>> [round(v, 4) for v in srgb8_rounding_log(grey).flatten().tolist()]
+        [0.0038, 0.0099]
+    """
+    check_shape(linear, "B 3 H W", name="linear")
+    half_code = 0.5 / 255.0
+    encoded = linear_to_srgb(linear.clamp(0.0, 1.0))
+    step = srgb_to_linear((encoded + half_code).clamp(max=1.0)) - srgb_to_linear(
+        (encoded - half_code).clamp(min=0.0)
+    )
+    weights = linear.new_tensor(LUMINANCE_WEIGHTS).view(1, 3, 1, 1)
+    sigma = ((weights * step).square().sum(dim=1, keepdim=True) / 12.0).sqrt()
+    return sigma / luminance(linear).clamp_min(LOG_FLOOR)
+
+
+def observable_mask(relief_log_ratio: Tensor, noise_sigma_log: Tensor | float, k: float = 1.0) -> Tensor:
+    """The pixels whose relief a photo shows: where the relief's shading (:func:`scene_relief_shading`)
+    exceeds ``k`` times the photo's noise there, ``|relief_log_ratio| > k · noise_sigma_log``, both
+    in log luminance (the noise e.g. :func:`delivered_noise_log` and :func:`srgb8_rounding_log`
+    added in quadrature). A per-pixel signal-to-noise test: relief spread over many pixels can be
+    seen below it, so this bounds what a photo shows pixel by pixel.
+
+    Shape:
+        - relief_log_ratio: ``(*, H, W)``
+        - noise_sigma_log: broadcastable to it, ≥ 0
+        - output: ``relief_log_ratio``'s shape, bool
+
+    Example:
+        A flat map's relief ratio is 0: nothing is observable, even without noise:
+
+        >>> observable_mask(torch.zeros(1, 1, 4, 4), 0.0).any().item()
+        False
+        >>> observable_mask(torch.tensor([0.02, -0.02, 0.005]), 0.01).tolist()
+        [True, True, False]
+    """
+    if not k > 0:
+        raise ValueError(f"k must be positive, got {k}")
+    noise = torch.as_tensor(noise_sigma_log, dtype=relief_log_ratio.dtype, device=relief_log_ratio.device)
+    if bool((noise < 0).any()):
+        raise ValueError("noise_sigma_log must be non-negative")
+    return relief_log_ratio.abs() > k * noise
+
+
+def observable_angle(normal: Tensor, mask: Tensor) -> Tensor:
+    """The part of the flat map's angle a photo can show: the mean :func:`tilt_deg` over the
+    observable texels (``mask``) times their share, i.e. ``Σ θ·mask / N`` over all N texels. Beside
+    the total (``tilt_deg(normal).mean()``, the flat map's angle) it says how much of the angle a
+    model could recover from the photo pixel by pixel.
+
+    Shape:
+        - normal: ``(*, 3, H, W)``
+        - mask: ``(*, H, W)`` bool (or ``(*, 1, H, W)``)
+        - output: ``(*)`` degrees
+
+    Example:
+        Two texels of 10° and two flat, the first 10° texel observable: 2.5° of the 5° total:
+
+        >>> normal = torch.zeros(3, 1, 4)
+        >>> normal[2], normal[0, 0, :2] = 1.0, math.tan(math.radians(10.0))
+        >>> mask = torch.tensor([[True, False, True, False]])
+        >>> round(observable_angle(normal, mask).item(), 3), round(tilt_deg(normal).mean().item(), 3)
+        (2.5, 5.0)
+    """
+    tilt = tilt_deg(normal)
+    if mask.shape != tilt.shape:
+        mask = mask.squeeze(-3) if mask.ndim == tilt.ndim + 1 and mask.shape[-3] == 1 else mask
+    if mask.shape != tilt.shape:
+        raise ValueError(
+            f"mask must have shape {tuple(tilt.shape)} (the normals' texels), got {tuple(mask.shape)}"
+        )
+    return (tilt * mask.to(tilt.dtype)).mean(dim=(-2, -1))

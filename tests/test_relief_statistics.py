@@ -1,0 +1,253 @@
+"""Relief statistics and what a photo shows of the relief (brdfgan.data.relief): golden values,
+invariants and input checks. Fast, no Mitsuba."""
+
+from __future__ import annotations
+
+import doctest
+import math
+
+import pytest
+import torch
+from torch import Tensor
+
+import brdfgan.data.relief as relief
+from brdfgan.core.exposure import log_luminance
+from brdfgan.core.render import nominal_camera, view_grid
+from brdfgan.core.svbrdf import NORMAL, flat_maps
+from brdfgan.data.materials.base import height_to_normal
+from brdfgan.data.materials.noise import fbm
+from brdfgan.data.relief import (
+    delivered_noise_log,
+    flat_share,
+    flat_window_share,
+    observable_angle,
+    observable_mask,
+    relief_share,
+    scene_relief_shading,
+    slope_band_energy,
+    srgb8_rounding_log,
+    steep_angle_share,
+    tilt_deg,
+)
+from brdfgan.data.rendered import photograph_scenes
+from brdfgan.data.sensor import SensorEffects
+
+SIZE = 64
+
+
+def test_the_docstring_examples_hold() -> None:
+    result = doctest.testmod(relief, optionflags=doctest.NORMALIZE_WHITESPACE | doctest.ELLIPSIS)
+    assert result.attempted >= 14
+    assert result.failed == 0
+
+
+def flat_normals(size: int = SIZE) -> Tensor:
+    normal = torch.zeros(3, size, size)
+    normal[2] = 1.0
+    return normal
+
+
+def test_a_flat_map_is_flat_everywhere() -> None:
+    normal = flat_normals()
+    assert tilt_deg(normal).abs().max().item() == 0.0
+    assert flat_share(normal).item() == 1.0
+    assert flat_window_share(normal, window=16).item() == 1.0
+    assert steep_angle_share(normal).item() == 0.0
+    assert slope_band_energy(normal).tolist() == [0.0] * 5
+
+
+def test_tilt_is_the_angle_from_z_whatever_the_length() -> None:
+    angles = torch.tensor([0.0, 5.0, 30.0, 60.0, 89.0])
+    radians = torch.deg2rad(angles)
+    normal = torch.stack([torch.sin(radians), torch.zeros(5), torch.cos(radians)]).view(3, 1, 5)
+    assert torch.allclose(tilt_deg(normal).flatten(), angles, atol=1e-4)
+    assert torch.allclose(tilt_deg(7.0 * normal), tilt_deg(normal))  # the direction's angle
+
+
+@pytest.mark.parametrize(
+    ("period_px", "band"),
+    [(48.0, 0), (24.0, 1), (12.0, 2), (6.0, 3), (3.0, 4)],  # > 32, 16–32, 8–16, 4–8, < 4 px
+)
+@pytest.mark.parametrize("diagonal", [False, True])
+def test_a_sinusoidal_bump_puts_its_slope_power_in_its_octave(
+    period_px: float, band: int, diagonal: bool
+) -> None:
+    size = 256
+    axis = torch.arange(size, dtype=torch.float64)
+    rows, cols = torch.meshgrid(axis, axis, indexing="ij")
+    # Along the columns, or along the diagonal with the same period (radial frequency 1/period).
+    position = (rows + cols) / math.sqrt(2.0) if diagonal else cols
+    height = 0.5 * torch.sin(2 * math.pi * position / period_px)  # texel units: slopes up to ~1
+    normal = torch.stack(
+        [-torch.gradient(height, dim=1)[0], torch.gradient(height, dim=0)[0], torch.ones_like(height)]
+    )
+    shares = slope_band_energy(normal)
+    assert shares.sum().item() == pytest.approx(1.0, abs=1e-9)
+    assert shares[band].item() > 0.9, shares.tolist()
+
+
+def test_band_edges_are_checked() -> None:
+    with pytest.raises(ValueError, match="increasing"):
+        slope_band_energy(flat_normals(), bands=(0.0, 0.1, 0.1))
+    with pytest.raises(ValueError, match="increasing"):
+        slope_band_energy(flat_normals(), bands=(0.1,))
+
+
+def thin_steep_lines(size: int = 128, spacing: int = 32, tilt: float = 40.0) -> Tensor:
+    """Flat tiles with grout: every ``spacing`` texels a 2-texel groove whose walls lean ``tilt``°."""
+    normal = flat_normals(size)
+    slope = math.tan(math.radians(tilt))
+    for start in range(spacing // 2, size, spacing):
+        normal[0, :, start], normal[0, :, start + 1] = slope, -slope
+        normal[1, start, :], normal[1, start + 1, :] = slope, -slope
+    return normal / normal.norm(dim=0, keepdim=True)
+
+
+def test_thin_steep_lines_carry_the_angle_and_leave_the_rest_flat() -> None:
+    lines = thin_steep_lines()
+    assert steep_angle_share(lines).item() == 1.0  # every tilted texel is a 40° wall
+    assert flat_share(lines).item() == pytest.approx(
+        (1 - 2 / 32) ** 2, abs=1e-6
+    )  # 2 of every 32 rows and columns
+    assert tilt_deg(lines).mean().item() > 4.0
+    # A smooth relief of about the same mean tilt carries little of it on steep texels.
+    height = 3.0 * fbm(128, 4, torch.Generator().manual_seed(0), octaves=3)[None]
+    smooth = height_to_normal(height)
+    assert 4.0 < tilt_deg(smooth).mean().item() < 8.0
+    assert steep_angle_share(smooth).item() < 0.1
+    assert flat_share(smooth).item() < 0.05
+    # The grooves' power lies at their width (2 px) and spacing harmonics: mostly fine.
+    assert slope_band_energy(lines)[3:].sum() > slope_band_energy(smooth)[3:].sum()
+
+
+def test_flat_windows_count_windows_without_relief() -> None:
+    normal = flat_normals(64)
+    normal[0, 40:48, 40:48] = 1.0  # 45° on 64 texels of one of the four 32² windows: a mean of 2.8°
+    assert flat_window_share(normal, window=32).item() == 0.75
+    assert flat_window_share(normal.expand(2, 3, 64, 64), window=32).tolist() == [0.75, 0.75]
+    with pytest.raises(ValueError, match="window"):
+        flat_window_share(normal, window=65)
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda: tilt_deg(torch.zeros(2, 4, 4)),
+        lambda: flat_share(flat_normals(), threshold_deg=0.0),
+        lambda: steep_angle_share(flat_normals(), threshold_deg=95.0),
+        lambda: relief_share(torch.ones(1, 3, 8, 8), torch.zeros(1, 1, 4, 4)),
+        lambda: observable_mask(torch.zeros(4), 0.1, k=0.0),
+        lambda: observable_mask(torch.zeros(4), -0.1),
+        lambda: observable_angle(flat_normals(8), torch.ones(4, 4, dtype=torch.bool)),
+        lambda: delivered_noise_log(torch.ones(1, 3, 8, 8), torch.ones(1, 3, 4, 4)),
+    ],
+)
+def test_bad_inputs_are_refused(call: object) -> None:
+    with pytest.raises(ValueError):
+        call()  # type: ignore[operator]
+
+
+# ----------------------------------------------------------------------------- photos
+
+
+def bumpy_maps(size: int = SIZE, textured: bool = False, seed: int = 0) -> Tensor:
+    """A grey dielectric with smooth bumps (RMS tilt ~10°), its base colour uniform or textured."""
+    generator = torch.Generator().manual_seed(seed)
+    maps = flat_maps(size, size, basecolor=(0.5, 0.5, 0.5), roughness=0.6, batch=(1,))
+    maps[0, NORMAL] = height_to_normal(2.0 * fbm(size, 4, generator, octaves=3)[None])
+    if textured:  # an albedo texture unrelated to the relief, ×0.6–×1.4
+        texture = 0.5 * (1.0 + 0.4 * fbm(size, 8, generator, octaves=3))
+        maps[0, :3] = texture.clamp(0.05, 0.95)
+    return maps
+
+
+def photo_scene(size: int = SIZE, lights: float = 1.0) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+    """A capture like a training photo's: the camera framing the sample at 50°, the flash 5 % of the
+    distance off the lens, and a distant light low in the sky (an environment's)."""
+    pose = nominal_camera(50.0)
+    height = pose.origin[2]
+    camera = torch.tensor([[0.0, 0.0, height]])
+    light_position = torch.tensor([[[0.05 * height, 0.0, height], [300.0, 0.0, 150.0]]])
+    light_rgb = lights * torch.tensor([[[1.0, 1.0, 1.0], [2e4, 2e4, 2e4]]])
+    grid = view_grid(pose, size, size).float()[None]
+    return camera, light_position, light_rgb, grid, torch.zeros(1)
+
+
+def test_scene_relief_shading_is_zero_for_flat_normals_and_ignores_the_light_level() -> None:
+    scene = photo_scene()
+    flat = flat_maps(SIZE, SIZE, basecolor=(0.5, 0.5, 0.5), roughness=0.6, batch=(1,))
+    assert scene_relief_shading(flat, *scene).abs().max().item() == 0.0
+    maps = bumpy_maps()
+    shading = scene_relief_shading(maps, *scene)
+    assert shading.shape == (1, 1, SIZE, SIZE)
+    assert shading.std().item() > 0.02
+    brighter = photo_scene(lights=10.0)
+    assert torch.allclose(scene_relief_shading(maps, *brighter), shading, atol=1e-5)
+
+
+def test_scene_relief_shading_is_the_log_ratio_of_the_training_photos() -> None:
+    """The relief photo it divides is :func:`photograph_scenes`' photo; the flat one is the same
+    photo of flat normals (there at its own exposure, here at the relief photo's)."""
+    scene = photo_scene()
+    maps = bumpy_maps()
+    flat = maps.clone()
+    flat[:, NORMAL] = torch.tensor([0.0, 0.0, 1.0]).view(1, 3, 1, 1)
+    photo, _, scale = photograph_scenes(maps, *scene)
+    flat_photo, _, flat_scale = photograph_scenes(flat, *scene)
+    flat_photo = (flat_photo / flat_scale * scale).clamp(0.0, 1.0)  # nothing clipped at this exposure
+    expected = log_luminance(photo, relief.LOG_FLOOR) - log_luminance(flat_photo, relief.LOG_FLOOR)
+    assert torch.allclose(scene_relief_shading(maps, *scene), expected, atol=1e-4)
+
+
+def test_relief_share_is_near_one_for_a_clean_render_and_drops_with_texture_and_noise() -> None:
+    scene = photo_scene()
+    maps = bumpy_maps()
+    shading = scene_relief_shading(maps, *scene)
+    photo = photograph_scenes(maps, *scene)[0]
+    clean = relief_share(photo, shading).item()
+    assert clean > 0.9
+    textured = bumpy_maps(textured=True)
+    textured_share = relief_share(
+        photograph_scenes(textured, *scene)[0], scene_relief_shading(textured, *scene)
+    ).item()
+    assert textured_share < clean - 0.2
+    noisy_sensor = SensorEffects(
+        vignetting_probability=0.0, white_balance_probability=0.0, jpeg_probability=0.0,
+        shot_noise_min=1e-2, shot_noise_max=1e-2, read_noise_min=1e-4, read_noise_max=1e-4,
+    )  # fmt: skip
+    noisy, _ = noisy_sensor.apply(photo[0], torch.Generator().manual_seed(0))
+    assert relief_share(noisy[None], shading).item() < clean - 0.2
+    # An unrelated "relief" explains nothing of the photo.
+    assert relief_share(photo, scene_relief_shading(bumpy_maps(seed=5), *scene)).item() < 0.1
+
+
+def test_nothing_is_observable_on_a_flat_map_and_noise_hides_relief() -> None:
+    scene = photo_scene()
+    flat = flat_maps(SIZE, SIZE, basecolor=(0.5, 0.5, 0.5), roughness=0.6, batch=(1,))
+    flat_shading = scene_relief_shading(flat, *scene)
+    assert not observable_mask(flat_shading, 0.0).any()
+    assert observable_angle(flat[:, NORMAL], observable_mask(flat_shading, 0.0)[:, 0]).item() == 0.0
+    maps = bumpy_maps()
+    shading = scene_relief_shading(maps, *scene)
+    normal = maps[:, NORMAL]
+    total = tilt_deg(normal).mean().item()
+    angles = [
+        observable_angle(normal, observable_mask(shading, sigma)[:, 0]).item() for sigma in (1e-4, 1e-2, 10.0)
+    ]
+    assert total >= angles[0] > angles[1] > angles[2] == 0.0
+    assert angles[0] > 0.8 * total  # a nearly noiseless photo shows most of the relief
+
+
+def test_delivered_noise_and_rounding_are_in_log_units() -> None:
+    photo = torch.full((1, 3, 32, 32), 0.3)
+    assert delivered_noise_log(photo, photo).max().item() == 0.0
+    # The exposure: a delivery twice as bright has no more noise.
+    assert delivered_noise_log(2 * photo, photo).max().item() == pytest.approx(0.0, abs=1e-6)
+    # Rounding is relative: darker values lose more, and linear-segment values follow 1/x.
+    levels = torch.tensor([0.5, 0.1, 0.01]).view(1, 1, 3, 1).expand(1, 3, 3, 1)
+    sigma = srgb8_rounding_log(levels).flatten().tolist()
+    assert sigma[0] < sigma[1] < sigma[2]
+    step = 1.0 / 255 / 12.92  # on the linear segment every code is this far apart
+    dark = torch.full((1, 3, 1, 1), 0.002)
+    norm = math.sqrt(sum(w * w for w in (0.2126, 0.7152, 0.0722)))
+    assert srgb8_rounding_log(dark).item() == pytest.approx(norm * step / math.sqrt(12) / 0.002, rel=1e-3)
