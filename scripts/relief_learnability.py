@@ -6,7 +6,10 @@ any of its options as Hydra overrides), then scores the normals on the validatio
 photos (delivered through the evaluation sensor): mean angle against the flat map's, and the
 slope cosine (pooled over texels: the cosine between predicted and true slope fields
 ``(−n_x/n_z, −n_y/n_z)``; 0 for flat or unrelated normals, 1 for the right relief up to scale).
-Each change to the data is judged by this run at equal steps (issue 46, item 1d). Writes
+The observable angle counts only the texels whose relief the photo shows (the flash's relief
+shading, :func:`brdfgan.metrics.relief_shading`, above the photo's 8-bit rounding,
+:func:`brdfgan.data.relief.observable_mask`). Each change to the data is judged by this run at
+equal steps (issue 46, item 1d). Writes
 ``OUT.json`` (the curve and the final scores).
 
     python -m scripts.relief_learnability --out outputs/learnability/base
@@ -28,29 +31,37 @@ import torch
 from torch import Tensor, nn
 
 from brdfgan.core.svbrdf import NORMAL
+from brdfgan.data.relief import observable_mask, srgb8_rounding_log
 from brdfgan.data.rendered import RenderedDataModule
 from brdfgan.io.atomic import write_text_atomic
 from brdfgan.losses.parameter import angular_distance
+from brdfgan.metrics import relief_shading as flash_relief_shading
 from brdfgan.training.config import register_configs
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
-def normal_scores(pred: Tensor, true: Tensor) -> dict[str, Tensor]:
+def normal_scores(pred: Tensor, true: Tensor, observable: Tensor) -> dict[str, Tensor]:
     """Sums for the normals' scores over a batch: angle to the truth and the flat map's angle
-    (degrees, summed over texels), the slope fields' products and squares, and the texel count.
+    (degrees, summed over texels, and over the ``observable`` texels), the slope fields' products
+    and squares, and the texel counts.
 
     Shape:
-        - pred, true: ``(B, 3, H, W)`` unit normals
+        - pred, true: ``(B, 3, H, W)`` unit normals; observable: ``(B, 1, H, W)`` bool
         - output: scalars
     """
     flat = torch.zeros_like(true)
     flat[:, 2] = 1.0
     p_slope = -pred[:, :2] / pred[:, 2:].clamp_min(1e-3)
     t_slope = -true[:, :2] / true[:, 2:].clamp_min(1e-3)
+    angle = angular_distance(pred, true, dim=1) * 180.0
+    flat_angle = angular_distance(flat, true, dim=1) * 180.0
+    weight = observable[:, 0].to(angle.dtype)
     return {
-        "angle": (angular_distance(pred, true, dim=1) * 180.0).sum(),
-        "flat_angle": (angular_distance(flat, true, dim=1) * 180.0).sum(),
+        "angle": angle.sum(),
+        "flat_angle": flat_angle.sum(),
+        "observable_angle": (angle * weight).sum(),
+        "observable_flat_angle": (flat_angle * weight).sum(),
         "slope_dot": (p_slope * t_slope).sum(),
         "pred_slope_sq": p_slope.square().sum(),
         "true_slope_sq": t_slope.square().sum(),
@@ -59,13 +70,20 @@ def normal_scores(pred: Tensor, true: Tensor) -> dict[str, Tensor]:
 
 
 def summarize(sums: Mapping[str, float]) -> dict[str, float]:
+    """Mean angles (all texels; the observable ones, ``Σ θ·mask / N`` as :func:`~brdfgan.data
+    .relief.observable_angle`), their ratios to the flat map's, and the pooled slope cosine."""
     angle = sums["angle"] / sums["texels"]
     flat = sums["flat_angle"] / sums["texels"]
+    observable = sums["observable_angle"] / sums["texels"]
+    observable_flat = sums["observable_flat_angle"] / sums["texels"]
     cosine = sums["slope_dot"] / max((sums["pred_slope_sq"] * sums["true_slope_sq"]) ** 0.5, 1e-12)
     return {
         "angle_deg": angle,
         "flat_angle_deg": flat,
         "angle_vs_flat": angle / flat - 1.0,
+        "observable_angle_deg": observable,
+        "observable_flat_angle_deg": observable_flat,
+        "observable_vs_flat": observable / max(observable_flat, 1e-12) - 1.0,
         "slope_cosine": cosine,
     }
 
@@ -76,7 +94,10 @@ def evaluate(generator: nn.Module, batches: Sequence[Mapping[str, Any]]) -> dict
     with torch.no_grad():
         for batch in batches:
             pred = generator(batch["photo"], batch["flash"])
-            for name, value in normal_scores(pred[:, NORMAL], batch["maps"][:, NORMAL]).items():
+            # What the photo shows of the relief: its flash shading above the 8-bit rounding.
+            shading = flash_relief_shading(batch["maps"], batch["flash"])
+            observable = observable_mask(shading, srgb8_rounding_log(batch["photo"]))
+            for name, value in normal_scores(pred[:, NORMAL], batch["maps"][:, NORMAL], observable).items():
                 sums[name] = sums.get(name, 0.0) + float(value)
     generator.train()
     return summarize(sums)

@@ -60,10 +60,18 @@ def test_a_wrong_value_names_the_key_before_anything_is_built(
     [[], ["debug=default"], ["debug=fdr"], ["debug=overfit"], ["debug=limit"],
      ["experiment=paper", "debug=default"], ["experiment=paper"], ["experiment=default_model_finetune"],
      ["model=deschaintre2018"], ["model=anchored"], ["loss=no_adv"], ["loss=supervised"], ["trainer=gpu"],
-     ["trainer=ddp"], ["logger=many"], ["data=deschaintre"], ["callbacks=none"]],
+     ["trainer=ddp"], ["logger=many"], ["data=deschaintre"], ["callbacks=none"], ["data=rendered"],
+     ["experiment=v5"], ["experiment=v5_fixres", "init_from=x"]],
 )  # fmt: skip
 def test_every_shipped_config_passes_the_check(tmp_path: Path, overrides: list[str]) -> None:
     check_config(compose_train(overrides, tmp_path), CHECKED_GROUPS)
+
+
+def test_an_interpolated_target_node_is_checked_where_it_is_defined(tmp_path: Path) -> None:
+    # data=rendered's bank takes ${data.prepare.spec}: a wrong value there names the defining key.
+    cfg = compose_train(["data=rendered", "data.prepare.spec.spp=lots"], tmp_path)
+    with pytest.raises(ConfigValueError, match=r"^data\.prepare\.spec\.spp='lots': expected int"):
+        check_config(cfg, CHECKED_GROUPS)
 
 
 def test_fits_and_describe_on_the_annotation_kinds() -> None:

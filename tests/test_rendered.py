@@ -39,7 +39,7 @@ from brdfgan.data.rendered import (
     sample_relief,
 )
 from brdfgan.data.shards import decode_maps
-from tests.conftest import compose_train, random_maps
+from tests.conftest import compose_train, random_maps, run_python
 
 RES = 64
 TINY_SPEC = DatasetSpec(
@@ -266,3 +266,26 @@ def test_relief_sampling_names_a_bad_key() -> None:
         ReliefSampling(swap_probability=1.5)
     with pytest.raises(DatasetConfigError, match=r"data\.relief"):
         ReliefSampling(bump_slope_min=0.3, bump_slope_max=0.1)
+
+
+@pytest.mark.mitsuba
+def test_a_fresh_clone_trains_the_v5_recipe_without_a_training_set(tmp_path: Path) -> None:
+    # experiment=v5 at toy sizes: the bank is painted, only the validation shards are generated,
+    # and the run trains on rendered photos and validates on Mitsuba ones.
+    result = run_python(
+        "train.py", "experiment=v5", "task_name=v5_smoke", "dataset_spec@data.prepare.spec=tiny",
+        "data.data_dir=${paths.data_dir}/tiny", "data.train_crop=32", "data.batch_size=2",
+        "data.epoch_samples=4", "data.environment_lights=4", "data.bank.environment_resolution=16",
+        "data.compile_renderer=false", "loss.compile=false", "model.generator.width=8",
+        "trainer.max_epochs=1", "trainer.check_val_every_n_epoch=1", "test=false",
+        cwd=tmp_path,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr[-3000:]
+    data = tmp_path / "data" / "tiny"
+    assert (data / "val" / "manifest.json").exists()
+    assert not list((data / "train").glob("*.tar")) and not (data / "test" / "manifest.json").exists()
+    assert list((tmp_path / "data" / "banks").glob("*/bank.json"))
+    run = sorted((tmp_path / "logs" / "v5_smoke" / "runs").iterdir())[-1]
+    assert (run / "checkpoints" / "last.ckpt").exists()
+    metrics = next((run / "csv").glob("version_*/metrics.csv")).read_text()
+    assert "val/loss" in metrics and "train/g_total" in metrics

@@ -81,6 +81,10 @@ def _check_target_node(node: DictConfig, key: str) -> None:
             known = ", ".join(p for p in parameters if p not in ("self", "args", "kwargs"))
             raise ConfigValueError(f"{child_key}: not a parameter of {target_name} (parameters: {known})")
         child = node._get_node(name)
+        if OmegaConf.is_interpolation(node, name):
+            resolved = node[name]
+            if isinstance(resolved, DictConfig) and "_target_" in resolved:
+                continue  # another node's target (``${data.prepare.spec}``): checked where it is defined
         if isinstance(child, DictConfig | ListConfig):
             check_node(child, child_key)  # nested _target_ nodes, themselves or in lists and mappings
             if isinstance(child, DictConfig) and "_target_" in child:
