@@ -15,7 +15,10 @@ run of the same path at toy sizes, seconds). Nothing is downloaded and Mitsuba i
 3. The rendering loss alone (the loss config's :class:`~brdfgan.losses.rendering.RenderingLoss`,
    compiled or not as configured), forward + backward on a batch of the same data, under the
    same autocast: its share of the step.
-4. With two or more GPUs: ``trainer=ddp trainer.devices=2`` for a few steps.
+4. ``train.py experiment=v5`` on photos rendered on the fly (``data=rendered``): a material bank
+   painted by the CPU (the tiny spec's families at the plan's sizes, room environments only, so no
+   Mitsuba), the photos rendered on the device in every batch's transfer hook; its batch interval.
+5. With two or more GPUs: ``trainer=ddp trainer.devices=2`` for a few steps.
 
 The Markdown table goes to stdout and, when ``$OUT`` is set (the GPU tool copies it back), to
 ``$OUT/gpu_check.md``, with the raw numbers in ``$OUT/gpu_check.json`` and each run's log. A run
@@ -204,6 +207,30 @@ TINY_PLAN = Plan(
 )
 
 
+def _timed_run_overrides(
+    plan: Plan, timer_out: Path, *, precision: str, optimizer_steps: int, name: str, trainer: list[str]
+) -> list[str]:
+    """What every timed ``train.py`` run of the check shares: the device(s), batch and loader
+    sizes, ``optimizer_steps`` steps, no validation, checkpoints or test, :class:`StepTimer`."""
+    return [
+        *trainer,
+        f"task_name=gpu_check_{name}",
+        f"data.batch_size={plan.batch}",
+        f"data.num_workers={plan.workers}",
+        f"data.pin_memory={str(plan.device == 'cuda').lower()}",
+        f"trainer.precision={precision}",
+        f"trainer.max_steps={optimizer_steps}",
+        "trainer.num_sanity_val_steps=0",
+        "++trainer.limit_val_batches=0",
+        "++trainer.enable_checkpointing=false",
+        "trainer.enable_progress_bar=false",
+        "test=false",
+        "callbacks=none",
+        "+callbacks.gpu_check_timer._target_=scripts.gpu_check.StepTimer",
+        f"+callbacks.gpu_check_timer.out={timer_out}",
+    ]
+
+
 def training_overrides(
     plan: Plan,
     data_dir: Path,
@@ -221,26 +248,41 @@ def training_overrides(
     trainer = ["trainer=ddp", "trainer.devices=2"] if ddp else [f"trainer={'gpu' if cuda else 'cpu'}"]
     if ddp and not cuda:
         trainer.append("trainer.accelerator=cpu")
+    # max_steps counts optimizer steps: a generator and a discriminator step per batch.
+    timed = _timed_run_overrides(
+        plan, timer_out, precision=precision, optimizer_steps=2 * batches, name=name, trainer=trainer
+    )
+    return ["experiment=paper", *timed, f"data.data_dir={data_dir}", *plan.overrides]
+
+
+def rendered_overrides(
+    plan: Plan, data_dir: Path, bank_dir: Path, timer_out: Path, *, precision: str, batches: int
+) -> list[str]:
+    """The ``train.py`` overrides of the on-the-fly run: ``experiment=v5`` (photos rendered each
+    step from a material bank, ``data=rendered``) on the device, the bank painted by the CPU from
+    the tiny spec's families at the plan's sizes with room environments only (sun and sky need
+    Mitsuba), ``data_dir``'s shards for validation (unused here: validation is off)."""
+    cuda = plan.device == "cuda"
+    timed = _timed_run_overrides(
+        plan, timer_out, precision=precision, optimizer_steps=batches, name="rendered",
+        trainer=[f"trainer={'gpu' if cuda else 'cpu'}"],
+    )  # fmt: skip
+    spec = "data.bank.spec"
+    toy = ["model.generator.width=8", EAGER_LOSS] if plan.overrides else []
     return [
-        "experiment=paper",
-        *trainer,
-        f"task_name=gpu_check_{name}",
+        "experiment=v5",
+        *timed,
         f"data.data_dir={data_dir}",
-        f"data.batch_size={plan.batch}",
-        f"data.num_workers={plan.workers}",
-        f"data.pin_memory={str(cuda).lower()}",
-        f"trainer.precision={precision}",
-        # max_steps counts optimizer steps: a generator and a discriminator step per batch.
-        f"trainer.max_steps={2 * batches}",
-        "trainer.num_sanity_val_steps=0",
-        "++trainer.limit_val_batches=0",
-        "++trainer.enable_checkpointing=false",
-        "trainer.enable_progress_bar=false",
-        "test=false",
-        "callbacks=none",
-        "+callbacks.gpu_check_timer._target_=scripts.gpu_check.StepTimer",
-        f"+callbacks.gpu_check_timer.out={timer_out}",
-        *plan.overrides,
+        "data.prepare=null",
+        f"+dataset_spec@{spec}=tiny",
+        f"{spec}.materials=24",
+        f"{spec}.material_resolution={plan.material_resolution}",
+        f"{spec}.resolution={plan.resolution}",
+        f"{spec}.lighting.sunsky_fraction=0",
+        f"data.bank.folder={bank_dir}",
+        f"data.train_crop={plan.resolution // 2}",
+        f"data.compile_renderer={str(cuda).lower()}",
+        *toy,
     ]
 
 
@@ -331,13 +373,20 @@ def run_training(
     precision: str,
     batches: int,
     ddp: bool = False,
+    rendered: bool = False,
 ) -> RunResult:
-    """``train.py`` with :func:`training_overrides` in its own process group (DDP ranks
-    included), killed after ``timeout`` seconds; its output goes to ``work/train_<name>.log``."""
+    """``train.py`` with :func:`training_overrides` (``rendered``: :func:`rendered_overrides`) in
+    its own process group (DDP ranks included), killed after ``timeout`` seconds; its output goes
+    to ``work/train_<name>.log``."""
     timer_out = work / f"{name}.json"
-    overrides = training_overrides(
-        plan, data_dir, timer_out, precision=precision, batches=batches, name=name, ddp=ddp
-    )
+    if rendered:
+        overrides = rendered_overrides(
+            plan, data_dir, work / "banks", timer_out, precision=precision, batches=batches
+        )
+    else:
+        overrides = training_overrides(
+            plan, data_dir, timer_out, precision=precision, batches=batches, name=name, ddp=ddp
+        )
     if timeout < MIN_RUN_SECONDS:
         return RunResult(name, overrides, 0.0, None, f"skipped: {max(0.0, timeout):.0f} s of the budget left")
     log = work / f"train_{name}.log"
@@ -606,7 +655,14 @@ def run_checks(
     )
 
     def train(
-        run_plan: Plan, name: str, precision: str, warmup: int, steps: int, *, ddp: bool = False
+        run_plan: Plan,
+        name: str,
+        precision: str,
+        warmup: int,
+        steps: int,
+        *,
+        ddp: bool = False,
+        rendered: bool = False,
     ) -> RunResult:
         # The later runs leave time for the ones after them (the DDP run is last).
         reserve = 10.0 if ddp else 30.0
@@ -620,6 +676,7 @@ def run_checks(
             precision=precision,
             batches=warmup + steps,
             ddp=ddp,
+            rendered=rendered,
         )
         if result.timer is not None:
             try:
@@ -671,6 +728,10 @@ def run_checks(
     )
     failed |= compare.timer is None
     rows.append(compare_row(compare, main_run, plan, raw))
+
+    rendered = train(plan, "rendered", plan.precision, plan.warmup, plan.steps, rendered=True)
+    failed |= rendered.timer is None
+    rows.append(rendered_row(rendered, plan, raw))
 
     gpus = torch.cuda.device_count() if device.type == "cuda" else 0
     if gpus > 1 or force_ddp:
@@ -728,6 +789,19 @@ def compare_row(result: RunResult, main_run: RunResult, plan: Plan, raw: dict[st
         return (label, "n/a (the main run failed)", note)
     ratio = stats["step_s"] / raw[main_run.name]["stats"]["step_s"]
     return (label, f"{ratio:.2f}× the step time", note)
+
+
+def rendered_row(result: RunResult, plan: Plan, raw: dict[str, Any]) -> Row:
+    """The on-the-fly run: its batch interval (the CPU's draws, the device's renders, the step)."""
+    label = f"experiment=v5 on rendered photos, {plan.precision}"
+    if result.timer is None:
+        return (label, "FAILED", str(result.error))
+    stats = raw[result.name]["stats"]
+    note = (
+        f"step {ms(stats['step_s'])}, {stats['samples_per_s']:.1f} samples/s; photos rendered on the "
+        f"{plan.device} each batch; peak {gib(result.timer['peak_bytes'])}; median of {stats['timed']}"
+    )
+    return (label, f"batch interval {ms(stats['interval_s'])}", note)
 
 
 if __name__ == "__main__":

@@ -66,6 +66,21 @@ def test_ddp_overrides_compose_to_two_processes(tmp_path: Path) -> None:
     assert compose_train(tiny, tmp_path).trainer.accelerator == "cpu"
 
 
+def test_rendered_overrides_compose_to_v5_on_a_bank_without_mitsuba(tmp_path: Path) -> None:
+    overrides = gpu_check.rendered_overrides(
+        gpu_check.GPU_PLAN, tmp_path / "data", tmp_path / "banks", tmp_path / "t.json",
+        precision="bf16-mixed", batches=25,
+    )  # fmt: skip
+    cfg = compose_train(overrides, tmp_path)
+    check_config(cfg, CHECKED_GROUPS)
+    assert cfg.data._target_ == "brdfgan.data.rendered.RenderedDataModule" and cfg.data.prepare is None
+    spec = cfg.data.bank.spec
+    assert (spec.resolution, spec.material_resolution, spec.lighting.sunsky_fraction) == (512, 512, 0)
+    assert spec.scans.folder is None  # the device has no scans: procedural families only
+    assert (cfg.data.compile_renderer, cfg.data.train_crop, cfg.data.batch_size) == (True, 256, 8)
+    assert (cfg.trainer.accelerator, cfg.trainer.max_steps, cfg.test) == ("gpu", 25, False)
+
+
 def test_step_stats_are_medians_after_the_warm_up() -> None:
     timer = {
         "compute_s": [9.0, 1.0, 3.0, 2.0],  # the warm-up batch is the slow one
@@ -106,6 +121,7 @@ def test_cpu_smoke_mode_prints_the_table_and_writes_out(tmp_path: Path) -> None:
         "peak GPU memory, 32-true",
         "rendering loss fwd+bwd",
         "bf16-mixed vs 32-true",
+        "experiment=v5 on rendered photos, 32-true",
         "DDP, 2 processes",
     ):
         assert check in rows, result.stdout
@@ -117,6 +133,7 @@ def test_cpu_smoke_mode_prints_the_table_and_writes_out(tmp_path: Path) -> None:
     assert {p.name for p in out.glob("train_*.log")} == {
         "train_main_32_true.log",
         "train_compare_bf16_mixed.log",
+        "train_rendered.log",
     }
 
 
@@ -151,8 +168,13 @@ def test_a_failed_compiled_run_is_retried_with_the_loss_eager(
         gpu_check.GPU_PLAN, torch.device("cpu"), tmp_path, {}, deadline=1e12, force_ddp=False
     )
     assert failed  # the compiled run's failure still fails the check
-    assert [name for name, _ in calls] == ["main_bf16_mixed", "main_bf16_mixed_eager", "compare_32_true"]
-    assert [gpu_check.EAGER_LOSS in overrides for _, overrides in calls] == [False, True, True]
+    assert [name for name, _ in calls] == [
+        "main_bf16_mixed",
+        "main_bf16_mixed_eager",
+        "compare_32_true",
+        "rendered",
+    ]
+    assert [gpu_check.EAGER_LOSS in overrides for _, overrides in calls] == [False, True, True, True]
     table = {check: (value, note) for check, value, note in rows}
     assert table["train.py, bf16-mixed"][0] == "FAILED" and "retry" in table
     assert table["step time, bf16-mixed"][0] == "1000.0 ms"
@@ -160,5 +182,6 @@ def test_a_failed_compiled_run_is_retried_with_the_loss_eager(
     assert table["peak GPU memory, bf16-mixed"][0] == "3.00 GiB"
     assert table["rendering loss fwd+bwd"][0] == "250.0 ms (25% of the step)"
     assert table["32-true vs bf16-mixed"][0] == "0.50× the step time"
+    assert table["experiment=v5 on rendered photos, bf16-mixed"][0] == "batch interval 1000.0 ms"
     assert table["DDP, 2 processes"][0] == "skipped"
     assert raw["main_bf16_mixed_eager"]["stats"]["timed"] == 20
