@@ -78,6 +78,7 @@ from brdfgan.data.rendered import (
     collate_scenes,
     draw_scene,
     photograph_scenes,
+    sample_relief,
 )
 from brdfgan.data.sensor import SensorEffects
 from brdfgan.training.config import register_configs
@@ -222,27 +223,51 @@ def paint(spec: DatasetSpec, index: int) -> PaintedMaterial:
 
 
 def realism_rows(
-    bank: HandfulBank, materials: dict[str, list[PaintedMaterial]], crops: int, scan_crops: int, seed: int
+    bank: HandfulBank,
+    materials: dict[str, list[PaintedMaterial]],
+    crops: int,
+    scan_crops: int,
+    seed: int,
+    relief: ReliefSampling,
 ) -> list[ReliefRow]:
     """A row per family, all procedural families together, and the training scans: ``crops``
     crops of each material and ``scan_crops`` of each scan set, cut as :func:`draw_scene` cuts
-    them (the spec's crop sampling, the scans' own)."""
+    them (the spec's crop sampling, the scans' own); with ``relief`` sampling on, two more rows:
+    the same crops through it (what the training photos show)."""
     spec = bank.spec
+    sampling = relief != ReliefSampling()
     rows = []
+    procedural = ReliefRow("procedural, all families")
+    scans = ReliefRow(f"training scans ({len(bank.scan_folders)} sets)")
+    relieved = {
+        "procedural": ReliefRow("procedural, with data.relief"),
+        "scans": ReliefRow("scans, with data.relief"),
+    }
+
+    def add(row: ReliefRow, group: str, cut: Tensor, generator: torch.Generator) -> None:
+        row.add(cut)
+        if sampling:
+            relieved[group].add(
+                torch.stack([sample_relief(bank, crop, relief, generator)[0] for crop in cut])
+            )
+
     for family, painted in materials.items():
         row = ReliefRow(family)
         for number, material in enumerate(painted):
             generator = torch.Generator().manual_seed(derive_seed(seed, "relief crops", family, number))
-            row.add(random_crops(material.maps, crops, spec.resolution, generator, spec.crop)[0])
+            add(
+                row,
+                "procedural",
+                random_crops(material.maps, crops, spec.resolution, generator, spec.crop)[0],
+                generator,
+            )
         rows.append(row)
-    procedural = ReliefRow("procedural, all families")
-    for row in rows:
         procedural.extend(row)
-    scans = ReliefRow(f"training scans ({len(bank.scan_folders)} sets)")
     for which, folder in enumerate(bank.scan_folders):
         generator = torch.Generator().manual_seed(derive_seed(seed, "relief crops", folder.name))
-        scans.add(random_crops(bank.scan(which), scan_crops, spec.resolution, generator, spec.scans.crop)[0])
-    return [*rows, procedural, scans]
+        cut = random_crops(bank.scan(which), scan_crops, spec.resolution, generator, spec.scans.crop)[0]
+        add(scans, "scans", cut, generator)
+    return [*rows, procedural, scans, *(relieved.values() if sampling else ())]
 
 
 def realism_table(rows: Sequence[ReliefRow]) -> str:
@@ -260,31 +285,22 @@ def realism_table(rows: Sequence[ReliefRow]) -> str:
 
 
 def sensor_variants(cfg: DictConfig) -> list[tuple[str, SensorEffects | None]]:
-    """The deliveries compared: none, the evaluation sensor, the training sensor with and without
-    its noise and JPEG, and the phone-calibrated proposal (docs/data.md says why)."""
-    training: SensorEffects = hydra.utils.instantiate(cfg.data.sensor)
+    """The deliveries compared: none, the evaluation sensor, v4's training sensor
+    (``data=procedural_and_scans``) with and without its noise and JPEG, and ``data=rendered``'s
+    sensor (the phone's noise and JPEG calibrated to a downscaled photo, docs/data.md says why)."""
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        v4 = compose(config_name="train", overrides=["data=procedural_and_scans"])
+    training: SensorEffects = hydra.utils.instantiate(v4.data.sensor)
     evaluation: SensorEffects = hydra.utils.instantiate(cfg.data.eval_sensor)
-    # A phone photo reaches the network cropped and downscaled: 12 MP to 256² averages ~140 pixels
-    # into one (a 2 MP crop ~30), dividing the noise variance a·x + b by as much, and its JPEG
-    # blocks shrink below a pixel. The proposal: Brooks et al.'s ranges ÷ 30–3000, and the
-    # evaluation sensor's JPEG quality.
-    calibrated = replace(
-        training,
-        shot_noise_min=training.shot_noise_min / 3000,
-        shot_noise_max=training.shot_noise_max / 30,
-        read_noise_min=training.read_noise_min / 3000,
-        read_noise_max=training.read_noise_max / 30,
-        jpeg_quality_min=evaluation.jpeg_quality_min,
-        jpeg_quality_max=evaluation.jpeg_quality_max,
-    )
+    rendered: SensorEffects = hydra.utils.instantiate(cfg.data.sensor)
     return [
         ("no sensor (the render)", None),
         ("evaluation sensor (phone_eval)", evaluation),
-        ("training sensor", training),
-        ("training sensor, no noise", replace(training, noise_probability=0.0)),
-        ("training sensor, no JPEG", replace(training, jpeg_probability=0.0)),
-        ("training sensor, neither", replace(training, noise_probability=0.0, jpeg_probability=0.0)),
-        ("proposal: noise ÷ 30–3000, JPEG 85–95", calibrated),
+        ("v4's training sensor", training),
+        ("v4's training sensor, no noise", replace(training, noise_probability=0.0)),
+        ("v4's training sensor, no JPEG", replace(training, jpeg_probability=0.0)),
+        ("v4's training sensor, neither", replace(training, noise_probability=0.0, jpeg_probability=0.0)),
+        ("data=rendered's sensor (noise ÷ 30–3000, JPEG 85–95)", rendered),
     ]
 
 
@@ -488,7 +504,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         handful = HandfulBank(
             spec, [material for painted in materials.values() for material in painted], environment_resolution
         )
-        rows = realism_rows(handful, materials, args.crops, args.scan_crops, args.seed)
+        relief: ReliefSampling = hydra.utils.instantiate(cfg.data.relief)
+        rows = realism_rows(handful, materials, args.crops, args.scan_crops, args.seed, relief)
         log(f"realism done ({time.time() - started:.0f} s)")
         bank: MaterialBank = handful
         if args.bank is not None:
@@ -498,7 +515,6 @@ def main(argv: Sequence[str] | None = None) -> None:
             else:
                 log(f"{args.bank}: no complete bank of this spec; drawing from the painted materials")
         variants = sensor_variants(cfg)
-        relief: ReliefSampling = hydra.utils.instantiate(cfg.data.relief)
         photos, counts = photo_rows(
             bank,
             variants,
