@@ -26,13 +26,15 @@ import os
 import re
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from torch import Tensor
+import torch
+from torch import Tensor, nn
 
+from brdfgan.core.flash_geometry import centred_flash_frame, resize_flash_frame
 from brdfgan.core.flash_mark import FlashMark, repair_flash_mark
 from brdfgan.core.seamless import (
     MAP_NAMES,
@@ -43,10 +45,19 @@ from brdfgan.core.seamless import (
     tiling_measures,
     wrap_ratios,
 )
+from brdfgan.core.svbrdf import NUM_CHANNELS
 from brdfgan.errors import UserError, disk_full_message, is_disk_full, one_line
 from brdfgan.inference.intake.lens import FieldOfView, crop_field_of_view
 from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, read_photo
 from brdfgan.inference.intake.preprocess import Crop, CropSized, preprocess
+from brdfgan.inference.model.guided import (
+    DEFAULT_NETWORK_CAP,
+    MapsAndCorrections,
+    anchored_network,
+    carry_up,
+    shrink_photo,
+    upsampling_record,
+)
 from brdfgan.inference.model.tiling import TilingConfig, predict_direct, predict_tiled
 from brdfgan.inference.model.weights import Model, PredictError
 from brdfgan.inference.outputs.export import ExportOptions, recover_outputs, write_material
@@ -80,12 +91,23 @@ class PredictOptions:
     tileable: bool = False  # cut the maps into a seamless tile (make_tileable)
     prefix_files: bool = False  # texture files named <material>_<map>.<ext> for engines' importers
     field_of_view: FieldOfView = field(default_factory=FieldOfView)  # --fov / --focal-length-35mm
+    # The largest side an anchored network runs at for the default (crop-sized) output; larger
+    # outputs are carried up guided by the photo (inference/model/guided.py). None: never.
+    network_cap: int | None = DEFAULT_NETWORK_CAP
+
+    def __post_init__(self) -> None:
+        if self.network_cap is not None and self.network_cap < 1:
+            raise ValueError(f"network_cap must be positive or None, got {self.network_cap}")
 
 
 @dataclass(frozen=True)
 class Predictor:
     """A model with the options of one run: the output side fixed (``--resolution``) or, by
-    default, each photo's crop side clamped to [the model's resolution, MAX_DEFAULT_RESOLUTION]."""
+    default, each photo's crop side clamped to [the model's resolution, MAX_DEFAULT_RESOLUTION].
+
+    The network runs at the output side, except by default with a photo-anchored network above
+    ``options.network_cap``: it then runs at the cap and its outputs are carried up guided by the
+    photo (:mod:`~brdfgan.inference.model.guided`). A fixed ``--resolution`` is always exact."""
 
     model: Model
     options: PredictOptions
@@ -108,16 +130,63 @@ class Predictor:
             return f"{self.resolution}²"
         return f"the crop's size ({self.resolution.minimum}²–{self.resolution.maximum}²)"
 
+    def network_side(self, side: int) -> int:
+        """The side the network runs at for maps of ``side``² (module and class docstrings)."""
+        cap = self.options.network_cap
+        if isinstance(self.resolution, int) or cap is None or anchored_network(self.model.generator) is None:
+            return side
+        return min(side, cap)
+
     def tiled(self, side: int) -> bool:
-        return self.options.tiling.runs_tiled(side, side)
+        """Whether the network runs tiled for maps of ``side``²."""
+        network_side = self.network_side(side)
+        return self.options.tiling.runs_tiled(network_side, network_side)
+
+    def inference_record(self, side: int) -> dict[str, Any]:
+        """``material.json``'s ``inference``: tiling, the network's and the output's side, upsampling."""
+        network_side = self.network_side(side)
+        return {**self.options.tiling.to_json(self.tiled(side)), **upsampling_record(network_side, side)}
+
+    def network(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        """The network's outputs for one prepared photo with its flash frame (default: centred):
+        its maps at the photo's side, or on the guided fast path its maps and corrections at the
+        capped side (:meth:`upsample` takes either to the maps).
+
+        Shape: ``(3, N, N)`` and ``(1, 3)`` → ``(8, N, N)`` or ``(OUTPUT_CHANNELS, n, n)``."""
+        side = photo.shape[-1]
+        network_side = self.network_side(side)
+        generator: nn.Module = self.model.generator
+        if network_side != side:
+            network = anchored_network(generator)
+            assert network is not None  # network_side caps anchored networks only
+            generator = MapsAndCorrections(network)
+            frame = centred_flash_frame(1, side, side) if flash is None else flash
+            photo = shrink_photo(photo[None], network_side)[0]
+            flash = resize_flash_frame(frame, network_side / side)
+        if self.tiled(side):
+            return predict_tiled(generator, photo[None], self.options.tiling, flash=flash)[0]
+        return predict_direct(generator, photo[None], flash)[0]
+
+    def upsample(self, outputs: Tensor, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        """The maps at the photo's side from :meth:`network`'s ``outputs`` for it: the outputs
+        themselves on the exact path, carried up guided by the photo on the fast path.
+
+        Shape: ``(C, n, n)``, ``(3, N, N)`` and ``(1, 3)`` → ``(8, N, N)``."""
+        side = photo.shape[-1]
+        if outputs.shape[-1] == side:
+            return outputs[:NUM_CHANNELS]
+        network = anchored_network(self.model.generator)
+        assert network is not None  # the fast path's outputs come from an anchored network
+        frame = centred_flash_frame(1, side, side) if flash is None else flash
+        with torch.inference_mode():
+            return carry_up(network, outputs[None], photo[None], frame)[0]
 
     def maps(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
-        """The generator's maps of one prepared photo with its flash frame (default: centred).
+        """The maps of one prepared photo with its flash frame (default: centred):
+        :meth:`upsample` of :meth:`network`.
 
         Shape: ``(3, N, N)`` and ``(1, 3)`` → ``(8, N, N)``."""
-        if self.tiled(photo.shape[-1]):
-            return predict_tiled(self.model.generator, photo[None], self.options.tiling, flash=flash)[0]
-        return predict_direct(self.model.generator, photo[None], flash)[0]
+        return self.upsample(self.network(photo, flash), photo, flash)
 
 
 @dataclass(frozen=True)
@@ -274,8 +343,11 @@ def predict_photo(
         photo.lens, photo.width, photo.height, prepared.crop.size, options.field_of_view
     )
     flash_frame = prepared.flash_frame(fov_deg)
+    side = prepared.photo.shape[-1]
     with clock("network"):
-        maps = predictor.maps(prepared.photo, flash_frame)
+        outputs = predictor.network(prepared.photo, flash_frame)
+    with clock("upsample") if predictor.network_side(side) != side else nullcontext():  # fast path only
+        maps = predictor.upsample(outputs, prepared.photo, flash_frame)
     refinement: dict[str, Any] | None = None
     if options.refine is not None:
         steps = options.refine.steps
@@ -301,7 +373,8 @@ def predict_photo(
         # The crop's horizontal field of view: what a flash-aware network is told about the
         # geometry (brdfgan.core.flash_geometry), and the capture model of a refinement.
         "field_of_view": {"degrees": fov_deg, "source": fov_source},
-        "inference": options.tiling.to_json(predictor.tiled(prepared.photo.shape[-1])),
+        # Which path ran: tiling, the network's side, the output's, the guided upsampling.
+        "inference": predictor.inference_record(side),
         # The test-time fit (brdfgan.inference.refine), None without --refine.
         "refinement": refinement,
         # --tileable: the flash mark's repair, the cut's copies, wrap ratios and copied fractions.

@@ -92,6 +92,48 @@ GLOBAL_HIDDEN = 64  # the global track's hidden width
 # validation photo a tilt of ~1.6°, normal angle 8.80° against the flat map's 7.95°; without
 # them, the same weights 8.00°).
 GLOBAL_OUTPUTS = MATERIAL_OUTPUTS + 1
+# The base colour's corrections as applied (compose_basecolor): log-gain 3, residual 3 (after its
+# tanh bound), metal colour 3 (after its sigmoid), metallic 1.
+CORRECTION_CHANNELS = 10
+
+
+def compose_basecolor(anchor: Tensor, corrections: Tensor) -> Tensor:
+    """The anchored base colour: ``b = lerp(clamp(a · exp(γ) + r, 0, 1), c, m)`` from the anchor
+    ``a`` and the corrections (:data:`CORRECTION_CHANNELS`): log-gain ``γ``, residual ``r``, metal
+    colour ``c`` and metallic ``m``, each clamped to its range (``±LOG_GAIN_LIMIT``,
+    ``±RESIDUAL_SCALE``, [0, 1]) — the network's own are within it, corrections carried to another
+    resolution may overshoot. A metal's base colour is its specular colour, which the de-lit photo
+    does not hold (dark away from the highlight): a free colour, blended in by the metallic map.
+
+    Shape:
+        - anchor: ``(B, 3, H, W)`` linear
+        - corrections: ``(B, 10, H, W)``
+        - output: ``(B, 3, H, W)`` linear in [0, 1]
+
+    Example:
+        No log-gain, residual or metal: the anchor itself (clamped to [0, 1]); all metal: the
+        metal colour:
+
+        >>> anchor = torch.tensor([0.2, 0.5, 1.5]).view(1, 3, 1, 1)
+        >>> dielectric = torch.zeros(1, CORRECTION_CHANNELS, 1, 1)
+        >>> [round(v, 4) for v in compose_basecolor(anchor, dielectric).flatten().tolist()]
+        [0.2, 0.5, 1.0]
+        >>> metal = dielectric.clone()
+        >>> metal[:, 6:9], metal[:, 9] = 0.9, 1.0
+        >>> [round(v, 4) for v in compose_basecolor(anchor, metal).flatten().tolist()]
+        [0.9, 0.9, 0.9]
+    """
+    check_shape(corrections, f"B {CORRECTION_CHANNELS} H W", name="corrections")
+    check_shape(anchor, "B 3 H W", name="anchor")
+    if anchor.shape[0] != corrections.shape[0] or anchor.shape[-2:] != corrections.shape[-2:]:
+        raise ValueError(
+            f"anchor {tuple(anchor.shape)} and corrections {tuple(corrections.shape)} differ in batch or size"
+        )
+    log_gain, residual, metal_colour, metallic = corrections.split([3, 3, 3, 1], dim=1)
+    log_gain = log_gain.clamp(-LOG_GAIN_LIMIT, LOG_GAIN_LIMIT)
+    residual = residual.clamp(-RESIDUAL_SCALE, RESIDUAL_SCALE)
+    dielectric = (anchor * log_gain.exp() + residual).clamp(0.0, 1.0)
+    return torch.lerp(dielectric, metal_colour.clamp(0.0, 1.0), metallic.clamp(0.0, 1.0))
 
 
 def _conv_block(in_channels: int, out_channels: int) -> nn.Sequential:
@@ -271,7 +313,40 @@ class AnchoredUNet(nn.Module):
                 f"depth={self.depth}) and at least {2 * multiple}; got {height}×{width}"
             )
 
+    def anchor(self, photo: Tensor, flash: Tensor, cap: Tensor | None = None) -> Tensor:
+        """The anchor ``g · d`` the base colour corrects: the de-lit photo, its hotspot clipped at
+        ``cap`` (default: measured on this photo, as the forward pass does), times the learnt
+        exposure gain, blurred with ``anchor_blur``. Any size: the guided fast path of
+        ``brdfgan predict`` composes a full-resolution base colour on it
+        (:func:`compose_basecolor`) with the cap of the photo the network read.
+
+        Shape:
+            - photo: ``(B, 3, H, W)`` linear LDR; flash: ``(B, 3)``; cap: ``(B, 1)``
+            - output: ``(B, 3, H, W)`` linear
+        """
+        check_shape(photo, "B 3 H W", name="AnchoredUNet photo")
+        check_flash_frame(flash, photo.shape[0])
+        frame = flash.to(device=photo.device, dtype=photo.dtype)
+        return self._anchor(delit_photo(photo.clamp(0.0, 1.0), frame, clip=False), cap)
+
+    def _anchor(self, delit: Tensor, cap: Tensor | None = None) -> Tensor:
+        cap = self.hotspot_cap(delit) if cap is None else cap  # the module: tiles replay the photo's
+        anchor = self.log_anchor_gain.exp().to(delit.dtype) * clip_hotspot(delit, cap=cap)
+        return binomial_blur(anchor) if self.anchor_blur else anchor
+
     def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        return self.maps_and_corrections(photo, flash)[0]
+
+    def maps_and_corrections(
+        self, photo: Tensor, flash: Tensor | None = None
+    ) -> tuple[Tensor, Tensor | None]:
+        """The maps (what ``forward`` returns) and, for an anchored network, the corrections its
+        base colour was composed from (:func:`compose_basecolor`; ``None`` when not anchored).
+
+        Shape:
+            - photo: ``(B, 3, H, W)``; flash: ``(B, 3)``
+            - output: ``(B, 8, H, W)`` maps, ``(B, CORRECTION_CHANNELS, H, W)`` corrections
+        """
         self.check_input(photo)
         batch, _, height, width = photo.shape
         if flash is None:
@@ -280,9 +355,7 @@ class AnchoredUNet(nn.Module):
         frame = flash.to(device=photo.device, dtype=photo.dtype)
         photo = photo.clamp(0.0, 1.0)
         delit = delit_photo(photo, frame, clip=False)
-        anchor = self.log_anchor_gain.exp().to(photo.dtype) * clip_hotspot(delit, cap=self.hotspot_cap(delit))
-        if self.anchor_blur:
-            anchor = binomial_blur(anchor)
+        anchor = self._anchor(delit)
         log_photo = (photo + LOG_EPS).log()  # an input, and the shading image's numerator
         x = torch.cat([log_photo, (anchor + LOG_EPS).log(), flash_side_channels(frame, height, width)], dim=1)
         skips, moments = [], []
@@ -307,17 +380,21 @@ class AnchoredUNet(nn.Module):
             material = material + levels[:, :MATERIAL_OUTPUTS]
         material = self.head_gain * material
         metallic = torch.sigmoid(material[:, 6:7])
+        corrections: Tensor | None = None
         if self.anchored:
             if self.correction_blur:  # the corrections only: metallic, provisional roughness stay sharp
-                corrections = binomial_blur(torch.cat([material[:, 0:6], material[:, 8:11]], dim=1))
-                material = torch.cat([corrections[:, 0:6], material[:, 6:8], corrections[:, 6:9]], dim=1)
-            log_gain = material[:, 0:3].clamp(-LOG_GAIN_LIMIT, LOG_GAIN_LIMIT)
-            dielectric = (anchor * log_gain.exp() + RESIDUAL_SCALE * torch.tanh(material[:, 3:6])).clamp(
-                0.0, 1.0
+                blurred = binomial_blur(torch.cat([material[:, 0:6], material[:, 8:11]], dim=1))
+                material = torch.cat([blurred[:, 0:6], material[:, 6:8], blurred[:, 6:9]], dim=1)
+            corrections = torch.cat(
+                [
+                    material[:, 0:3].clamp(-LOG_GAIN_LIMIT, LOG_GAIN_LIMIT),
+                    RESIDUAL_SCALE * torch.tanh(material[:, 3:6]),
+                    torch.sigmoid(material[:, 8:11]),
+                    metallic,
+                ],
+                dim=1,
             )
-            # A metal's base colour is its specular colour, which the de-lit photo does not hold
-            # (dark away from the highlight): a free colour, blended in by the metallic map.
-            basecolor = torch.lerp(dielectric, torch.sigmoid(material[:, 8:11]), metallic)
+            basecolor = compose_basecolor(anchor, corrections)
         else:
             basecolor = torch.sigmoid(material[:, 0:3] + material[:, 3:6])
 
@@ -336,7 +413,16 @@ class AnchoredUNet(nn.Module):
             surface = torch.cat([surface[:, :2], surface[:, 2:] + levels[:, MATERIAL_OUTPUTS:]], dim=1)
         surface = self.head_gain * surface
         normal = normalize_normal(torch.cat([surface[:, 0:2], torch.ones_like(surface[:, 2:3])], dim=1))
-        return join_maps(linear_to_srgb(basecolor), normal, torch.sigmoid(surface[:, 2:3]), metallic)
+        maps = join_maps(linear_to_srgb(basecolor), normal, torch.sigmoid(surface[:, 2:3]), metallic)
+        return maps, corrections
 
 
-__all__ = ["DEFAULT_ANCHOR_GAIN", "METALLIC_BIAS", "SHADINGS", "AnchoredUNet", "Shading"]
+__all__ = [
+    "CORRECTION_CHANNELS",
+    "DEFAULT_ANCHOR_GAIN",
+    "METALLIC_BIAS",
+    "SHADINGS",
+    "AnchoredUNet",
+    "Shading",
+    "compose_basecolor",
+]

@@ -72,7 +72,7 @@ from brdfgan.core.flash_geometry import (
     crop_flash_frame,
     resize_flash_frame,
 )
-from brdfgan.core.svbrdf import NORMAL, NUM_CHANNELS, normalize_normal
+from brdfgan.core.svbrdf import NORMAL, normalize_normal
 from brdfgan.errors import UserError
 from brdfgan.models.heads import PHOTO_CHANNELS
 from brdfgan.models.image_statistics import ImageStatistic
@@ -568,7 +568,7 @@ def predict_tiled(
         - photo: ``(1, 3, H, W)``, linear LDR in [0, 1], H, W >= 2
         - flash: ``(1, 3)``
         - output: ``(1, 8, H, W)``, valid maps (normals renormalised after blending), on the photo's
-          device and dtype
+          device and dtype; a generator with more output channels (maps first) gets them all
     """
     _check_photo(photo, single=True)
     frame = _whole_photo_frame(photo, flash)
@@ -615,7 +615,7 @@ def predict_tiled(
                 generator, norm_statistics(generator, small.to(device=device, dtype=dtype), small_frame)
             )
 
-        out = torch.zeros(1, NUM_CHANNELS, full_h, full_w, device=photo.device, dtype=photo.dtype)
+        out: Tensor | None = None  # allocated at the first tile: the generator's channels
         total, done = len(ys) * len(xs), 0
         with frozen:
             for y, window_y in zip(ys, wy, strict=True):
@@ -623,11 +623,14 @@ def predict_tiled(
                     tile = padded[..., y : y + tile_h, x : x + tile_w].to(device=device, dtype=dtype)
                     tile_frame = crop_flash_frame(frame, x, y).to(device)
                     maps = generator(tile, tile_frame).to(device=photo.device, dtype=photo.dtype)
+                    if out is None:
+                        out = maps.new_zeros(1, maps.shape[1], full_h, full_w)
                     out[..., y : y + tile_h, x : x + tile_w] += maps * (window_y[:, None] * window_x[None, :])
                     done += 1
                     if progress is not None:
                         progress(done, total)
 
+        assert out is not None  # at least one tile
         out = out[..., :height, :width]
         out /= sum_y[:height, None] * sum_x[None, :width]
         # A weighted mean of unit vectors is shorter than 1 where tiles disagree: renormalise.
