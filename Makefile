@@ -74,6 +74,7 @@ bench: setup
 	$(PY) -m benchmarks.bench_generate
 	$(PY) -m benchmarks.bench_refine
 	$(PY) -m benchmarks.bench_datamodule
+	$(PY) -m benchmarks.bench_rendered
 	$(PY) -m benchmarks.bench_sensor
 	$(PY) -m benchmarks.bench_evaluate
 	$(PY) -m benchmarks.bench_predict

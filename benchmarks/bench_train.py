@@ -110,7 +110,8 @@ def _compose(overrides: list[str]) -> Any:
         return compose(config_name="train", overrides=overrides)
 
 
-def _time(fn: Any, repeats: int) -> float:
+def median_seconds(fn: Any, repeats: int) -> float:
+    """The median wall time of ``repeats`` calls of ``fn`` after one warm-up call."""
     fn()  # warm-up
     times = []
     for _ in range(repeats):
@@ -215,8 +216,8 @@ def _measure(case: Case, steps: int) -> dict[str, Any]:
         module.generator.zero_grad(set_to_none=True)
         module.generator(photo).square().mean().backward()
 
-    render_s = _time(render_step, 3) if render_loss is not None else 0.0
-    generator_s = _time(generator_step, 3)
+    render_s = median_seconds(render_step, 3) if render_loss is not None else 0.0
+    generator_s = median_seconds(generator_step, 3)
     step_s = statistics.median(step_times)
     return {
         "step_s": step_s,
