@@ -29,7 +29,7 @@ import torch
 
 from benchmarks.bench_train import median_seconds
 from brdfgan.core.render import render_point_lights
-from brdfgan.data.rendered import RenderedStream, photograph_scenes
+from brdfgan.data.rendered import RenderedStream, photograph_scenes, scene_tensors
 from brdfgan.training.config import register_configs
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
@@ -60,17 +60,13 @@ def main() -> None:
         draws.append(time.perf_counter() - start)
     draw = statistics.median(draws[2:])
 
-    def inputs(batch: dict[str, Any]) -> tuple[Any, ...]:
-        names = ("scene_maps", "camera_position", "light_position", "light_rgb", "grid", "exposure_ev")
-        return tuple(batch[name] for name in names)
-
     compiled = torch.compile(render_point_lights, dynamic=False)
     with torch.no_grad():
-        eager = median_seconds(lambda: photograph_scenes(*inputs(scenes[0])), 3)
+        eager = median_seconds(lambda: photograph_scenes(*scene_tensors(scenes[0])), 3)
         start = time.perf_counter()
-        photograph_scenes(*inputs(scenes[0]), compiled)
+        photograph_scenes(*scene_tensors(scenes[0]), compiled)
         compile_seconds = time.perf_counter() - start
-        fast = median_seconds(lambda: photograph_scenes(*inputs(scenes[1]), compiled), 5)
+        fast = median_seconds(lambda: photograph_scenes(*scene_tensors(scenes[1]), compiled), 5)
     phone = median_seconds(lambda: module.photograph(scenes[2]), 3) - eager  # photograph renders eagerly
     batches = [module.photograph(batch) for batch in scenes[2:]]
 

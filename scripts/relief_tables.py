@@ -79,6 +79,7 @@ from brdfgan.data.rendered import (
     draw_scene,
     photograph_scenes,
     sample_relief,
+    scene_tensors,
 )
 from brdfgan.data.sensor import SensorEffects
 from brdfgan.training.config import register_configs
@@ -116,8 +117,8 @@ def compose_config(overrides: Sequence[str] = ()) -> DictConfig:
 class HandfulBank(MaterialBank):
     """The training bank of a spec with its procedural part reduced to ``materials`` (painted by
     the caller, held in memory) and its environments loaded directly: what :func:`draw_scene`
-    needs, without painting and tabulating the whole bank on disk. A draw is a scan set with the
-    spec's ``scans.fraction`` (as the bank draws them), else one of ``materials`` uniformly."""
+    needs, without painting and tabulating the whole bank on disk. :meth:`MaterialBank.draw`
+    chooses among the scan sets and ``materials``."""
 
     def __init__(
         self, spec: DatasetSpec, materials: Sequence[PaintedMaterial], environment_resolution: int
@@ -126,12 +127,12 @@ class HandfulBank(MaterialBank):
         self.materials = tuple(materials)
         self._loaded: dict[str, Environment] = {}
 
-    def draw(self, generator: torch.Generator) -> PaintedMaterial:
-        u = torch.rand(3, generator=generator, dtype=torch.float64).tolist()
-        if self.scan_folders and u[0] < self.spec.scans.fraction:
-            which = min(int(u[1] * len(self.scan_folders)), len(self.scan_folders) - 1)
-            return self.scan_material(which, u[2], generator)
-        return self.materials[min(int(u[1] * len(self.materials)), len(self.materials) - 1)]
+    @property
+    def procedural_count(self) -> int:
+        return len(self.materials)
+
+    def procedural_material(self, position: int) -> PaintedMaterial:
+        return self.materials[position]
 
     def scan(self, which: int) -> Tensor:
         """Training scan set ``which`` as the bank reads it (not recoloured), kept for its draws.
@@ -399,14 +400,7 @@ def photo_rows(
         ]
         scenes = [draw_scene(bank, f"relief-{s}", s, environment_lights, relief) for s in seeds]
         scene_batch = collate_scenes(scenes)
-        inputs = (
-            scene_batch["scene_maps"],
-            scene_batch["camera_position"],
-            scene_batch["light_position"],
-            scene_batch["light_rgb"],
-            scene_batch["grid"],
-            scene_batch["exposure_ev"],
-        )
+        inputs = scene_tensors(scene_batch)
         photos, maps, _ = photograph_scenes(*inputs)
         ratio = scene_relief_shading(*inputs)
         # The flash's relief shading alone (light 0 is the flash): what a model that reads relief

@@ -37,6 +37,7 @@ from brdfgan.data.rendered import (
     collate_scenes,
     photograph_scenes,
     sample_relief,
+    scene_tensors,
 )
 from brdfgan.data.shards import decode_maps
 from tests.conftest import compose_train, random_maps, run_python
@@ -57,11 +58,7 @@ def _smooth_maps(seed: int) -> torch.Tensor:
 
 def _photo(maps: torch.Tensor, capture: CaptureDraw, flash, lights) -> torch.Tensor:  # type: ignore[no-untyped-def]
     batch = collate_scenes([capture_scene("k", maps, capture, flash, lights, {})])
-    photos, _, _ = photograph_scenes(
-        batch["scene_maps"], batch["camera_position"], batch["light_position"],
-        batch["light_rgb"], batch["grid"], batch["exposure_ev"],
-    )  # fmt: skip
-    return photos[0]
+    return photograph_scenes(*scene_tensors(batch))[0][0]
 
 
 def test_environment_lights_estimate_the_environment_without_bias() -> None:

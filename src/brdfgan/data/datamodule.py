@@ -108,7 +108,15 @@ from brdfgan.data.shards import (
 from brdfgan.data.spec_checks import DatasetConfigError
 from brdfgan.metrics import hotspot_centres, stored_photo_size
 
-__all__ = ["ShardDataModule", "ShardStream", "ShardWarning", "SkipStats", "collate_samples"]
+__all__ = [
+    "EpochStream",
+    "ShardDataModule",
+    "ShardStream",
+    "ShardWarning",
+    "SkipStats",
+    "collate_samples",
+    "sensed_sample",
+]
 
 log = logging.getLogger(__name__)
 
@@ -222,7 +230,42 @@ def flash_frames(meta: Sequence[Mapping[str, Any]], height: int, width: int) -> 
     return torch.cat([centres, torch.tensor(scales, dtype=torch.float64)[:, None]], dim=1).float()
 
 
-class ShardStream(IterableDataset):
+def sensed_sample(sample: Sample, sensor: SensorEffects, seed: int) -> Sample:
+    """The sample with ``sensor`` applied to its photo, seeded by ``seed``, under the flash colour
+    its meta records (for the auto white balance; ``None`` if it records none); what was drawn in
+    ``meta["sensor"]``."""
+    photo, record = sensor.apply(
+        sample.photo,
+        torch.Generator().manual_seed(seed),
+        illuminant_rgb=sensor.flash_illuminant(sample.meta),
+    )
+    return Sample(sample.key, photo, sample.maps, {**sample.meta, "sensor": record}, check=False)
+
+
+class EpochStream(IterableDataset):
+    """An iterable dataset that counts its passes, so that each pass is an epoch of its own.
+
+    ``epoch`` counts the iterations of this copy of the dataset: in the main process (no workers)
+    or in a persistent worker, which keeps its copy between epochs. ``skip_batches`` is how many
+    batches of the next epoch were already trained on (a resumed run); it applies once.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.epoch = 0
+        self.skip_batches = 0
+
+    def _begin_epoch(self) -> tuple[int, int, int, int]:
+        """``(worker, num_workers, epoch, skip)`` of the pass now starting; counts it."""
+        info = get_worker_info()
+        worker, num_workers = (0, 1) if info is None else (info.id, info.num_workers)
+        epoch, skip = self.epoch, self.skip_batches
+        self.epoch += 1
+        self.skip_batches = 0
+        return worker, num_workers, epoch, skip
+
+
+class ShardStream(EpochStream):
     """Batches of one split for one rank; see the module docstring for the splitting rules.
 
     ``kind="train"``: infinite shuffled stream cut to ``batches_per_epoch`` full batches per
@@ -276,11 +319,6 @@ class ShardStream(IterableDataset):
         self.align_maps = align_maps
         # Only for __len__: the iteration reads the worker count from the DataLoader's workers.
         self.num_workers = num_workers
-        # Counts the iterations of this copy of the dataset: in the main process (no workers)
-        # or in a persistent worker, which keeps its copy between epochs.
-        self.epoch = 0
-        # Batches of the first epoch iterated that were already trained on (a resumed run).
-        self.skip_batches = 0
 
     def __len__(self) -> int:
         if self.kind == "train":
@@ -293,11 +331,7 @@ class ShardStream(IterableDataset):
         return sum(-(-samples // self.batch_size) for samples in self._eval_samples(self.num_workers))
 
     def __iter__(self) -> Iterator[dict[str, Any]]:
-        info = get_worker_info()
-        worker, num_workers = (0, 1) if info is None else (info.id, info.num_workers)
-        epoch, skip = self.epoch, self.skip_batches
-        self.epoch += 1
-        self.skip_batches = 0
+        worker, num_workers, epoch, skip = self._begin_epoch()
         if self.kind == "train":
             return self._train_batches(epoch, worker, num_workers, skip)
         return self._eval_batches(worker, num_workers)
@@ -414,15 +448,8 @@ class ShardStream(IterableDataset):
         return True  # continue with the next member or shard
 
     def _sensed(self, sample: Sample, seed: int) -> Sample:
-        """The sample with :attr:`sensor` applied to its photo, seeded by ``seed``, under the
-        flash colour its meta records (for the auto white balance; ``None`` if it records none)."""
         assert self.sensor is not None
-        photo, record = self.sensor.apply(
-            sample.photo,
-            torch.Generator().manual_seed(seed),
-            illuminant_rgb=self.sensor.flash_illuminant(sample.meta),
-        )
-        return Sample(sample.key, photo, sample.maps, {**sample.meta, "sensor": record}, check=False)
+        return sensed_sample(sample, self.sensor, seed)
 
     def _decode(self, records: Iterator[dict]) -> Iterator[Sample]:
         for record in records:
@@ -793,7 +820,7 @@ class ShardDataModule(L.LightningDataModule):
             **options,
         )
 
-    def _loader(self, stream: IterableDataset, *, persistent: bool) -> DataLoader:
+    def _loader(self, stream: EpochStream, *, persistent: bool) -> DataLoader:
         return DataLoader(
             stream,
             batch_size=None,  # batches are formed in the workers

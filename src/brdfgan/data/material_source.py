@@ -179,6 +179,21 @@ def paint_procedural(
     return PaintedMaterial(layers_to_maps(layers), family.name, params, extra)
 
 
+def recolor_scan(
+    maps: Tensor, recolor: RecolorConfig, generator: torch.Generator
+) -> tuple[Tensor, dict[str, Any]]:
+    """A scanned set recoloured by a draw of ``recolor`` from ``generator`` (metal keeps its colour,
+    :func:`~brdfgan.data.materials.recolor.recolor_basecolor`), and the draw's record.
+
+    Shape:
+        - maps: ``(8, S, S)``; output: ``(8, S, S)``, a new tensor
+    """
+    draw = draw_recolor(recolor, generator)
+    maps = maps.clone()
+    maps[BASECOLOR] = recolor_basecolor(maps[BASECOLOR], maps[METALLIC], draw)
+    return maps, draw.to_json()
+
+
 def paint_scanned(
     folder: Path,
     resolution: int,
@@ -197,10 +212,7 @@ def paint_scanned(
         and recolor.probability > 0
         and torch.rand((), generator=choices).item() < recolor.probability
     ):
-        draw = draw_recolor(recolor, choices)
-        maps = maps.clone()
-        maps[BASECOLOR] = recolor_basecolor(maps[BASECOLOR], maps[METALLIC], draw)
-        extra["recolor"] = draw.to_json()
+        maps, extra["recolor"] = recolor_scan(maps, recolor, choices)
     return PaintedMaterial(maps, f"{SCANNED_PREFIX}{folder.name}", {}, extra, crop)
 
 
@@ -212,4 +224,5 @@ __all__ = [
     "is_scanned",
     "paint_procedural",
     "paint_scanned",
+    "recolor_scan",
 ]

@@ -44,17 +44,17 @@ from typing import Any
 import numpy as np
 import torch
 from torch import Tensor
-from torch.utils.data import DataLoader, IterableDataset, get_worker_info
+from torch.utils.data import DataLoader
 
 from brdfgan.core.exposure import auto_exposure_scale
 from brdfgan.core.lighting import Environment, SunLight, environment_lights
 from brdfgan.core.relight import SKY_LIGHT_DISTANCE
 from brdfgan.core.render import PointLights, render_point_lights, view_grid, warp_maps_to_view, warp_to_view
 from brdfgan.core.sampling import log_uniform
-from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, normalize_normal
+from brdfgan.core.svbrdf import NORMAL, normalize_normal
 from brdfgan.data.augment import random_crops
 from brdfgan.data.capture import CaptureDraw
-from brdfgan.data.datamodule import ShardDataModule, collate_samples, random_crop
+from brdfgan.data.datamodule import EpochStream, ShardDataModule, collate_samples, random_crop, sensed_sample
 from brdfgan.data.flash import blackbody_rgb
 from brdfgan.data.generation import (
     DatasetSpec,
@@ -74,9 +74,9 @@ from brdfgan.data.lighting import (
     flash_centre_irradiance,
     load_environment,
 )
-from brdfgan.data.material_source import PaintedMaterial
+from brdfgan.data.material_source import PaintedMaterial, recolor_scan
+from brdfgan.data.materials.base import height_to_normal
 from brdfgan.data.materials.noise import fbm
-from brdfgan.data.materials.recolor import draw_recolor, recolor_basecolor
 from brdfgan.data.scanned import read_scanned_material, scanned_material_folders
 from brdfgan.data.shards import Sample, ShardError, decode_maps, encode_maps
 from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, ordered
@@ -92,6 +92,7 @@ __all__ = [
     "draw_scene",
     "photograph_scenes",
     "render_scenes",
+    "scene_tensors",
 ]
 
 log = logging.getLogger(__name__)
@@ -185,16 +186,18 @@ class MaterialBank:
         with single_torch_thread():  # the bytes of a material do not depend on the core count
             for index in tqdm(self.procedural, desc="material bank", unit="material", disable=not progress):
                 path = self.material_path(index)
-                generator = torch.Generator().manual_seed(material_seed(self.spec.seed, index))
-                if path.exists():
-                    # Its metadata is cheap to redo exactly; the maps are what took the time.
-                    meta_only = paint_material(self.spec, "train", index, generator)
-                    materials[str(index)] = _material_meta(meta_only)
+                meta_path = path.with_suffix(".json")
+                if path.exists() and meta_path.exists():  # painted by a build that was killed later
+                    materials[str(index)] = json.loads(meta_path.read_text())
                     continue
+                generator = torch.Generator().manual_seed(material_seed(self.spec.seed, index))
                 material = paint_material(self.spec, "train", index, generator)
+                meta = _material_meta(material)
+                # The metadata first: a maps file on disk always has its metadata beside it.
+                write_text_atomic(meta_path, json.dumps(meta, sort_keys=True))
                 with atomic_replace(path) as temp:
                     temp.write_bytes(encode_maps(material.maps))
-                materials[str(index)] = _material_meta(material)
+                materials[str(index)] = meta
         self._write_environments()
         index_text = json.dumps(
             {
@@ -239,11 +242,20 @@ class MaterialBank:
         """A material at random: a training scan set with probability ``scans.fraction`` (freshly
         recoloured with ``scans.recolor_probability``), else a banked procedural material."""
         u = torch.rand(3, generator=generator, dtype=torch.float64).tolist()
-        use_scan = self.scan_folders and (not self.procedural or u[0] < self.spec.scans.fraction)
-        if use_scan:
+        count = self.procedural_count
+        if self.scan_folders and (not count or u[0] < self.spec.scans.fraction):
             which = min(int(u[1] * len(self.scan_folders)), len(self.scan_folders) - 1)
             return self.scan_material(which, u[2], generator)
-        index = self.procedural[min(int(u[1] * len(self.procedural)), len(self.procedural) - 1)]
+        return self.procedural_material(min(int(u[1] * count), count - 1))
+
+    @property
+    def procedural_count(self) -> int:
+        """How many procedural materials :meth:`draw` chooses among."""
+        return len(self.procedural)
+
+    def procedural_material(self, position: int) -> PaintedMaterial:
+        """The ``position``-th banked procedural material, decoded from its file."""
+        index = self.procedural[position]
         path = self.material_path(index)
         try:
             maps = decode_maps(path.read_bytes(), str(path))
@@ -270,10 +282,7 @@ class MaterialBank:
         extra: dict[str, Any] = {}
         recolor = replace(self.spec.recolor, probability=self.spec.scans.recolor_probability)
         if recolor.probability > 0 and recolor_draw < recolor.probability:
-            draw = draw_recolor(recolor, generator)
-            maps = maps.clone()
-            maps[BASECOLOR] = recolor_basecolor(maps[BASECOLOR], maps[METALLIC], draw)
-            extra["recolor"] = draw.to_json()
+            maps, extra["recolor"] = recolor_scan(maps, recolor, generator)
         return PaintedMaterial(maps, f"scanned/{folder.name}", {}, extra, self.spec.scans.crop)
 
 
@@ -345,8 +354,6 @@ def add_relief(normal: Tensor, height: Tensor, rms_slope: float) -> Tensor:
         >>> round(float(slopes.square().sum(0).mean().sqrt()), 4), bool(bumped[0, 0, 0] < 0)
         (0.1, True)
     """
-    from brdfgan.data.materials.base import height_to_normal
-
     bump = height_to_normal(height)
     bump_slopes = -bump[:2] / bump[2:]
     rms = float(bump_slopes.square().sum(0).mean().sqrt())
@@ -544,6 +551,20 @@ def _mix(*parts: int | str) -> int:
     return derive_seed(*parts) & 0x7FFFFFFFFFFFFFFF
 
 
+def scene_tensors(batch: Mapping[str, Any]) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor]:
+    """A :func:`collate_scenes` batch's tensors in the order :func:`photograph_scenes` takes them
+    (the first five: :func:`render_scenes`): maps, camera position, light positions and colours,
+    view grids, exposure errors."""
+    return (
+        batch["scene_maps"],
+        batch["camera_position"],
+        batch["light_position"],
+        batch["light_rgb"],
+        batch["grid"],
+        batch["exposure_ev"],
+    )
+
+
 def collate_scenes(scenes: Sequence[PhotoScene]) -> dict[str, Any]:
     """A batch of scenes (what :class:`RenderedStream` yields, before rendering).
 
@@ -565,7 +586,7 @@ def collate_scenes(scenes: Sequence[PhotoScene]) -> dict[str, Any]:
     }
 
 
-class RenderedStream(IterableDataset):
+class RenderedStream(EpochStream):
     """Batches of training scenes, ``batches_per_epoch`` an epoch, for one rank.
 
     Batch ``b`` of epoch ``e`` is a pure function of ``(seed, e, rank, b)``; DataLoader workers
@@ -592,18 +613,12 @@ class RenderedStream(IterableDataset):
         self.seed = seed
         self.rank = rank
         self.environment_lights = environment_lights
-        self.epoch = 0
-        self.skip_batches = 0
 
     def __len__(self) -> int:
         return self.batches_per_epoch
 
     def __iter__(self) -> Iterator[dict[str, Any]]:
-        info = get_worker_info()
-        worker, num_workers = (0, 1) if info is None else (info.id, info.num_workers)
-        epoch, skip = self.epoch, self.skip_batches
-        self.epoch += 1
-        self.skip_batches = 0
+        worker, num_workers, epoch, skip = self._begin_epoch()
         return self._batches(epoch, range(skip, self.batches_per_epoch)[worker::num_workers])
 
     def _batches(self, epoch: int, batches: Sequence[int]) -> Iterator[dict[str, Any]]:
@@ -668,11 +683,6 @@ class RenderedDataModule(ShardDataModule):
         splits = wanted.get(str(fn.value) if fn is not None else "", ("val", "test"))
         return tuple(split for split in splits if self.splits[split] is not None)
 
-    @property
-    def train_batches_per_epoch(self) -> int:
-        assert self.epoch_samples is not None
-        return max(1, self.epoch_samples // (self._world_size * self.batch_size))
-
     def num_samples(self, kind: str = "train") -> int:
         if kind == "train":
             assert self.epoch_samples is not None
@@ -706,15 +716,7 @@ class RenderedDataModule(ShardDataModule):
         train crop on the CPU, back on the batch's device."""
         device = batch["scene_maps"].device
         with torch.no_grad():
-            photos, maps, scales = photograph_scenes(
-                batch["scene_maps"],
-                batch["camera_position"],
-                batch["light_position"],
-                batch["light_rgb"],
-                batch["grid"],
-                batch["exposure_ev"],
-                self._render,
-            )
+            photos, maps, scales = photograph_scenes(*scene_tensors(batch), self._render)
         samples = []
         for key, photo, aligned, scale, meta in zip(
             batch["key"], photos.cpu(), maps.cpu(), scales.tolist(), batch["meta"], strict=True
@@ -722,12 +724,7 @@ class RenderedDataModule(ShardDataModule):
             sample = Sample(key, photo, aligned, {**meta, "exposure_scale": scale}, check=False)
             seed = int(meta["render"]["seed"])
             if self.sensor is not None and self.sensor.enabled:
-                sensed, record = self.sensor.apply(
-                    sample.photo,
-                    torch.Generator().manual_seed(_mix(seed, "sensor")),
-                    illuminant_rgb=self.sensor.flash_illuminant(sample.meta),
-                )
-                sample = Sample(key, sensed, aligned, {**sample.meta, "sensor": record}, check=False)
+                sample = sensed_sample(sample, self.sensor, _mix(seed, "sensor"))
             if self.train_crop is not None:
                 sample = random_crop(sample, self.train_crop, random.Random(_mix(seed, "crop")))
             samples.append(sample)
