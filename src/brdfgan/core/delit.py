@@ -34,7 +34,7 @@ from brdfgan.core.svbrdf import normalize_normal
 
 # The hotspot is clipped at this multiple of the de-lit luminance's upper quartile: a glossy
 # highlight is several times brighter than the albedo around it, a matte one's peak is not
-# clipped (measured on real captures: 1.5 × the 75th percentile, DESIGN.md §8).
+# clipped (measured on real phone captures: docs/ood.md, the de_lit reference).
 HOTSPOT_CLIP_FACTOR = 1.5
 HOTSPOT_CLIP_QUANTILE = 0.75
 
