@@ -79,6 +79,43 @@ def test_user_errors_and_full_disks_are_one_line_bugs_keep_their_traceback(
         run_reporting_errors(lambda: fail(ValueError("a bug")))
 
 
+def test_an_interrupt_a_native_library_re_raised_is_still_an_interrupt(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A signal inside Mitsuba's render callback comes back as drjit's RuntimeError raised *from*
+    the KeyboardInterrupt (seen in CI as a traceback instead of generate's one line, exit 130)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from brdfgan.errors import exit_on_user_error
+
+    mi.set_variant("scalar_rgb")
+
+    class InterruptedOp(dr.CustomOp):  # type: ignore[misc]
+        def eval(self, x: object) -> object:
+            raise KeyboardInterrupt
+
+    def render() -> int:
+        dr.custom(InterruptedOp, mi.Float(1.0))
+        return 0
+
+    assert run_reporting_errors(render, interrupted="interrupted: kept") == INTERRUPTED_EXIT_CODE
+    assert capsys.readouterr().err == "interrupted: kept\n"
+    with pytest.raises(SystemExit) as exited:
+        exit_on_user_error(render, interrupted="interrupted: kept")()
+    assert exited.value.code == INTERRUPTED_EXIT_CODE
+    assert capsys.readouterr().err == "interrupted: kept\n"
+
+    def cleanup_fails() -> int:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise ValueError("a bug in the cleanup") from None  # not *from* the interrupt
+
+    with pytest.raises(ValueError, match="a bug in the cleanup"):
+        run_reporting_errors(cleanup_fails)
+
+
 def test_references_writes_the_three_weight_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     maps = [random_maps(8, 8, seed=seed) for seed in range(3)]
     samples = [Sample(f"train-{i}", torch.rand(3, 8, 8), m, meta={}) for i, m in enumerate(maps)]

@@ -61,6 +61,25 @@ def _disk_full_errors(error: BaseException) -> Iterator[OSError]:
         current = current.__cause__ or current.__context__
 
 
+def wrapped_interrupt(error: BaseException) -> KeyboardInterrupt | None:
+    """The ``KeyboardInterrupt`` that ``error`` was raised from, if any.
+
+    A signal that lands while native code calls back into Python (Mitsuba's ``mi.render`` runs
+    its integrator through ``drjit.custom``) raises the interrupt in the callback, and the library
+    re-raises it as its own ``RuntimeError`` *from* the interrupt: that is still the user's
+    interrupt, not a bug. Only explicit causes count (``raise ... from``); an error raised while
+    handling an interrupt (its ``__context__``) is a bug in the cleanup and keeps its traceback.
+    """
+    seen: set[int] = set()
+    current: BaseException | None = error
+    while current is not None and id(current) not in seen:
+        seen.add(id(current))
+        if isinstance(current, KeyboardInterrupt):
+            return current
+        current = current.__cause__
+    return None
+
+
 def is_disk_full(error: BaseException) -> bool:
     """Whether ``error`` (or an error it was raised from) is a full filesystem."""
     return next(_disk_full_errors(error), None) is not None
@@ -103,6 +122,10 @@ def run_reporting_errors(function: Callable[[], int], *, interrupted: str = "int
         print(str(error) or interrupted, file=sys.stderr)
         return INTERRUPTED_EXIT_CODE
     except Exception as error:
+        interrupt = wrapped_interrupt(error)
+        if interrupt is not None:
+            print(str(interrupt) or interrupted, file=sys.stderr)
+            return INTERRUPTED_EXIT_CODE
         code = report_error(error)
         if code is None:
             raise
@@ -125,6 +148,10 @@ def exit_on_user_error(
                 print(str(error) or interrupted, file=sys.stderr)
                 raise SystemExit(INTERRUPTED_EXIT_CODE) from None
             except BaseException as error:
+                interrupt = wrapped_interrupt(error)
+                if interrupt is not None:
+                    print(str(interrupt) or interrupted, file=sys.stderr)
+                    raise SystemExit(INTERRUPTED_EXIT_CODE) from None
                 code = report_error(error)
                 if code is None:
                     raise
