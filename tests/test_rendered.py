@@ -244,6 +244,30 @@ def test_relief_sampling_swaps_and_bumps_the_normals_only(bank: MaterialBank) ->
     assert same is crop and record == {}
 
 
+def test_plain_albedo_fades_the_base_colour_toward_its_mean_and_nothing_else(bank: MaterialBank) -> None:
+    crop = random_crops(
+        bank.draw(torch.Generator().manual_seed(0)).maps, 1, 32, torch.Generator().manual_seed(1)
+    )[0][0]
+    faded, record = sample_relief(
+        bank, crop, ReliefSampling(plain_albedo_probability=1.0), torch.Generator().manual_seed(4)
+    )
+    contrast = record["plain_albedo"]["contrast"]
+    assert 0.0 <= contrast < 1.0 and set(record) == {"plain_albedo"}
+    mean = crop[:3].mean(dim=(1, 2), keepdim=True)
+    torch.testing.assert_close(faded[:3].mean(dim=(1, 2), keepdim=True), mean)
+    torch.testing.assert_close(faded[:3] - mean, contrast * (crop[:3] - mean))
+    assert torch.equal(faded[3:], crop[3:]) and not torch.equal(faded[:3], crop[:3])
+    validate_maps(faded)
+    # Switched on over swaps and bumps, it leaves them as they were drawn.
+    both = ReliefSampling(swap_probability=1.0, bump_probability=1.0)
+    relief_only, _ = sample_relief(bank, crop, both, torch.Generator().manual_seed(5))
+    with_fade, record = sample_relief(
+        bank, crop, replace(both, plain_albedo_probability=1.0), torch.Generator().manual_seed(5)
+    )
+    assert set(record) == {"swap", "bumps", "plain_albedo"}
+    assert torch.equal(relief_only[NORMAL], with_fade[NORMAL])
+
+
 def test_relief_sampling_leaves_every_other_draw_of_the_photo_as_it_was(bank: MaterialBank) -> None:
     from brdfgan.data.rendered import draw_scene
 

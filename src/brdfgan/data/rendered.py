@@ -51,7 +51,7 @@ from brdfgan.core.lighting import Environment, SunLight, environment_lights
 from brdfgan.core.relight import SKY_LIGHT_DISTANCE
 from brdfgan.core.render import PointLights, render_point_lights, view_grid, warp_maps_to_view, warp_to_view
 from brdfgan.core.sampling import log_uniform
-from brdfgan.core.svbrdf import NORMAL, normalize_normal
+from brdfgan.core.svbrdf import BASECOLOR, NORMAL, normalize_normal
 from brdfgan.data.augment import random_crops
 from brdfgan.data.capture import CaptureDraw
 from brdfgan.data.datamodule import EpochStream, ShardDataModule, collate_samples, random_crop, sensed_sample
@@ -310,7 +310,12 @@ class ReliefSampling:
     - ``bump_probability``: smooth relief is added to the normals (broad bumps and dents to fine
       grain): an fbm height of ``cells`` base cells across the crop (log-uniform in
       ``[bump_cells_min, bump_cells_max]``, four octaves), scaled to an RMS slope log-uniform in
-      ``[bump_slope_min, bump_slope_max]``, its slopes added to the crop's.
+      ``[bump_slope_min, bump_slope_max]``, its slopes added to the crop's;
+    - ``plain_albedo_probability``: the base colour's texture is faded toward its mean (per
+      channel, contrast uniform in ``[0, 1)``), so the photo's variation is mostly the relief's
+      shading. Relief under a uniform albedo is what a network learns from fastest (docs/data.md,
+      "Relief"); the faded crops teach what relief shading looks like, the others to tell it
+      from a texture.
 
     Checked on construction, naming the keys under ``data.relief``.
     """
@@ -321,11 +326,13 @@ class ReliefSampling:
     bump_slope_max: float = 0.25
     bump_cells_min: int = 2
     bump_cells_max: int = 32
+    plain_albedo_probability: float = 0.0
 
     def __post_init__(self) -> None:
         key = "data.relief"
         in_range(f"{key}.swap_probability", self.swap_probability, 0.0, 1.0)
         in_range(f"{key}.bump_probability", self.bump_probability, 0.0, 1.0)
+        in_range(f"{key}.plain_albedo_probability", self.plain_albedo_probability, 0.0, 1.0)
         in_range(f"{key}.bump_slope_min", self.bump_slope_min, 0.0, 2.0, low_open=True)
         in_range(f"{key}.bump_slope_max", self.bump_slope_max, 0.0, 2.0, low_open=True)
         ordered(key, self, "bump_slope_min", "bump_slope_max")
@@ -366,8 +373,9 @@ def add_relief(normal: Tensor, height: Tensor, rms_slope: float) -> Tensor:
 def sample_relief(
     bank: MaterialBank, maps: Tensor, sampling: ReliefSampling, generator: torch.Generator
 ) -> tuple[Tensor, dict[str, Any]]:
-    """The crop ``maps`` with :class:`ReliefSampling`'s relief (swapped, then bumped, as drawn from
-    ``generator``; the same number of draws whatever happens) and what was drawn.
+    """The crop ``maps`` with :class:`ReliefSampling`'s relief (swapped, then bumped, then the
+    base colour faded, as drawn from ``generator``; the same number of draws whatever happens)
+    and what was drawn.
 
     Shape:
         - maps: ``(8, R, R)``; output: ``(8, R, R)``
@@ -388,6 +396,13 @@ def sample_relief(
         out = out.clone() if out is maps else out
         out[NORMAL] = add_relief(out[NORMAL], height, slope)
         record["bumps"] = {"rms_slope": slope, "cells": cells}
+    # Drawn after the rest, so that switching it on leaves the swaps and bumps as they were.
+    fade = torch.rand(2, generator=generator, dtype=torch.float64).tolist()
+    if fade[0] < sampling.plain_albedo_probability:
+        out = out.clone() if out is maps else out
+        mean = out[BASECOLOR].mean(dim=(1, 2), keepdim=True)
+        out[BASECOLOR] = mean + fade[1] * (out[BASECOLOR] - mean)
+        record["plain_albedo"] = {"contrast": fade[1]}
     return out, record
 
 
