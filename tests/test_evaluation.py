@@ -369,12 +369,35 @@ def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> 
     assert earlier["run"] == str(tmp_path / "gan")
     assert earlier["optimizer_steps"] == 4900 and earlier["epochs"] == 7
     assert earlier["loss"]["adversarial"] and "init_from" not in earlier and "hardware" not in earlier
+    # The whole recipe: both stages' steps (the wall times are unknown: these runs logged nothing).
+    assert summary["recipe"] == {"stages": 2, "optimizer_steps": 7000, "wall_time_s": None}
     # Weights that do not come from a run directory are named only.
     weights = tmp_path / "w.safetensors"
     weights.write_bytes(b"")
     from_weights = ["experiment=default_model_finetune", f"init_from={weights}"]
     other = _fake_training_run(tmp_path / "other", from_weights, epoch=0, step=350)
-    assert training_summary(tmp_path / "other", other, None)["init_from"] == {"checkpoint": str(weights)}
+    from_outside = training_summary(tmp_path / "other", other, None)
+    assert from_outside["init_from"] == {"checkpoint": str(weights)}
+    assert from_outside["recipe"] == {"stages": 1, "optimizer_steps": 350, "wall_time_s": None}
+
+
+def test_the_summary_says_how_the_training_photos_were_made(tmp_path: Path) -> None:
+    from brdfgan.inference.model.export_weights import recipe_totals, training_summary
+
+    v5 = _fake_training_run(tmp_path / "v5", ["experiment=v5"], epoch=14, step=6000)
+    dataset = training_summary(tmp_path / "v5", v5, None)["dataset"]
+    assert dataset["training_photos"] == "rendered on the fly"
+    assert dataset["relief"]["swap_probability"] == 0.25 and dataset["relief"]["bump_probability"] == 0.5
+    assert dataset["sensor"]["jpeg_quality_min"] == 85 and "_target_" not in dataset["relief"]
+    v4 = _fake_training_run(tmp_path / "v4", ["experiment=anchored"], epoch=0, step=10)
+    assert training_summary(tmp_path / "v4", v4, None)["dataset"]["training_photos"] == "shards"
+    # Known wall times add up over the stages.
+    stages = {
+        "optimizer_steps": 1000,
+        "wall_time_s": 1200.0,
+        "init_from": {"optimizer_steps": 6000, "wall_time_s": 4800.5},
+    }
+    assert recipe_totals(stages) == {"stages": 2, "optimizer_steps": 7000, "wall_time_s": 6000.5}
 
 
 def test_the_summary_records_the_share_of_scanned_materials(tmp_path: Path) -> None:

@@ -118,6 +118,15 @@ def training_summary(
     scans = spec.get("scans")
     if isinstance(scans, dict) and scans.get("fraction"):  # the share painted from scans, sets held out
         summary["dataset"]["scans"] = {key: scans.get(key) for key in ("fraction", "val_sets", "test_sets")}
+    # How the training photos were made: read from shards, or rendered on the fly from the spec's
+    # materials (data=rendered) with its relief sampling; both through the phone's sensor.
+    rendered = str(data.get("_target_", "")).endswith("RenderedDataModule")
+    summary["dataset"]["training_photos"] = "rendered on the fly" if rendered else "shards"
+    for key in ("relief", "sensor"):
+        if key in data:
+            options = OmegaConf.to_container(data[key], resolve=True)
+            if isinstance(options, dict):
+                summary["dataset"][key] = {k: v for k, v in options.items() if not str(k).startswith("_")}
     if test_metrics is None:
         test_metrics = run_test_metrics(run_dir, checkpoint, state, str(config.get("monitor", "val/loss")))
     if test_metrics is not None:
@@ -125,7 +134,29 @@ def training_summary(
     init_from = OmegaConf.select(config, "init_from", default=None)
     if init_from is not None:
         summary["init_from"] = warm_start_summary(Path(str(init_from)))
+        summary["recipe"] = recipe_totals(summary)
     return summary
+
+
+def recipe_totals(summary: dict[str, Any]) -> dict[str, Any]:
+    """The whole recipe of a warm-started run: its stages (this run and those it began from,
+    through ``init_from``), their optimizer steps and training seconds summed. The wall time is
+    ``None`` when a stage's is unknown (weights from outside a run directory)."""
+    stages, steps, seconds = 0, 0, 0.0
+    known = True
+    stage: dict[str, Any] | None = summary
+    while stage is not None:
+        if "optimizer_steps" not in stage:  # weights that do not come from a run directory
+            known = False
+            break
+        stages += 1
+        steps += int(stage["optimizer_steps"])
+        if stage.get("wall_time_s") is None:
+            known = False
+        else:
+            seconds += float(stage["wall_time_s"])
+        stage = stage.get("init_from")
+    return {"stages": stages, "optimizer_steps": steps, "wall_time_s": round(seconds, 1) if known else None}
 
 
 def warm_start_summary(checkpoint: Path) -> dict[str, Any]:
