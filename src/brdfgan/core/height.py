@@ -73,13 +73,23 @@ def height_from_normals(normal: Tensor, *, periodic: bool = False) -> Tensor:
         dh_drow = torch.cat([dh_drow, dh_drow.flip(-1)], dim=-1)
         dh_drow = torch.cat([dh_drow, -dh_drow.flip(-2)], dim=-2)
     rows, cols = dh_dx.shape[-2:]
-    wx = 2.0 * math.pi * torch.fft.fftfreq(cols, dtype=torch.float64).view(1, cols)
+    # Real fields: the half spectrum (rfft2) holds everything, at half the work of the full one.
+    wx = 2.0 * math.pi * torch.fft.rfftfreq(cols, dtype=torch.float64).view(1, cols // 2 + 1)
     wy = 2.0 * math.pi * torch.fft.fftfreq(rows, dtype=torch.float64).view(rows, 1)
     denominator = wx**2 + wy**2
     denominator[0, 0] = 1.0  # the mean is free: set to 0 below
-    spectrum = (-1j * wx * torch.fft.fft2(dh_dx) - 1j * wy * torch.fft.fft2(dh_drow)) / denominator
+    # A derivative at an axis's Nyquist frequency has no real-valued answer (its sign flips with
+    # the bin's): that term is dropped, as taking the real part of the full inverse FFT does.
+    wx_derivative, wy_derivative = wx.clone(), wy.clone()
+    if cols % 2 == 0:
+        wx_derivative[0, -1] = 0.0
+    if rows % 2 == 0:
+        wy_derivative[rows // 2, 0] = 0.0
+    spectrum = (
+        -1j * wx_derivative * torch.fft.rfft2(dh_dx) - 1j * wy_derivative * torch.fft.rfft2(dh_drow)
+    ) / denominator
     spectrum[..., 0, 0] = 0.0
-    heights = torch.fft.ifft2(spectrum).real[..., :height, :width]
+    heights = torch.fft.irfft2(spectrum, s=(rows, cols))[..., :height, :width]
     heights = heights - heights.mean(dim=(-2, -1), keepdim=True)
     return (heights / width).to(normal.dtype)  # pixels → sample sides
 
@@ -118,15 +128,18 @@ def ambient_occlusion(
     padded = F.pad(field, (pixels, pixels, pixels, pixels), mode=mode)
     rows, cols = field.shape[-2:]
     visible = torch.zeros_like(field)
+    # In-place into two buffers: at 2048² the allocations cost as much as the arithmetic.
+    tangent, rise = torch.empty_like(field), torch.empty_like(field)
     for index in range(directions):
         angle = 2.0 * math.pi * index / directions
-        tangent = torch.zeros_like(field)
+        tangent.zero_()
         for distance in distances:
             dx, dy = round(distance * math.cos(angle)), round(distance * math.sin(angle))
             if dx == 0 and dy == 0:
                 continue
             shifted = padded[..., pixels + dy : pixels + dy + rows, pixels + dx : pixels + dx + cols]
             run = math.hypot(dx, dy) / size  # in sample sides, like the heights
-            tangent = torch.maximum(tangent, (shifted - field) / run)
-        visible += 1.0 / (1.0 + tangent**2)  # cos² of the elevation atan(tangent)
+            torch.sub(shifted, field, out=rise).div_(run)
+            torch.maximum(tangent, rise, out=tangent)
+        visible.add_(tangent.square_().add_(1.0).reciprocal_())  # cos² of the elevation atan(tangent)
     return (visible / directions).reshape(height.shape).to(height.dtype)

@@ -261,26 +261,40 @@ def _check_array(path: Path, array: np.ndarray) -> np.ndarray:
     return image
 
 
-def _write_png(path: Path, temp: Path, image: np.ndarray, bit_depth: int) -> None:
-    if not np.isfinite(image).all():
-        raise ImageIOError(f"{path}: refusing to write infinite values to PNG")
+def png_bytes(image: np.ndarray, bit_depth: BitDepth = 8) -> bytes:
+    """A PNG file's bytes of ``image``'s values in ``[0, 1]`` (clipped; RGB(A) order in, as PNG
+    stores it), quantised to ``bit_depth``. OpenCV releases the GIL while it encodes, so several
+    images encode in parallel on threads.
+
+    Shape:
+        - image: ``(H, W)`` or ``(H, W, C)``, ``C`` in ``{1, 3, 4}``
+    """
     unit = np.clip(image.astype(np.float64), 0.0, 1.0)
     quantised = (np.rint(unit * 255.0).astype(np.uint8) if bit_depth == 8 else
                  np.rint(unit * 65535.0).astype(np.uint16))  # fmt: skip
-    if quantised.shape[2] == 3:
-        bgr = cv2.cvtColor(quantised, cv2.COLOR_RGB2BGR)
-    elif quantised.shape[2] == 4:
-        bgr = cv2.cvtColor(quantised, cv2.COLOR_RGBA2BGRA)
-    else:
-        bgr = quantised
-    ok, encoded = cv2.imencode(".png", bgr)
+    channels = quantised.shape[2] if quantised.ndim == 3 else 1
+    if channels == 3:
+        quantised = cv2.cvtColor(quantised, cv2.COLOR_RGB2BGR)
+    elif channels == 4:
+        quantised = cv2.cvtColor(quantised, cv2.COLOR_RGBA2BGRA)
+    ok, encoded = cv2.imencode(".png", quantised)
     if not ok:
-        raise ImageIOError(f"{path}: PNG encoding failed")
+        raise ImageIOError("PNG encoding failed")
+    return encoded.tobytes()
+
+
+def _write_png(path: Path, temp: Path, image: np.ndarray, bit_depth: BitDepth) -> None:
+    if not np.isfinite(image).all():
+        raise ImageIOError(f"{path}: refusing to write infinite values to PNG")
+    try:
+        encoded = png_bytes(image, bit_depth)
+    except ImageIOError:
+        raise ImageIOError(f"{path}: PNG encoding failed") from None
     # O_EXCL: never clobber a file of the same name; mode 0o666 lets the umask decide permissions
     # (mkstemp would force 0o600 onto the final file).
     fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     with os.fdopen(fd, "wb") as handle:
-        handle.write(encoded.tobytes())
+        handle.write(encoded)
 
 
 def _write_exr(path: Path, temp: Path, image: np.ndarray, precision: str) -> None:

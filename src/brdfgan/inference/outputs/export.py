@@ -56,11 +56,11 @@ import re
 import shutil
 import uuid
 from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
-import cv2
 import numpy as np
 import torch
 from torch import Tensor
@@ -79,7 +79,7 @@ from brdfgan.core.svbrdf import (
 )
 from brdfgan.errors import DiskFullError, UserError, is_disk_full
 from brdfgan.inference.outputs.gltf import write_glb
-from brdfgan.io.images import write_image
+from brdfgan.io.images import png_bytes, write_image
 
 log = logging.getLogger(__name__)
 
@@ -254,17 +254,6 @@ def texture_set(maps: Tensor, options: ExportOptions, relief: Relief | None = No
     }
 
 
-def png_bytes(values: np.ndarray) -> bytes:
-    """8-bit PNG of ``(H, W, C)`` values in [0, 1], RGB order (OpenCV wants BGR: converted here)."""
-    image: np.ndarray = np.clip(np.rint(values * 255.0), 0, 255).astype(np.uint8)
-    if image.ndim == 3 and image.shape[2] == 3:
-        image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
-    ok, encoded = cv2.imencode(".png", image)
-    if not ok:
-        raise ExportError("cannot encode a PNG texture")
-    return encoded.tobytes()
-
-
 def write_material(
     out_dir: str | os.PathLike[str],
     maps: Tensor,
@@ -363,10 +352,30 @@ def _write_files(
     extra_files: Mapping[str, Callable[[Path], Any]],
 ) -> dict[str, dict[str, Any]]:
     files: dict[str, dict[str, Any]] = {}
+    # Twelve 2048² encodes were half of predict's export: OpenCV and OpenEXR encode without the
+    # GIL, so they run on the threads predict was given (--threads). Leaving the block waits for
+    # every write, so an interrupt never leaves one running into the staging folder's removal.
+    with ThreadPoolExecutor(max_workers=max(1, torch.get_num_threads())) as pool:
+        writes = [
+            pool.submit(
+                write_image,
+                directory / f"{options.file_prefix}{map_name}.{options.format}",
+                texture.values,
+                bit_depth=texture.bit_depth or options.bit_depth,
+                exr_precision=options.exr_precision,
+            )
+            for map_name, texture in textures.items()
+        ]
+        embedded = {
+            slot: pool.submit(png_bytes, gltf_textures[slot].values)
+            for slot in ("basecolor", "normal", "metallicRoughness")
+        }
+        for write in writes:
+            write.result()
+        pngs = {slot: future.result() for slot, future in embedded.items()}
     for map_name, texture in textures.items():
         path = directory / f"{options.file_prefix}{map_name}.{options.format}"
         bit_depth = texture.bit_depth or options.bit_depth
-        write_image(path, texture.values, bit_depth=bit_depth, exr_precision=options.exr_precision)
         depth = bit_depth if options.format == "png" else options.exr_precision
         files[path.name] = {
             "map": map_name,
@@ -380,9 +389,9 @@ def _write_files(
             files[path.name]["strength"] = options.normal_strength
     write_glb(
         directory / "material.glb",
-        basecolor_png=png_bytes(gltf_textures["basecolor"].values),
-        normal_png=png_bytes(gltf_textures["normal"].values),
-        metallic_roughness_png=png_bytes(gltf_textures["metallicRoughness"].values),
+        basecolor_png=pngs["basecolor"],
+        normal_png=pngs["normal"],
+        metallic_roughness_png=pngs["metallicRoughness"],
         name=name,
         normal_scale=options.normal_strength,
     )

@@ -42,9 +42,9 @@ from typing import Any
 import cv2
 import numpy as np
 
-from brdfgan.inference.outputs.export import HIDDEN_OUTPUT_PATTERN, ExportOptions, png_bytes
+from brdfgan.inference.outputs.export import HIDDEN_OUTPUT_PATTERN, ExportOptions
 from brdfgan.io.atomic import write_text_atomic
-from brdfgan.io.images import ImageIOError, read_image
+from brdfgan.io.images import ImageIOError, png_bytes, read_image
 
 __all__ = ["MAX_TEXTURE_SIDE", "TEXTURE_MAPS", "THREE_BUNDLE", "material_files", "write_viewer"]
 
