@@ -1,4 +1,5 @@
-"""False metal and relief leak: golden values, invariants, batch-split exactness, the evaluator."""
+"""False metal, relief leak and the observable normal angle: golden values, invariants, batch-split
+exactness, the evaluator."""
 
 from __future__ import annotations
 
@@ -26,11 +27,14 @@ from brdfgan.evaluation.evaluator import evaluate_models, markdown_table, write_
 from brdfgan.metrics import (
     DIELECTRIC_THRESHOLD,
     FalseMetal,
+    ObservableNormalAngle,
     ReliefLeak,
     SVBRDFMetrics,
     false_metal,
+    observable_mask,
     relief_leak,
     relief_shading,
+    srgb8_rounding_log,
 )
 
 SIZE = 32
@@ -293,6 +297,81 @@ def test_the_collection_routes_flash_to_the_relief_leak_only() -> None:
     assert out["val/false_metal"].item() == pytest.approx(0.25)
 
 
+# ---------------------------------------------------------------- observable normal angle
+
+
+def flash_photo(truth: Tensor, frame: Tensor, peak: float = 0.8) -> Tensor:
+    """The truth's flash photo (its relief included), exposed so its brightest texel is ``peak``."""
+    parts = split_maps(truth)
+    render = flash_render(
+        srgb_to_linear(parts.basecolor), parts.normal, parts.roughness, parts.metallic, frame
+    )
+    return render * (peak / render.amax(dim=(1, 2, 3), keepdim=True))
+
+
+def test_observable_angle_golden_values_and_invariants() -> None:
+    from brdfgan.data.relief import observable_angle
+
+    truth, frame = bumpy_truth(batch=3, seed=6), frames(3)
+    photo = flash_photo(truth, frame)
+    mask = observable_mask(relief_shading(truth, frame), srgb8_rounding_log(photo))[:, 0]
+    assert 0.2 < mask.double().mean().item() < 1.0  # some relief shows, not all of it
+    flat = truth.clone()
+    flat[:, 3:6] = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64).view(3, 1, 1)
+
+    def scores(pred: Tensor) -> tuple[float, float]:
+        metric = ObservableNormalAngle()
+        metric.update(pred, truth, photo, frame)
+        out = metric.compute()
+        return out["normal_angle_deg/observable"].item(), out["normal_angle_deg/observable_flat"].item()
+
+    # The flat map's part of the angle the photo shows: Σ θ·mask / N, as the data tables count it.
+    expected_flat = observable_angle(truth[:, 3:6], mask).mean().item()
+    assert scores(flat) == pytest.approx((expected_flat, expected_flat), rel=1e-12)
+    assert scores(truth)[0] == pytest.approx(0.0, abs=1e-4)
+    # Half the relief (slopes halved): in between.
+    half = truth.clone()
+    half[:, 3:5] *= 0.5
+    half[:, 3:6] = normalize_normal(half[:, 3:6], dim=1)
+    assert 0.2 * expected_flat < scores(half)[0] < 0.8 * expected_flat
+    # A flat truth shows no relief: nothing counts; a batch without photos is skipped.
+    nothing = ObservableNormalAngle()
+    nothing.update(half, flat, flash_photo(flat, frame), frame)
+    assert nothing.compute()["normal_angle_deg/observable_flat"].item() == 0.0
+    skipped = ObservableNormalAngle()
+    skipped.update(half, truth, None, frame)
+    assert all(math.isnan(v.item()) for v in skipped.compute().values())
+    with pytest.raises(ValueError, match="photo"):
+        ObservableNormalAngle().update(half, truth, photo[:, :, :16], frame)
+
+
+def test_observable_angle_is_exact_over_batch_splits_and_routed_by_the_collection() -> None:
+    truth, frame = bumpy_truth(batch=4, seed=7), frames(4)
+    photo = flash_photo(truth, frame)
+    pred = truth.clone()
+    pred[:, 3:5] *= 0.3
+    pred[:, 3:6] = normalize_normal(pred[:, 3:6], dim=1)
+    whole = ObservableNormalAngle()
+    whole.update(pred, truth, photo, frame)
+    split = ObservableNormalAngle()
+    split.update(pred[:1], truth[:1], photo[:1], frame[:1])
+    split.update(pred[1:], truth[1:], photo[1:], frame[1:])
+    for key, value in whole.compute().items():
+        torch.testing.assert_close(split.compute()[key], value, rtol=1e-13, atol=1e-15)
+    collection = SVBRDFMetrics(downscale_to=None, rerender_configs=2)
+    collection.update(pred, truth, flash=frame, photo=photo)
+    out = collection.compute()
+    for key, value in whole.compute().items():
+        assert torch.equal(out[key], value), key
+    # Darker photos round coarser: less of the relief is observable.
+    dim = ObservableNormalAngle()
+    dim.update(pred, truth, flash_photo(truth, frame, peak=0.02), frame)
+    assert (
+        dim.compute()["normal_angle_deg/observable_flat"]
+        < whole.compute()["normal_angle_deg/observable_flat"]
+    )
+
+
 # ---------------------------------------------------------------- evaluator
 
 
@@ -331,7 +410,13 @@ def test_evaluator_tables_report_false_metal_and_relief_leak(tmp_path: Path) -> 
     header, rule, copy, right = markdown_table(results).splitlines()
     columns = [cell.strip() for cell in header.strip("|").split("|")]
     start = columns.index("false metal")
-    assert columns[start : start + 3] == ["false metal", "relief leak", "leak slope"]
+    assert columns[start : start + 5] == [
+        "false metal",
+        "relief leak",
+        "leak slope",
+        "normal ° seen",
+        "flat ° seen",
+    ]
     assert start == columns.index("chk metal") + 1
     assert rule.count("---") == len(columns)
     cells = [cell.strip() for cell in copy.strip("|").split("|")]
@@ -341,3 +426,6 @@ def test_evaluator_tables_report_false_metal_and_relief_leak(tmp_path: Path) -> 
     write_results(results, tmp_path)
     stored = json.loads((tmp_path / "metrics.json").read_text())
     assert {"false_metal", "relief_leak", "relief_leak/slope"} <= set(stored["copy"])
+    # The photo reaches the observable angle: both models predict flat normals.
+    seen = stored["copy"]["normal_angle_deg/observable"]
+    assert seen > 0.0 and seen == pytest.approx(stored["copy"]["normal_angle_deg/observable_flat"], rel=1e-6)

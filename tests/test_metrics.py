@@ -39,6 +39,13 @@ SRGB_HALF_LINEAR = ((0.5 + 0.055) / 1.055) ** 2.4  # sRGB 0.5 decoded: 0.21404â€
 CHECKERBOARD_KEYS = tuple(
     f"checkerboard/{name}{kind}" for name in CHECKERBOARD_MAPS for kind in ("", "/pooled")
 )
+
+
+def photos(batch: int, size: int = 8, seed: int = 0, dtype: torch.dtype = torch.float32) -> Tensor:
+    """Linear photos for the maps' batch (the observable normal angle reads their 8-bit rounding)."""
+    return torch.rand(batch, 3, size, size, generator=torch.Generator().manual_seed(seed), dtype=dtype)
+
+
 SCALAR_KEYS = (
     "normal_angle_deg",
     "rerender_rmse",
@@ -46,6 +53,8 @@ SCALAR_KEYS = (
     "basecolor_hue_error_deg",
     *CHECKERBOARD_KEYS,
     "false_metal",
+    "normal_angle_deg/observable",
+    "normal_angle_deg/observable_flat",
     "relief_leak",
     "relief_leak/slope",
 )
@@ -410,9 +419,10 @@ def test_two_updates_equal_one_concatenated_batch() -> None:
     pred, true = random_maps(8, 8, seed=1, batch=(5,)), random_maps(8, 8, seed=2, batch=(5,))
     # Uneven split: a mean of per-batch means would weight the single sample like the four others.
     split, whole = SVBRDFMetrics(downscale_to=4, rerender_configs=2), SVBRDFMetrics(4, rerender_configs=2)
-    split.update(pred[:1], true[:1])
-    split.update(pred[1:], true[1:])
-    whole.update(pred, true)
+    photo = torch.rand(5, 3, 8, 8, generator=torch.Generator().manual_seed(3))
+    split.update(pred[:1], true[:1], photo=photo[:1])
+    split.update(pred[1:], true[1:], photo=photo[1:])
+    whole.update(pred, true, photo=photo)
     a, b = split.compute(), whole.compute()
     assert a.keys() == b.keys()
     for key in a:
@@ -429,10 +439,11 @@ def test_reset() -> None:
     before = metric.compute()
     metric.reset()
     same = random_maps(8, 8, seed=3, batch=(2,))
-    metric.update(same, same)
+    metric.update(same, same, photo=torch.full((2, 3, 8, 8), 0.5))
     after = metric.compute()
     assert before["rmse/roughness"] > 0
     assert after.pop("basecolor_saturation_ratio").item() == pytest.approx(1.0, abs=1e-6)
+    assert after.pop("normal_angle_deg/observable_flat").item() > 0  # a flat map misses the random relief
     for key in CHECKERBOARD_KEYS:
         assert after.pop(key).item() == 1.0, key  # identical maps: the same period-2 power
     for key, value in after.items():
@@ -443,11 +454,12 @@ def test_reset() -> None:
 def test_dtypes(dtype: torch.dtype) -> None:
     pred = random_maps(8, 8, seed=1, batch=(2,), dtype=dtype)
     true = random_maps(8, 8, seed=2, batch=(2,), dtype=dtype)
+    photo = photos(2, dtype=dtype)
     metric = SVBRDFMetrics(downscale_to=4, rerender_configs=2)
-    metric.update(pred, true)
+    metric.update(pred, true, photo=photo)
     out = metric.compute()
     reference = SVBRDFMetrics(downscale_to=4, rerender_configs=2)
-    reference.update(pred.double(), true.double())
+    reference.update(pred.double(), true.double(), photo=photo.double())
     for key, value in reference.compute().items():
         assert torch.isfinite(out[key]) and out[key] > 0, key
         torch.testing.assert_close(out[key], value, rtol=1e-4, atol=1e-6)
@@ -578,13 +590,14 @@ def _states(metric: MapRMSE) -> Iterator[Tensor]:
 
 def test_merge_state_equals_single_process() -> None:
     pred, true = random_maps(8, 8, seed=5, batch=(3,)), random_maps(8, 8, seed=6, batch=(3,))
+    photo = photos(3)
     single = SVBRDFMetrics(downscale_to=4, rerender_configs=2)
-    single.update(pred, true)
+    single.update(pred, true, photo=photo)
     expected = single.compute()
 
     ranks = [SVBRDFMetrics(downscale_to=4, rerender_configs=2) for _ in range(2)]
-    ranks[0].update(pred[:2], true[:2])
-    ranks[1].update(pred[2:], true[2:])
+    ranks[0].update(pred[:2], true[:2], photo=photo[:2])
+    ranks[1].update(pred[2:], true[2:], photo=photo[2:])
     for name, metric in ranks[0].items(keep_base=True):
         metric.merge_state(ranks[1][name])
     merged = ranks[0].compute()
@@ -637,13 +650,14 @@ def _ddp_worker(rank: int, world: int, port: int, out_dir: str) -> None:
     try:
         pred, true = random_maps(8, 8, seed=11, batch=(3,)), random_maps(8, 8, seed=12, batch=(3,))
         shard = slice(0, 1) if rank == 0 else slice(1, 3)  # uneven shards, as a last batch can be
+        photo = photos(3)
         metrics = SVBRDFMetrics(downscale_to=4, rerender_configs=2)
-        metrics.update(pred[shard], true[shard])
+        metrics.update(pred[shard], true[shard], photo=photo[shard])
         synced = metrics.compute()
         # rank 0 alone, as after training: without sync_on_compute=False this would wait forever
         if rank == 0:
             alone = SVBRDFMetrics(downscale_to=4, rerender_configs=2, sync_on_compute=False)
-            alone.update(pred, true)
+            alone.update(pred, true, photo=photo)
             torch.save({"synced": synced, "alone": alone.compute()}, f"{out_dir}/rank0.pt")
         dist.barrier()
     finally:
@@ -663,7 +677,7 @@ def test_real_gloo_all_gather_equals_single_process(tmp_path) -> None:
     result = torch.load(tmp_path / "rank0.pt")
     pred, true = random_maps(8, 8, seed=11, batch=(3,)), random_maps(8, 8, seed=12, batch=(3,))
     single = SVBRDFMetrics(downscale_to=4, rerender_configs=2)
-    single.update(pred, true)
+    single.update(pred, true, photo=photos(3))
     for key, value in single.compute().items():
         torch.testing.assert_close(result["synced"][key], value, rtol=1e-6, atol=0.0)
         torch.testing.assert_close(result["alone"][key], value, rtol=1e-6, atol=0.0)

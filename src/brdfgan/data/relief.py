@@ -27,11 +27,12 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.checks import check_shape
-from brdfgan.core.exposure import LUMINANCE_WEIGHTS, auto_exposure_scale, log_luminance, luminance
+from brdfgan.core.exposure import auto_exposure_scale, log_luminance
 from brdfgan.core.filtering import gaussian_blur
-from brdfgan.core.svbrdf import NORMAL, linear_to_srgb, srgb_to_linear
+from brdfgan.core.svbrdf import NORMAL
 from brdfgan.data.rendered import render_scenes
 from brdfgan.losses.parameter import TILT_Z_MIN
+from brdfgan.metrics import observable_mask, srgb8_rounding_log  # their home: the evaluator grades with them
 
 __all__ = [
     "FLAT_DEG",
@@ -422,66 +423,6 @@ def delivered_noise_log(delivered: Tensor, reference: Tensor, sigma_px: float = 
     difference = _log_luminance(delivered) - _log_luminance(reference)
     difference = difference - difference.mean(dim=(-2, -1), keepdim=True)
     return gaussian_blur(difference.square(), sigma_px, "reflect").clamp_min(0.0).sqrt()
-
-
-def srgb8_rounding_log(linear: Tensor) -> Tensor:
-    """The noise of rounding a photo to 8-bit sRGB codes (as a JPEG file holds it and ``brdfgan
-    predict`` decodes it), per pixel, in log luminance: each channel's rounding error uniform over
-    its code step ``δ_c`` (the linear distance between the codes around its value), so
-    ``σ_Y² = Σ w_c² δ_c² / 12`` with ``w`` the luminance weights, divided by the luminance
-    (floored at :data:`LOG_FLOOR`). ``linear`` holds the values the file encodes (before any later
-    exposure).
-
-    Shape:
-        - linear: ``(B, 3, H, W)`` in [0, 1]
-        - output: ``(B, 1, H, W)``
-
-    Example:
-        A grey of 0.2 (sRGB code 124) has code steps of 0.0035 (1.7 % of it), so
-        ``σ = 0.75 · 0.0035 / √12 / 0.2 = 0.0038`` in log units (0.75: the norm of the luminance
-        weights); the darker a pixel, the larger:
-
-        >>> grey = torch.tensor([0.2, 0.02]).view(1, 1, 2, 1).expand(1, 3, 2, 1)
-        >>> [round(v, 4) for v in srgb8_rounding_log(grey).flatten().tolist()]
-        [0.0038, 0.0099]
-    """
-    check_shape(linear, "B 3 H W", name="linear")
-    half_code = 0.5 / 255.0
-    encoded = linear_to_srgb(linear.clamp(0.0, 1.0))
-    step = srgb_to_linear((encoded + half_code).clamp(max=1.0)) - srgb_to_linear(
-        (encoded - half_code).clamp(min=0.0)
-    )
-    weights = linear.new_tensor(LUMINANCE_WEIGHTS).view(1, 3, 1, 1)
-    sigma = ((weights * step).square().sum(dim=1, keepdim=True) / 12.0).sqrt()
-    return sigma / luminance(linear).clamp_min(LOG_FLOOR)
-
-
-def observable_mask(relief_log_ratio: Tensor, noise_sigma_log: Tensor | float, k: float = 1.0) -> Tensor:
-    """The pixels whose relief a photo shows: where the relief's shading (:func:`scene_relief_shading`)
-    exceeds ``k`` times the photo's noise there, ``|relief_log_ratio| > k · noise_sigma_log``, both
-    in log luminance (the noise e.g. :func:`delivered_noise_log` and :func:`srgb8_rounding_log`
-    added in quadrature). A per-pixel signal-to-noise test: relief spread over many pixels can be
-    seen below it, so this bounds what a photo shows pixel by pixel.
-
-    Shape:
-        - relief_log_ratio: ``(*, H, W)``
-        - noise_sigma_log: broadcastable to it, ≥ 0
-        - output: ``relief_log_ratio``'s shape, bool
-
-    Example:
-        A flat map's relief ratio is 0: nothing is observable, even without noise:
-
-        >>> observable_mask(torch.zeros(1, 1, 4, 4), 0.0).any().item()
-        False
-        >>> observable_mask(torch.tensor([0.02, -0.02, 0.005]), 0.01).tolist()
-        [True, True, False]
-    """
-    if not k > 0:
-        raise ValueError(f"k must be positive, got {k}")
-    noise = torch.as_tensor(noise_sigma_log, dtype=relief_log_ratio.dtype, device=relief_log_ratio.device)
-    if bool((noise < 0).any()):
-        raise ValueError("noise_sigma_log must be non-negative")
-    return relief_log_ratio.abs() > k * noise
 
 
 def observable_angle(normal: Tensor, mask: Tensor) -> Tensor:

@@ -76,7 +76,7 @@ def evaluate_models(
         # None: each network's own default, the photo centred on its hotspot with the default FOV.
         flash = recorded if flash_frame == "recorded" else None
         for name, model in models.items():
-            metrics[name].update(model(photo, flash), truth, hotspot=hotspot, flash=recorded)
+            metrics[name].update(model(photo, flash), truth, hotspot=hotspot, flash=recorded, photo=photo)
     return {name: {k: float(v) for k, v in metric.compute().items()} for name, metric in metrics.items()}
 
 
@@ -104,7 +104,8 @@ def markdown_table(results: Mapping[str, Mapping[str, float]]) -> str:
     checkerboard ratios (predicted / true period-2 power per map: 1 right, ≫ 1 a checkerboard), the
     false metal (mean predicted metallic on dielectric truth: 0 right), the relief leak and its
     slope (the base colour's error against the true relief shading: 0 right, 1 the relief copied
-    into it), and the hotspot ratios of the predicted maps (RMSE near the flash highlight /
+    into it), the normal angle over the texels whose relief the photo shows beside a flat map's
+    there, and the hotspot ratios of the predicted maps (RMSE near the flash highlight /
     elsewhere), per model."""
     columns = [(f"rmse/{m}", f"{m}") for m in ALL_MAPS] + [(f"rmse256/{m}", f"{m} ↓256") for m in PAPER_MAPS]
     columns += [("normal_angle_deg", "normal °"), ("rerender_rmse", "re-render")]
@@ -114,6 +115,8 @@ def markdown_table(results: Mapping[str, Mapping[str, float]]) -> str:
         ("false_metal", "false metal"),
         ("relief_leak", "relief leak"),
         ("relief_leak/slope", "leak slope"),
+        ("normal_angle_deg/observable", "normal ° seen"),
+        ("normal_angle_deg/observable_flat", "flat ° seen"),
     ]
     columns += [(f"hotspot/{m}", f"hot {label}") for m, label in HOTSPOT_COLUMNS.items()]
     present = [(key, label) for key, label in columns if any(key in v for v in results.values())]

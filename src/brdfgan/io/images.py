@@ -273,11 +273,12 @@ def png_bytes(image: np.ndarray, bit_depth: BitDepth = 8) -> bytes:
     quantised = (np.rint(unit * 255.0).astype(np.uint8) if bit_depth == 8 else
                  np.rint(unit * 65535.0).astype(np.uint16))  # fmt: skip
     channels = quantised.shape[2] if quantised.ndim == 3 else 1
+    stored: np.ndarray = quantised
     if channels == 3:
-        quantised = cv2.cvtColor(quantised, cv2.COLOR_RGB2BGR)
+        stored = cv2.cvtColor(quantised, cv2.COLOR_RGB2BGR)
     elif channels == 4:
-        quantised = cv2.cvtColor(quantised, cv2.COLOR_RGBA2BGRA)
-    ok, encoded = cv2.imencode(".png", quantised)
+        stored = cv2.cvtColor(quantised, cv2.COLOR_RGBA2BGRA)
+    ok, encoded = cv2.imencode(".png", stored)
     if not ok:
         raise ImageIOError("PNG encoding failed")
     return encoded.tobytes()

@@ -22,6 +22,7 @@ from brdfgan.metrics.svbrdf_metrics import (
     HueError,
     MapRMSE,
     NormalAngularError,
+    ObservableNormalAngle,
     ReliefLeak,
     RerenderError,
     SaturationRatio,
@@ -38,6 +39,7 @@ from brdfgan.metrics.svbrdf_metrics import (
     hotspot_centres,
     hue_difference_deg,
     hue_error_deg,
+    observable_mask,
     period2_amplitudes,
     period2_floor,
     period2_power,
@@ -45,6 +47,7 @@ from brdfgan.metrics.svbrdf_metrics import (
     relief_leak,
     relief_shading,
     saturation_ratio,
+    srgb8_rounding_log,
     stored_photo_size,
 )
 
@@ -64,6 +67,7 @@ __all__ = [
     "HueError",
     "MapRMSE",
     "NormalAngularError",
+    "ObservableNormalAngle",
     "ReliefLeak",
     "RerenderError",
     "SVBRDFMetrics",
@@ -80,6 +84,7 @@ __all__ = [
     "hotspot_centres",
     "hue_difference_deg",
     "hue_error_deg",
+    "observable_mask",
     "period2_amplitudes",
     "period2_floor",
     "period2_power",
@@ -87,5 +92,6 @@ __all__ = [
     "relief_leak",
     "relief_shading",
     "saturation_ratio",
+    "srgb8_rounding_log",
     "stored_photo_size",
 ]

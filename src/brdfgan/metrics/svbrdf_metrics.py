@@ -98,7 +98,7 @@ from torchmetrics import Metric, MetricCollection
 from brdfgan.config_check import ConfigValueError
 from brdfgan.core.checks import check_shape
 from brdfgan.core.delit import flash_render
-from brdfgan.core.exposure import log_luminance
+from brdfgan.core.exposure import LUMINANCE_WEIGHTS, log_luminance, luminance
 from brdfgan.core.flash_geometry import (
     DEFAULT_FOV_DEG,
     FLASH_FRAME_SIZE,
@@ -115,6 +115,7 @@ from brdfgan.core.sampling import (
 )
 from brdfgan.core.svbrdf import (
     CHANNELS,
+    NORMAL,
     check_map_pair,
     check_map_shape,
     diffuse_albedo,
@@ -299,15 +300,24 @@ class NormalAngularError(Metric):
 
     def update(self, pred: Tensor, true: Tensor) -> None:
         pred, true = _as_batch(pred, true)
-        p = normalize_normal(split_maps(pred).normal)
-        t = normalize_normal(split_maps(true).normal)
-        sine = torch.linalg.vector_norm(torch.cross(p, t, dim=-3), dim=-3)
-        cosine = (p * t).sum(dim=-3)
-        self.sum_deg += torch.rad2deg(torch.atan2(sine, cosine)).sum(dtype=torch.float64)
-        self.pixels += cosine.numel()
+        angle = _normal_angle_deg(pred, true)
+        self.sum_deg += angle.sum(dtype=torch.float64)
+        self.pixels += angle.numel()
 
     def compute(self) -> Tensor:
         return self.sum_deg / self.pixels
+
+
+def _normal_angle_deg(pred: Tensor, true: Tensor) -> Tensor:
+    """Per-pixel angle in degrees between two map sets' renormalised normals, ``atan2(|p × t|, p · t)``.
+
+    Shape:
+        - pred, true: ``(B, 8, H, W)``; output: ``(B, H, W)``
+    """
+    p = normalize_normal(split_maps(pred).normal)
+    t = normalize_normal(split_maps(true).normal)
+    sine = torch.linalg.vector_norm(torch.cross(p, t, dim=-3), dim=-3)
+    return torch.rad2deg(torch.atan2(sine, (p * t).sum(dim=-3)))
 
 
 # ---------------------------------------------------------------- base-colour hue and saturation
@@ -1173,6 +1183,25 @@ def relief_leak(pred: Tensor, true: Tensor, frame: Tensor) -> dict[str, Tensor]:
     return _relief_leak_values(correlation.sum(), slope.sum(), has_relief.sum())
 
 
+def _flash_frame(
+    flash: Tensor | None, batch: int, height: int, width: int, unbatched: bool, device: torch.device
+) -> Tensor:
+    """The samples' flash frames in float64: ``flash`` checked (a ``(3,)`` frame for unbatched
+    maps), or, for ``None``, photos centred on their hotspot with the default field of view.
+
+    Shape:
+        - flash: ``(B, 3)``, or ``(3,)`` when ``unbatched``; output: ``(B, 3)``
+    """
+    if flash is None:
+        frame = centred_flash_frame(batch, height, width, DEFAULT_FOV_DEG, device=device)
+    else:
+        frame = flash.detach().to(device)
+        if unbatched and frame.shape == (FLASH_FRAME_SIZE,):
+            frame = frame.unsqueeze(0)
+        check_flash_frame(frame, batch)
+    return frame.to(torch.float64)
+
+
 class ReliefLeak(Metric):
     """:func:`relief_leak` over a whole dataset: the per-sample correlations and slopes of the
     samples with relief are summed over the updates, with their count; the means are taken in
@@ -1209,14 +1238,7 @@ class ReliefLeak(Metric):
         unbatched = pred.ndim == 3
         pred, true = _as_batch(pred, true)
         batch, _, height, width = pred.shape
-        if flash is None:
-            frame = centred_flash_frame(batch, height, width, DEFAULT_FOV_DEG, device=pred.device)
-        else:
-            frame = flash.detach().to(pred.device)
-            if unbatched and frame.shape == (FLASH_FRAME_SIZE,):
-                frame = frame.unsqueeze(0)
-            check_flash_frame(frame, batch)
-        frame = frame.to(torch.float64)
+        frame = _flash_frame(flash, batch, height, width, unbatched, pred.device)
         correlation, slope, has_relief = _relief_leak_terms(pred.double(), true.double(), frame)
         self.sum_correlation += correlation.sum()
         self.sum_slope += slope.sum()
@@ -1226,11 +1248,141 @@ class ReliefLeak(Metric):
         return _relief_leak_values(self.sum_correlation, self.sum_slope, self.samples)
 
 
+# ---------------------------------------------------------------- the relief a photo can show
+#
+# A photo shows a texel's relief when the relief's shading there (relief_shading, log luminance)
+# stands above the photo's noise. The noise every delivered photo carries is the rounding to 8-bit
+# sRGB codes (a JPEG file, what brdfgan predict decodes); sensor noise comes on top where known.
+# The observable angle counts a model's normal angle only over those texels: what a model could
+# recover from the photo pixel by pixel (issue 46: "the metric grades what a photo can show").
+
+
+def srgb8_rounding_log(linear: Tensor) -> Tensor:
+    """The noise of rounding a photo to 8-bit sRGB codes (as a JPEG file holds it and ``brdfgan
+    predict`` decodes it), per pixel, in log luminance: each channel's rounding error uniform over
+    its code step ``δ_c`` (the linear distance between the codes around its value), so
+    ``σ_Y² = Σ w_c² δ_c² / 12`` with ``w`` the luminance weights, divided by the luminance
+    (floored at :data:`RELIEF_LOG_FLOOR`). ``linear`` holds the values the file encodes (before any
+    later exposure).
+
+    Shape:
+        - linear: ``(B, 3, H, W)`` in [0, 1]
+        - output: ``(B, 1, H, W)``
+
+    Example:
+        A grey of 0.2 (sRGB code 124) has code steps of 0.0035 (1.7 % of it), so
+        ``σ = 0.75 · 0.0035 / √12 / 0.2 = 0.0038`` in log units (0.75: the norm of the luminance
+        weights); the darker a pixel, the larger:
+
+        >>> grey = torch.tensor([0.2, 0.02]).view(1, 1, 2, 1).expand(1, 3, 2, 1)
+        >>> [round(v, 4) for v in srgb8_rounding_log(grey).flatten().tolist()]
+        [0.0038, 0.0099]
+    """
+    check_shape(linear, "B 3 H W", name="linear")
+    half_code = 0.5 / 255.0
+    encoded = linear_to_srgb(linear.clamp(0.0, 1.0))
+    step = srgb_to_linear((encoded + half_code).clamp(max=1.0)) - srgb_to_linear(
+        (encoded - half_code).clamp(min=0.0)
+    )
+    weights = linear.new_tensor(LUMINANCE_WEIGHTS).view(1, 3, 1, 1)
+    sigma = ((weights * step).square().sum(dim=1, keepdim=True) / 12.0).sqrt()
+    return sigma / luminance(linear).clamp_min(RELIEF_LOG_FLOOR)
+
+
+def observable_mask(relief_log_ratio: Tensor, noise_sigma_log: Tensor | float, k: float = 1.0) -> Tensor:
+    """The pixels whose relief a photo shows: where the relief's shading (:func:`relief_shading`)
+    exceeds ``k`` times the photo's noise there, ``|relief_log_ratio| > k · noise_sigma_log``, both
+    in log luminance (the noise e.g. :func:`srgb8_rounding_log`, sensor noise added in quadrature).
+    A per-pixel signal-to-noise test: relief spread over many pixels can be seen below it, so this
+    bounds what a photo shows pixel by pixel.
+
+    Shape:
+        - relief_log_ratio: ``(*, H, W)``
+        - noise_sigma_log: broadcastable to it, ≥ 0
+        - output: ``relief_log_ratio``'s shape, bool
+
+    Example:
+        A flat map's relief ratio is 0: nothing is observable, even without noise:
+
+        >>> observable_mask(torch.zeros(1, 1, 4, 4), 0.0).any().item()
+        False
+        >>> observable_mask(torch.tensor([0.02, -0.02, 0.005]), 0.01).tolist()
+        [True, True, False]
+    """
+    if not k > 0:
+        raise ValueError(f"k must be positive, got {k}")
+    noise = torch.as_tensor(noise_sigma_log, dtype=relief_log_ratio.dtype, device=relief_log_ratio.device)
+    if bool((noise < 0).any()):
+        raise ValueError("noise_sigma_log must be non-negative")
+    return relief_log_ratio.abs() > k * noise
+
+
+class ObservableNormalAngle(Metric):
+    """The normal angle over the texels whose relief the photo shows (:func:`observable_mask` of the
+    true :func:`relief_shading` against the photo's 8-bit rounding), beside the flat map's over the
+    same texels. Both are ``Σ θ·mask / N`` over all N texels (the part of the angle a photo can
+    show, as :func:`brdfgan.data.relief.observable_angle`), so their ratio is the model's gain
+    over a flat map where the relief is visible.
+
+    ``update(pred, true, photo=None, flash=None)``: ``photo`` the linear photos the model read
+    (``batch["photo"]``, the maps' size); a batch without it is skipped. ``flash`` as
+    :class:`ReliefLeak`'s.
+
+    ``compute()`` returns ``{"normal_angle_deg/observable": …, "normal_angle_deg/observable_flat": …}``
+    (float64 scalars, NaN before any photo).
+
+    Shape:
+        - pred, true: ``(B, 8, H, W)`` or ``(8, H, W)``; photo: ``(B, 3, H, W)`` or ``(3, H, W)``
+        - flash: ``(B, 3)`` (``(1, 3)`` or ``(3,)`` for unbatched maps)
+    """
+
+    is_differentiable = False
+    higher_is_better = False
+    full_state_update = False
+
+    sum_deg: Tensor
+    sum_flat_deg: Tensor
+    pixels: Tensor
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.add_state("sum_deg", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("sum_flat_deg", torch.zeros((), dtype=torch.float64), dist_reduce_fx="sum")
+        self.add_state("pixels", torch.zeros((), dtype=torch.int64), dist_reduce_fx="sum")
+
+    def update(
+        self, pred: Tensor, true: Tensor, photo: Tensor | None = None, flash: Tensor | None = None
+    ) -> None:
+        if photo is None:
+            return
+        unbatched = pred.ndim == 3
+        pred, true = _as_batch(pred, true)
+        photo = photo.detach().to(pred.device)
+        photo = photo.unsqueeze(0) if unbatched and photo.ndim == 3 else photo
+        batch, _, height, width = pred.shape
+        check_shape(photo, f"{batch} 3 {height} {width}", name="photo (the maps' batch and size)")
+        frame = _flash_frame(flash, batch, height, width, unbatched, pred.device)
+        shading = relief_shading(true.double(), frame)
+        mask = observable_mask(shading, srgb8_rounding_log(photo.double()))[:, 0].to(torch.float64)
+        flat = true.clone()
+        flat[:, NORMAL] = flat.new_tensor([0.0, 0.0, 1.0]).view(1, 3, 1, 1)
+        self.sum_deg += (_normal_angle_deg(pred, true).double() * mask).sum()
+        self.sum_flat_deg += (_normal_angle_deg(flat, true).double() * mask).sum()
+        self.pixels += mask.numel()
+
+    def compute(self) -> dict[str, Tensor]:
+        return {
+            "normal_angle_deg/observable": _ratio(self.sum_deg, self.pixels),
+            "normal_angle_deg/observable_flat": _ratio(self.sum_flat_deg, self.pixels),
+        }
+
+
 class SVBRDFMetrics(MetricCollection):
-    """All evaluation metrics behind one ``update(pred_maps, true_maps, hotspot=None, flash=None)``,
-    computed as a flat dict. ``hotspot`` (the flash positions, :func:`hotspot_centres`) reaches
-    only :class:`HotspotError` and ``flash`` (the photos' flash frames, ``batch["flash"]``) only
-    :class:`ReliefLeak`: torchmetrics' ``MetricCollection.update`` passes each child only the
+    """All evaluation metrics behind one ``update(pred_maps, true_maps, hotspot=None, flash=None,
+    photo=None)``, computed as a flat dict. ``hotspot`` (the flash positions, :func:`hotspot_centres`)
+    reaches only :class:`HotspotError`, ``flash`` (the photos' flash frames, ``batch["flash"]``) only
+    :class:`ReliefLeak` and :class:`ObservableNormalAngle`, ``photo`` (the photos the model read)
+    only the latter: torchmetrics' ``MetricCollection.update`` passes each child only the
     keyword arguments its ``update`` signature names (``Metric._filter_kwargs``).
 
     Keys of ``compute()`` (float64 scalars, with the collection's optional ``prefix``):
@@ -1244,8 +1396,10 @@ class SVBRDFMetrics(MetricCollection):
     ``false_metal`` (:class:`FalseMetal`, mean predicted metallic on dielectric truth: 0 = right),
     ``relief_leak`` and ``relief_leak/slope`` (:class:`ReliefLeak`, correlation and slope of the
     base colour's error on the true relief shading: 0 = right, +1 = the relief is in the base
-    colour) and, with ``hotspot``, ``hotspot/<map>`` (:class:`HotspotError`; with ``hotspot_rmse`` also
-    ``hotspot/<map>/inside`` and ``/outside``). Log them with
+    colour), with ``photo`` ``normal_angle_deg/observable`` and ``…/observable_flat``
+    (:class:`ObservableNormalAngle`: the model's and a flat map's angle over the texels whose relief
+    the photo shows) and, with ``hotspot``, ``hotspot/<map>`` (:class:`HotspotError`; with
+    ``hotspot_rmse`` also ``hotspot/<map>/inside`` and ``/outside``). Log them with
     ``log_dict(metrics.compute())`` — Lightning's ``log_dict(metrics)`` expects scalar metrics.
 
     Compute groups are off on purpose: torchmetrics would merge children whose states happen to be
@@ -1297,6 +1451,7 @@ class SVBRDFMetrics(MetricCollection):
         metrics["checkerboard"] = CheckerboardRatio(prefix="checkerboard/", **kw)
         metrics["false_metal"] = FalseMetal(**kw)
         metrics["relief_leak"] = ReliefLeak(**kw)
+        metrics["normal_angle_deg/observable"] = ObservableNormalAngle(**kw)
         if hotspot:
             metrics["hotspot"] = HotspotError(
                 hotspot_radius_fraction, albedo_space=albedo_space, rmse=hotspot_rmse, prefix="hotspot/", **kw

@@ -288,7 +288,7 @@ class SVBRDFGAN(L.LightningModule):
         if metrics is not None:
             meta = batch.get("meta")
             hotspot = None if meta is None else hotspot_centres(meta, *maps.shape[-2:]).to(maps.device)
-            metrics.update(fake, maps, hotspot=hotspot, flash=batch.get("flash"))
+            metrics.update(fake, maps, hotspot=hotspot, flash=batch.get("flash"), photo=photo)
         self.log_dict(
             {f"{stage}/{name}": value for name, value in terms.items()},
             on_epoch=True,

@@ -370,8 +370,8 @@ def _write_files(
             slot: pool.submit(png_bytes, gltf_textures[slot].values)
             for slot in ("basecolor", "normal", "metallicRoughness")
         }
-        for write in writes:
-            write.result()
+        for written in writes:
+            written.result()
         pngs = {slot: future.result() for slot, future in embedded.items()}
     for map_name, texture in textures.items():
         path = directory / f"{options.file_prefix}{map_name}.{options.format}"
