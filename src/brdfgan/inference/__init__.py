@@ -9,6 +9,8 @@
   (:mod:`.outputs.export`, :mod:`.outputs.gltf`) and the relit previews (:mod:`.outputs.preview`).
 - :mod:`~brdfgan.inference.refine`: test-time refinement, the maps fitted to the photo with the
   differentiable renderer (``--refine``).
+- :mod:`~brdfgan.inference.views`: several photos of one surface (issue 47): each registered to
+  the reference photo (:mod:`.views.register`: features or a marker board).
 - :mod:`~brdfgan.inference.pipeline`: the stages chained per photo and per batch.
 """
 

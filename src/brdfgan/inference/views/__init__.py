@@ -1,0 +1,7 @@
+"""Several flash photos of one flat surface → one material (``brdfgan predict --views``, issue 47).
+
+- :mod:`~brdfgan.inference.views.register`: each photo's homography to the reference photo, from
+  feature matches with the flash highlight masked, or from MaterialGAN's AprilTag board; the
+  checks that leave out a photo that does not register. The plane ↔ photo geometry it relies on
+  (intrinsics, poses, the OpenCV half pixel) is :mod:`brdfgan.core.homography`.
+"""
