@@ -10,7 +10,8 @@
 - :mod:`~brdfgan.inference.refine`: test-time refinement, the maps fitted to the photo with the
   differentiable renderer (``--refine``).
 - :mod:`~brdfgan.inference.views`: several photos of one surface (issue 47): each registered to
-  the reference photo (:mod:`.views.register`: features or a marker board).
+  the reference photo (:mod:`.views.register`: features or a marker board), then one material
+  fitted to all of them (:mod:`.views.fit`, settings in :mod:`.views.config`).
 - :mod:`~brdfgan.inference.pipeline`: the stages chained per photo and per batch.
 """
 

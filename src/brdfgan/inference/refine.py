@@ -128,16 +128,19 @@ def parameters_to_maps(parameters: Tensor) -> Tensor:
     )
 
 
-def photo_loss(render: Tensor, photo: Tensor, clip_level: float) -> Tensor:
+def photo_loss(render: Tensor, photo: Tensor, clip_level: float, mask: Tensor | None = None) -> Tensor:
     """L1 of log(x + ε) over unclipped pixels; clipped ones (any channel ≥ ``clip_level``) as
-    lower bounds. Mean over all pixels and channels.
+    lower bounds. Mean over all pixels and channels, or with ``mask`` (a view's seen pixels) the
+    mean weighted by it, 0 when it is all 0; the photo must be finite where the mask is 0 too.
 
-    Shape: render, photo ``(B, 3, H, W)`` → scalar."""
+    Shape: render, photo ``(B, 3, H, W)``; mask ``(B, 1, H, W)`` → scalar."""
     log_render = torch.log(render.clamp_min(0.0) + LOG_EPSILON)
     log_photo = torch.log(photo + LOG_EPSILON)
     clipped = (photo >= clip_level).any(dim=1, keepdim=True)
     error = torch.where(clipped, (log_photo - log_render).clamp_min(0.0), (log_render - log_photo).abs())
-    return error.mean()
+    if mask is None:
+        return error.mean()
+    return (error * mask).sum() / mask.expand_as(error).sum().clamp_min(1e-12)
 
 
 def transfer_correction(maps: Tensor, before: Tensor, after: Tensor) -> Tensor:

@@ -4,4 +4,8 @@
   feature matches with the flash highlight masked, or from MaterialGAN's AprilTag board; the
   checks that leave out a photo that does not register. The plane ↔ photo geometry it relies on
   (intrinsics, poses, the OpenCV half pixel) is :mod:`brdfgan.core.homography`.
+- :mod:`~brdfgan.inference.views.fit`: the maps and each view's exposure fitted to every
+  registered view with the differentiable renderer, from the network's prediction of the
+  reference (gains first and outlier views dropped, coarse to fine, a guard that keeps the
+  prediction); its settings, :mod:`~brdfgan.inference.views.config`.
 """
