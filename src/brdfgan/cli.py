@@ -32,7 +32,11 @@ if TYPE_CHECKING:  # imported lazily below: --help must not wait for torch
     import torch
 
     from brdfgan.inference.intake.preprocess import Crop
+    from brdfgan.inference.pipeline import Predictor
 
+# predict --views: the most photos of one surface fitted together (the issue's 2-12; each view adds
+# a render to every fit step).
+MAX_VIEWS = 12
 # Exit status when the command ran but at least one photo of the batch failed.
 PARTIAL_FAILURE_EXIT_CODE = 1
 PREDICT_INTERRUPTED = "interrupted: finished photos are complete; the one in progress was not written"
@@ -48,6 +52,8 @@ examples:
       camera RAW (linear demosaic), linear EXR textures, DirectX normal map (Unreal)
   brdfgan predict scan.png --out out/ --input-colorspace linear --crop 120,80,1024 --bit-depth 16
       a linear PNG, a given 1024² square at x=120, y=80, 16-bit PNG textures
+  brdfgan predict --views top.jpg left.jpg right.jpg --out materials/
+      three photos of one surface → one material fitted to all of them, materials/top/
 """
 
 
@@ -218,6 +224,13 @@ def build_parser() -> argparse.ArgumentParser:
         "S is recorded in material.json)",
     )
     predict.add_argument("--no-preview", action="store_true", help="do not render preview.png")
+    predict.add_argument(
+        "--views",
+        action="store_true",
+        help="the photos are views of one flat surface (2-12, flash on; the first is the reference): "
+        "one material fitted to all of them, in OUT/<first photo's name>/; a photo that does not "
+        "register is left out with a warning (docs/views.md)",
+    )
     predict.add_argument(
         "--refine",
         nargs="?",
@@ -428,6 +441,8 @@ def predict_command(args: argparse.Namespace) -> int:
     )
     from brdfgan.inference.refine import RefineConfig
 
+    if args.views and args.refine is not None:
+        raise UserError("--refine cannot be combined with --views (the multi-view fit refines the maps)")
     device = _predict_device(args.device)
     if args.quiet:  # errors only: library warnings (logging) are not errors
         logging.getLogger("brdfgan").setLevel(logging.ERROR)
@@ -459,12 +474,16 @@ def predict_command(args: argparse.Namespace) -> int:
     if not photos:
         print("error: no photos to process", file=sys.stderr)
         return USER_ERROR_EXIT_CODE
+    if args.views and len(photos) > MAX_VIEWS:
+        raise UserError(f"--views takes at most {MAX_VIEWS} photos of one surface, got {len(photos)}")
     if not args.quiet:
         print(
             f"model {model.model_id} ({model.path}) on {device}; "
             f"{len(photos)} photo(s) at {predictor.describe_resolution()}",
             file=sys.stderr,
         )
+    if args.views:
+        return _predict_views(args, photos, predictor)
     bar = tqdm(total=len(photos), unit="photo", disable=args.quiet or None, file=sys.stderr)
     # The refinement's steps of the photo in progress, under the batch's bar.
     quiet_steps = args.quiet or args.refine is None
@@ -510,6 +529,41 @@ def predict_command(args: argparse.Namespace) -> int:
         return PARTIAL_FAILURE_EXIT_CODE
     if not args.quiet:
         print(f"done: {len(outcome.succeeded)} material(s) in {args.out}", file=sys.stderr)
+    return 0
+
+
+def _predict_views(args: argparse.Namespace, photos: list[Path], predictor: Predictor) -> int:
+    """``predict --views``: one material from every photo, in ``OUT/<first photo's name>/``."""
+    from tqdm import tqdm
+
+    from brdfgan.errors import interrupts_raise
+    from brdfgan.inference.pipeline import clean_up_outputs, output_names
+    from brdfgan.inference.views.pipeline import predict_views
+
+    steps_bar = tqdm(unit="step", leave=False, disable=args.quiet or None, file=sys.stderr)
+
+    def fit_step(step: int, steps: int) -> None:
+        if step == 1:
+            steps_bar.reset(total=steps)
+            steps_bar.set_description(f"fitting {len(photos)} views")
+        steps_bar.update(1)
+
+    out_dir = args.out / output_names(photos[:1])[0]
+    clean_up_outputs(args.out)
+    try:
+        # SIGTERM too: the material in progress then leaves no hidden staging folder behind.
+        with interrupts_raise():
+            result = predict_views(photos, out_dir, predictor, on_fit_step=fit_step)
+    finally:
+        steps_bar.close()
+    for warning in () if args.quiet else result.warnings:  # each names its file
+        print(f"warning: {warning}", file=sys.stderr)
+    if args.verbose:
+        stages = ", ".join(f"{stage} {seconds:.2f} s" for stage, seconds in result.timings.items())
+        print(f"{result.photo.name}: {stages}", file=sys.stderr)
+    print(result.output)
+    if not args.quiet:
+        print(f"done: 1 material from {len(photos)} view(s) in {args.out}", file=sys.stderr)
     return 0
 
 

@@ -48,8 +48,8 @@ from brdfgan.core.seamless import (
 from brdfgan.core.svbrdf import NUM_CHANNELS
 from brdfgan.errors import UserError, disk_full_message, is_disk_full, one_line
 from brdfgan.inference.intake.lens import FieldOfView, crop_field_of_view
-from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, read_photo
-from brdfgan.inference.intake.preprocess import Crop, CropSized, preprocess
+from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, Photo, read_photo
+from brdfgan.inference.intake.preprocess import Crop, CropSized, Preprocessed, preprocess
 from brdfgan.inference.model.guided import (
     DEFAULT_NETWORK_CAP,
     MapsAndCorrections,
@@ -64,6 +64,7 @@ from brdfgan.inference.outputs.export import ExportOptions, recover_outputs, wri
 from brdfgan.inference.outputs.preview import write_animation, write_preview
 from brdfgan.inference.outputs.viewer import write_viewer
 from brdfgan.inference.refine import RefineConfig, refine_maps
+from brdfgan.inference.views.config import ViewFitConfig
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +92,7 @@ class PredictOptions:
     tileable: bool = False  # cut the maps into a seamless tile (make_tileable)
     prefix_files: bool = False  # texture files named <material>_<map>.<ext> for engines' importers
     field_of_view: FieldOfView = field(default_factory=FieldOfView)  # --fov / --focal-length-35mm
+    view_fit: ViewFitConfig = field(default_factory=ViewFitConfig)  # the multi-view fit (--views)
     # The largest side an anchored network runs at for the default (crop-sized) output; larger
     # outputs are carried up guided by the photo (inference/model/guided.py). None: never.
     network_cap: int | None = DEFAULT_NETWORK_CAP
@@ -305,7 +307,7 @@ RefineProgress = Callable[[Path, int, int], None]  # (photo, step, of steps)
 
 
 @dataclass
-class _StageClock:
+class StageClock:
     """Wall-clock seconds per pipeline stage, added into ``timings`` (``--verbose`` prints them)."""
 
     timings: dict[str, float]
@@ -332,11 +334,78 @@ def predict_photo(
     path: Path, out_dir: Path, predictor: Predictor, on_refine_step: RefineProgress | None = None
 ) -> PhotoResult:
     """Run the whole pipeline on one photo and write ``out_dir`` (replaced atomically)."""
-    options = predictor.options
     timings: dict[str, float] = {}
-    clock = _StageClock(timings)
+    clock = StageClock(timings)
     with clock("read"):
-        photo = read_photo(path, options.colorspace)
+        photo = read_photo(path, predictor.options.colorspace)
+    reference = predict_reference(photo, predictor, clock)
+    return refine_and_write(reference, out_dir, predictor, clock, on_refine_step)
+
+
+def refine_and_write(
+    reference: ReferencePrediction,
+    out_dir: Path,
+    predictor: Predictor,
+    clock: StageClock,
+    on_refine_step: RefineProgress | None = None,
+    *,
+    warnings: tuple[str, ...] | None = None,
+) -> PhotoResult:
+    """The single-photo path after the network: ``--refine`` when asked, then the write-out.
+    ``warnings``: the result's warnings instead of the photo's and its preprocessing's own."""
+    options = predictor.options
+    maps = reference.maps
+    refinement: dict[str, Any] | None = None
+    if options.refine is not None:
+        steps = options.refine.steps
+        path = reference.photo.path
+        progress = None if on_refine_step is None else lambda step, _loss: on_refine_step(path, step, steps)
+        with clock("refine"):
+            refined = refine_maps(
+                reference.prepared.photo, maps, reference.flash_frame, options.refine, on_step=progress
+            )
+        maps = refined.maps
+        refinement = {
+            **refined.to_json(),
+            "field_of_view": {"degrees": reference.fov_deg, "source": reference.fov_source},
+            "settings": {k: v for k, v in options.refine.to_json().items() if k != "steps"},
+        }
+    return write_prediction(
+        reference,
+        maps,
+        out_dir,
+        predictor,
+        clock,
+        # The test-time fit (brdfgan.inference.refine), None without --refine.
+        records={"refinement": refinement},
+        warnings=reference.warnings if warnings is None else warnings,
+    )
+
+
+@dataclass(frozen=True)
+class ReferencePrediction:
+    """One read photo through preprocessing and the network: what the write-out and the fits
+    (``--refine``, ``--views``) start from."""
+
+    photo: Photo
+    prepared: Preprocessed
+    fov_deg: float  # horizontal field of view across the crop
+    fov_source: str
+    flash_frame: Tensor  # (1, 3) of prepared.photo
+    maps: Tensor  # (8, N, N), the network's (carried up on the fast path)
+
+    @property
+    def side(self) -> int:
+        return int(self.prepared.photo.shape[-1])
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        return self.photo.warnings + self.prepared.warnings
+
+
+def predict_reference(photo: Photo, predictor: Predictor, clock: StageClock) -> ReferencePrediction:
+    """Preprocess a read photo, find its crop's field of view and flash frame, and run the network."""
+    options = predictor.options
     with clock("preprocess"):
         prepared = preprocess(photo, predictor.resolution, options.crop)
     fov_deg, fov_source = crop_field_of_view(
@@ -348,35 +417,41 @@ def predict_photo(
         outputs = predictor.network(prepared.photo, flash_frame)
     with clock("upsample") if predictor.network_side(side) != side else nullcontext():  # fast path only
         maps = predictor.upsample(outputs, prepared.photo, flash_frame)
-    refinement: dict[str, Any] | None = None
-    if options.refine is not None:
-        steps = options.refine.steps
-        progress = None if on_refine_step is None else lambda step, _loss: on_refine_step(path, step, steps)
-        with clock("refine"):
-            refined = refine_maps(prepared.photo, maps, flash_frame, options.refine, on_step=progress)
-        maps = refined.maps
-        refinement = {
-            **refined.to_json(),
-            "field_of_view": {"degrees": fov_deg, "source": fov_source},
-            "settings": {k: v for k, v in options.refine.to_json().items() if k != "steps"},
-        }
+    return ReferencePrediction(photo, prepared, fov_deg, fov_source, flash_frame, maps)
+
+
+def write_prediction(
+    reference: ReferencePrediction,
+    maps: Tensor,
+    out_dir: Path,
+    predictor: Predictor,
+    clock: StageClock,
+    *,
+    records: dict[str, Any],
+    warnings: tuple[str, ...],
+) -> PhotoResult:
+    """The write-out of a prediction: ``--tileable``, ``material.json``'s metadata (with
+    ``records``, the fits' entries), the previews, the viewer, and :func:`write_material`, which
+    replaces ``out_dir`` atomically (nothing is left half-written on an error).
+
+    Shape: maps ``(8, N, N)``."""
+    options = predictor.options
+    prepared, flash_frame = reference.prepared, reference.flash_frame
     tiling: TileableRecord | None = None
     if options.tileable:
         with clock("tileable"):
             maps, tiling = make_tileable(maps, (float(flash_frame[0, 0]), float(flash_frame[0, 1])))
-    warnings = photo.warnings + prepared.warnings
     metadata = {
         "name": out_dir.name,
         "model": predictor.model.to_json(),
-        "input": photo.to_json(),
+        "input": reference.photo.to_json(),
         **prepared.to_json(),
         # The crop's horizontal field of view: what a flash-aware network is told about the
         # geometry (brdfgan.core.flash_geometry), and the capture model of a refinement.
-        "field_of_view": {"degrees": fov_deg, "source": fov_source},
+        "field_of_view": {"degrees": reference.fov_deg, "source": reference.fov_source},
         # Which path ran: tiling, the network's side, the output's, the guided upsampling.
-        "inference": predictor.inference_record(side),
-        # The test-time fit (brdfgan.inference.refine), None without --refine.
-        "refinement": refinement,
+        "inference": predictor.inference_record(reference.side),
+        **records,
         # --tileable: the flash mark's repair, the cut's copies, wrap ratios and copied fractions.
         "tileable": tiling.to_json() if tiling is not None else None,
         "input_statistics": prepared.stats,
@@ -399,10 +474,20 @@ def predict_photo(
     extra_files["index.html"] = clock.timed(
         "viewer", lambda target: write_viewer(target, metadata=metadata, options=export)
     )
+    timings = clock.timings
     with clock("export"):  # textures, height and occlusion, material.glb (previews timed on their own)
         write_material(out_dir, maps, export, metadata, extra_files=extra_files)
     timings["export"] -= sum(timings.get(stage, 0.0) for stage in ("preview", "animation", "viewer"))
-    return PhotoResult(photo=path, output=out_dir, warnings=warnings, timings=timings)
+    return PhotoResult(photo=reference.photo.path, output=out_dir, warnings=warnings, timings=timings)
+
+
+def clean_up_outputs(out_root: Path) -> None:
+    """:func:`~brdfgan.inference.outputs.export.recover_outputs` before a run writes into
+    ``out_root``; a failure is a warning (the run's own folders may still be writable)."""
+    try:
+        recover_outputs(out_root)
+    except OSError as error:
+        log.warning("%s: cannot clean up after earlier runs (%s)", out_root, error.strerror or error)
 
 
 def predict_batch(
@@ -425,10 +510,7 @@ def predict_batch(
     """
     succeeded: list[PhotoResult] = []
     failed: list[PhotoFailure] = []
-    try:
-        recover_outputs(out_root)
-    except OSError as error:  # not fatal: the photos may still be writable
-        log.warning("%s: cannot clean up after earlier runs (%s)", out_root, error.strerror or error)
+    clean_up_outputs(out_root)
     for photo, name in zip(photos, output_names(photos), strict=True):
         result: PhotoResult | PhotoFailure
         try:

@@ -1,0 +1,253 @@
+"""Several flash photos of one flat surface → one material (``brdfgan predict --views``).
+
+::
+
+    read_photo each view (an unreadable one: a warning naming it, left out)
+      → the first readable view is the reference: preprocess + network, as predict_photo
+      → each other view registered to the reference photo (features, highlight masked) and checked
+        (check_registration: a view that fails is left out with a warning naming it)
+      → its camera in the reference's world (views.geometry), its photo warped into the
+        reference's texture frame (views.warp)
+      → fit_views: the maps and each view's gain fitted to every view (views.fit)
+      → the single-photo write-out (pipeline.write_prediction: atomic, nothing half-written),
+        material.json with ``views`` (one entry per input, in order) and ``view_fit``
+
+With fewer than two usable views the reference gets the single-photo path's output, with a
+warning saying so.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from brdfgan.core.exposure import luminance
+from brdfgan.core.homography import intrinsics
+from brdfgan.core.render import CameraPose
+from brdfgan.errors import UserError, one_line
+from brdfgan.inference.intake.lens import crop_field_of_view
+from brdfgan.inference.intake.photo import Photo, read_photo
+from brdfgan.inference.pipeline import (
+    PhotoResult,
+    Predictor,
+    ReferencePrediction,
+    StageClock,
+    predict_reference,
+    refine_and_write,
+    write_prediction,
+)
+from brdfgan.inference.views.fit import ViewFitResult, fit_views, working_levels
+from brdfgan.inference.views.geometry import (
+    PLANE_HALF_SIZE,
+    reference_camera,
+    texture_to_photo,
+    view_camera,
+)
+from brdfgan.inference.views.register import (
+    Registration,
+    check_registration,
+    feature_homography,
+    highlight_mask,
+)
+from brdfgan.inference.views.warp import warp_to_reference
+
+FitProgress = Callable[[int, int], None]  # (step, of steps)
+
+
+@dataclass(frozen=True)
+class RegisteredView:
+    """A view that registered: its geometry and its photo in the reference's texture frame."""
+
+    index: int  # position among the inputs
+    photo: Photo
+    registration: Registration
+    camera: CameraPose
+    pose_reprojection_px: float
+    ambiguous: bool
+    fov_deg: float  # horizontal, whole photo
+    fov_source: str
+    image: Tensor  # (3, N, N) linear, warped
+    seen: Tensor  # (1, N, N)
+
+
+def _vector(values: Sequence[float]) -> list[float]:
+    return [float(v) for v in values]
+
+
+def _finite_or_none(value: Any) -> Any:
+    """JSON has no NaN or infinity: a view that sees nothing, a failed fit, record ``null``."""
+    return None if isinstance(value, float) and not math.isfinite(value) else value
+
+
+def register_view(
+    index: int, photo: Photo, reference: ReferencePrediction, predictor: Predictor
+) -> RegisteredView | str:
+    """One view registered to the reference by features, checked, posed and warped; or the
+    one-line reason it is left out."""
+    side = reference.side
+    photo_from_texture = texture_to_photo(reference.prepared.crop, side)
+    reference_linear = reference.photo.linear
+    registration = feature_homography(
+        luminance(reference_linear)[0].numpy(),
+        luminance(photo.linear)[0].numpy(),
+        highlight_mask(reference_linear),
+        highlight_mask(photo.linear),
+    )
+    if registration is None:
+        return "too few features match the reference photo's to fit a homography"
+    corners = np.array([[0.0, 0.0], [side, 0.0], [side, side], [0.0, side]])
+    square = np.concatenate([corners, np.ones((4, 1))], axis=1) @ photo_from_texture.T
+    reason = check_registration(
+        registration,
+        square[:, :2],
+        photo.width,
+        photo.height,
+        reference_size=(reference.photo.width, reference.photo.height),
+    )
+    if reason is not None:
+        return reason
+    view_from_texture = registration.homography @ photo_from_texture
+    fov_deg, fov_source = crop_field_of_view(
+        photo.lens, photo.width, photo.height, photo.width, predictor.options.field_of_view
+    )
+    try:
+        camera, pose_error, ambiguous = view_camera(
+            view_from_texture, intrinsics(fov_deg, photo.width, photo.height), side
+        )
+    except ValueError as error:
+        return f"no camera pose fits its registration ({one_line(error)})"
+    image, seen = warp_to_reference(photo.linear, view_from_texture, side)
+    return RegisteredView(
+        index, photo, registration, camera, pose_error, ambiguous, fov_deg, fov_source, image, seen
+    )
+
+
+def predict_views(
+    paths: Sequence[Path],
+    out_dir: Path,
+    predictor: Predictor,
+    on_fit_step: FitProgress | None = None,
+) -> PhotoResult:
+    """Fit one material to every usable photo of ``paths`` (views of one flat surface, the first
+    readable one the reference) and write it to ``out_dir`` (replaced atomically; module docstring).
+
+    The result's warnings are one line each and name their file.
+
+    Raises:
+        UserError: no photo can be read, or the reference cannot be used (its one-line reason).
+    """
+    options = predictor.options
+    clock = StageClock({})
+    entries: list[dict[str, Any]] = [
+        {"file": str(path), "role": "left_out", "reason": None} for path in paths
+    ]
+    warnings: list[str] = []
+
+    def leave_out(index: int, reason: str) -> None:
+        entries[index]["reason"] = reason
+        warnings.append(f"{paths[index]}: left out: {reason}")
+
+    photos: dict[int, Photo] = {}
+    with clock("read"):
+        for index, path in enumerate(paths):
+            try:
+                photos[index] = read_photo(path, options.colorspace)
+            except (UserError, OSError) as error:
+                message = one_line(error)
+                prefix = f"{path}: "
+                leave_out(index, message[len(prefix) :] if message.startswith(prefix) else message)
+    if not photos:
+        raise UserError(f"none of the {len(paths)} views can be read")
+    reference_index, *others = sorted(photos)
+    reference = predict_reference(photos[reference_index], predictor, clock)
+    entries[reference_index]["role"] = "reference"
+    reference_path = paths[reference_index]
+    warnings[:0] = [f"{reference_path}: {warning}" for warning in reference.warnings]
+
+    registered: list[RegisteredView] = []
+    with clock("register"):
+        for index in others:
+            outcome = register_view(index, photos[index], reference, predictor)
+            if isinstance(outcome, str):
+                leave_out(index, outcome)
+            else:
+                registered.append(outcome)
+    if not registered:
+        warnings.append(
+            f"{reference_path}: no other view is usable: the material is this photo's single-photo prediction"
+        )
+        return refine_and_write(reference, out_dir, predictor, clock, warnings=tuple(warnings))
+
+    camera = reference_camera(reference.flash_frame, reference.side)
+    cameras = [camera, *(view.camera for view in registered)]
+    positions = torch.tensor([list(pose.origin) for pose in cameras], dtype=torch.float32)
+    config = options.view_fit
+    total_steps = sum(steps for _, steps in working_levels(config, reference.side))
+    progress = None if on_fit_step is None else lambda step, _loss: on_fit_step(step, total_steps)
+    with clock("fit"):
+        fitted = fit_views(
+            torch.stack([reference.prepared.photo, *(view.image for view in registered)]),
+            torch.stack([torch.ones_like(reference.prepared.photo[:1]), *(view.seen for view in registered)]),
+            positions,
+            positions,  # the flash at each lens
+            reference.maps,
+            PLANE_HALF_SIZE,
+            config,
+            on_step=progress,
+        )
+
+    entries[reference_index].update(_camera_entry(camera, reference.fov_deg, reference.fov_source))
+    for view in registered:
+        entries[view.index].update(
+            role="fitted",
+            method=view.registration.method,
+            inliers=view.registration.inliers,
+            inlier_ratio=view.registration.inlier_ratio,
+            reprojection_px=view.registration.reprojection_px,
+            pose_reprojection_px=view.pose_reprojection_px,
+            pose_ambiguous=view.ambiguous,
+            **_camera_entry(view.camera, view.fov_deg, view.fov_source),
+        )
+    for index, record in zip(
+        [reference_index, *(view.index for view in registered)], fitted.views, strict=True
+    ):
+        entries[index].update(
+            coverage=record.coverage,
+            gain=list(record.gain),
+            residual_before=record.residual_before,
+            residual_after=record.residual_after,
+        )
+        if record.dropped is not None:
+            if index != reference_index:
+                entries[index]["role"] = "left_out"
+            leave_out(index, record.dropped)
+    records = {
+        "refinement": None,
+        # One entry per input view, in order: role reference/fitted/left_out and why, registration,
+        # camera (world units of the reference's texture square [-1, 1]², flash at the lens), fit.
+        "views": [{key: _finite_or_none(value) for key, value in entry.items()} for entry in entries],
+        # The multi-view fit (brdfgan.inference.views.fit) and its settings.
+        "view_fit": _fit_entry(fitted, config.to_json()),
+    }
+    return write_prediction(
+        reference, fitted.maps, out_dir, predictor, clock, records=records, warnings=tuple(warnings)
+    )
+
+
+def _camera_entry(pose: CameraPose, fov_deg: float, fov_source: str) -> dict[str, Any]:
+    return {
+        "camera_position": _vector(pose.origin),
+        "camera_target": _vector(pose.target),
+        "field_of_view": {"degrees": fov_deg, "source": fov_source},
+    }
+
+
+def _fit_entry(result: ViewFitResult, settings: dict[str, Any]) -> dict[str, Any]:
+    return {**result.to_json(), "settings": settings}
