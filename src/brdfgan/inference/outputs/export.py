@@ -352,14 +352,17 @@ def _write_files(
     extra_files: Mapping[str, Callable[[Path], Any]],
 ) -> dict[str, dict[str, Any]]:
     files: dict[str, dict[str, Any]] = {}
+    paths = {
+        map_name: directory / f"{options.file_prefix}{map_name}.{options.format}" for map_name in textures
+    }
     # Twelve 2048² encodes were half of predict's export: OpenCV and OpenEXR encode without the
-    # GIL, so they run on the threads predict was given (--threads). Leaving the block waits for
+    # GIL, so they run on torch's intra-op threads (OMP_NUM_THREADS). Leaving the block waits for
     # every write, so an interrupt never leaves one running into the staging folder's removal.
     with ThreadPoolExecutor(max_workers=max(1, torch.get_num_threads())) as pool:
         writes = [
             pool.submit(
                 write_image,
-                directory / f"{options.file_prefix}{map_name}.{options.format}",
+                paths[map_name],
                 texture.values,
                 bit_depth=texture.bit_depth or options.bit_depth,
                 exr_precision=options.exr_precision,
@@ -374,9 +377,8 @@ def _write_files(
             written.result()
         pngs = {slot: future.result() for slot, future in embedded.items()}
     for map_name, texture in textures.items():
-        path = directory / f"{options.file_prefix}{map_name}.{options.format}"
-        bit_depth = texture.bit_depth or options.bit_depth
-        depth = bit_depth if options.format == "png" else options.exr_precision
+        path = paths[map_name]
+        depth = (texture.bit_depth or options.bit_depth) if options.format == "png" else options.exr_precision
         files[path.name] = {
             "map": map_name,
             "colorspace": texture.colorspace,
