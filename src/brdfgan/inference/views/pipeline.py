@@ -53,8 +53,9 @@ from brdfgan.inference.views.geometry import (
 from brdfgan.inference.views.register import (
     Registration,
     check_registration,
-    feature_homography,
+    detect_features,
     highlight_mask,
+    homography_to_view,
 )
 from brdfgan.inference.views.warp import warp_to_reference
 
@@ -86,19 +87,26 @@ def _finite_or_none(value: Any) -> Any:
     return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
+def reference_features(reference: ReferencePrediction) -> tuple[np.ndarray, np.ndarray]:
+    """The reference photo's keypoints and descriptors, away from its flash highlight (found once
+    for every view registered to it)."""
+    linear = reference.photo.linear
+    return detect_features(luminance(linear)[0].numpy(), highlight_mask(linear))
+
+
 def register_view(
-    index: int, photo: Photo, reference: ReferencePrediction, predictor: Predictor
+    index: int,
+    photo: Photo,
+    reference: ReferencePrediction,
+    features: tuple[np.ndarray, np.ndarray],
+    predictor: Predictor,
 ) -> RegisteredView | str:
-    """One view registered to the reference by features, checked, posed and warped; or the
-    one-line reason it is left out."""
+    """One view registered to the reference (whose :func:`reference_features` are ``features``),
+    checked, posed and warped; or the one-line reason it is left out."""
     side = reference.side
     photo_from_texture = texture_to_photo(reference.prepared.crop, side)
-    reference_linear = reference.photo.linear
-    registration = feature_homography(
-        luminance(reference_linear)[0].numpy(),
-        luminance(photo.linear)[0].numpy(),
-        highlight_mask(reference_linear),
-        highlight_mask(photo.linear),
+    registration = homography_to_view(
+        features, luminance(photo.linear)[0].numpy(), highlight_mask(photo.linear)
     )
     if registration is None:
         return "too few features match the reference photo's to fit a homography"
@@ -173,8 +181,10 @@ def predict_views(
 
     registered: list[RegisteredView] = []
     with clock("register"):
+        # The reference's features once for all views (none to find when it is alone).
+        features = reference_features(reference) if others else (np.zeros((0, 2)), np.zeros((0, 0)))
         for index in others:
-            outcome = register_view(index, photos[index], reference, predictor)
+            outcome = register_view(index, photos[index], reference, features, predictor)
             if isinstance(outcome, str):
                 leave_out(index, outcome)
             else:

@@ -260,7 +260,25 @@ def feature_homography(
         - reference_mask, view_mask: the same sizes, non-zero where no keypoint may be taken
           (:func:`highlight_mask`), or ``None``
     """
-    reference_points, reference_descriptors = detect_features(reference_grey, reference_mask, detector)
+    reference = detect_features(reference_grey, reference_mask, detector)
+    return homography_to_view(reference, view_grey, view_mask, detector)
+
+
+def homography_to_view(
+    reference: tuple[np.ndarray, np.ndarray],
+    view_grey: np.ndarray,
+    view_mask: np.ndarray | None = None,
+    detector: Detector = "sift",
+) -> Registration | None:
+    """:func:`feature_homography` with the reference's keypoints and descriptors already found
+    (:func:`detect_features`, by the same ``detector``): several views registered to one reference
+    detect its features once.
+
+    Shape:
+        - reference: points ``(N, 2)`` full-resolution pixels, descriptors ``(N, D)``
+        - view_grey: ``(H', W')`` linear luminance; view_mask: the same size or ``None``
+    """
+    reference_points, reference_descriptors = reference
     view_points, view_descriptors = detect_features(view_grey, view_mask, detector)
     pairs = match_features(reference_descriptors, view_descriptors, detector)
     if len(pairs) < 4:
