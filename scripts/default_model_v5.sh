@@ -5,7 +5,7 @@
 # split's two parts, the procedural and scan test sets and both OOD variants beside v4 and the
 # trivial references; export_weights ships it. One training at a time on the two threads.
 #
-#   scripts/default_model_v5.sh [final|fixres|normal_curve|evaluate|export_weights]...
+#   scripts/default_model_v5.sh [final|fixres|normal_curve|evaluate|ablation|export_weights]...
 #   (default: final fixres normal_curve evaluate, in order; SEEDS="1" runs one seed per session)
 #
 # Long trainings resume: rerunning a stage continues each unfinished run from its last.ckpt.
@@ -72,6 +72,29 @@ export_weights() {
     --model-id brdfgan-default-v5 --metrics $OUT/eval_test_procedural/metrics.json --metrics-model v5 \
     --hardware "2 vCPU x86_64 (no GPU), 2 threads, one training at a time"
   $PY -m tests.test_shipped_weights  # refresh the stored statistics
+}
+
+ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's changes added at a time
+  # (rendered photos with the calibrated sensor; + relief sampling; + no shading image = v5), 1 000
+  # batches each, one seed, scored on the validation split's two parts (docs/default_model.md).
+  local steps="data.epoch_samples=2000 trainer.max_epochs=2 trainer.check_val_every_n_epoch=2 test=false"
+  local norelief="data.relief.swap_probability=0 data.relief.bump_probability=0"
+  declare -A RUNS=(
+    [v4_recipe]="experiment=anchored data.prepare=null"  # the training shards there are (a session cannot wait for all 63)
+    [rendered]="experiment=v5 model.generator.shading=detached $norelief"
+    [rendered_relief]="experiment=v5 model.generator.shading=detached"
+    [v5_recipe]="experiment=v5"
+  )
+  local run models=""
+  for run in v4_recipe rendered rendered_relief v5_recipe; do
+    [ -f $OUT/ablation/$run/checkpoints/last.ckpt ] ||
+      $PY train.py ${RUNS[$run]} $steps hydra.run.dir=$OUT/ablation/$run
+    models="$models${models:+, }$run: $OUT/ablation/$run/checkpoints/last.ckpt"
+  done
+  for part in procedural scans; do
+    $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_val_$part \
+      data.prepare=null grid_samples=0 hydra.run.dir=$OUT/ablation/eval_val_$part "ckpt={$models}"
+  done
 }
 
 # v4, the model v5 is measured against, from the history (the release before v5).
