@@ -24,12 +24,15 @@ from brdfgan.evaluation.captures import (
     CaptureModel,
     capture_flash_frame,
     capture_models,
+    csv_table,
     evaluate_captures,
     find_captures,
     fit_gain,
+    markdown_table,
     read_capture,
 )
 from brdfgan.inference.model.weights import load_model
+from brdfgan.inference.views.config import ViewFitConfig
 from brdfgan.io.images import write_image
 from brdfgan.models.reference import DeLitPhoto, PhotoAsBasecolor
 from brdfgan.runs import save_weights
@@ -196,6 +199,18 @@ def test_fit_gain_is_least_squares_over_unsaturated_pixels() -> None:
     photo[:, 0, 0] = 1.0  # saturated: left out
     assert fit_gain(render, photo) == pytest.approx(0.7)
     assert fit_gain(torch.zeros(3, 4, 4), torch.rand(3, 4, 4)) == 1.0
+
+
+def test_fit_gain_leaves_out_a_highlight_the_photo_tone_mapped() -> None:
+    # A glossy sample's highlight: the render is 4× too bright for the photo there, which a phone's
+    # tone curve rolled off just under saturation; left in, it pulls the gain to ~0.5.
+    render = torch.rand(3, 16, 16, dtype=torch.float64) * 0.5 + 0.1
+    photo = 0.7 * render
+    render[:, :3, :3] = 6.0
+    photo[:, :3, :3] = 0.97
+    assert fit_gain(render, photo) == pytest.approx(0.7)
+    photo[:, :3, :3] = 1.0  # clipped in the photo: left out on the first pass already
+    assert fit_gain(render, photo) == pytest.approx(0.7)
 
 
 def test_the_true_maps_relight_every_view(tmp_path: Path) -> None:
@@ -379,3 +394,97 @@ def test_cli_help_and_interrupt_message(capsys: pytest.CaptureFixture[str]) -> N
         main(["--help"])
     assert "    eval-captures" in capsys.readouterr().out
     assert build_parser().parse_args(["eval-captures", "DIR"]).interrupted.startswith("interrupted")
+
+
+# --- --fit-views ------------------------------------------------------------------------------------
+
+# A cheap fit for 64² views (tests/test_views_fit.py's FAST): a few seconds single-threaded.
+FAST_FIT = ViewFitConfig(levels=(32, 64), steps=(40, 40))
+
+
+def five_view_capture(folder: Path, maps: Tensor) -> Path:
+    """A capture of ``maps`` that lists its first five views."""
+    write_capture(folder, maps, "json")
+    _edit_json(folder, idx=list(range(5)))
+    return folder
+
+
+def grey_model() -> CaptureModel:
+    """A deliberately wrong predictor: flat grey whatever it is shown."""
+    return CaptureModel("grey", lambda photo, frame: flat_maps(photo.shape[-2], photo.shape[-1]))
+
+
+def test_fit_views_one_is_todays_protocol(tmp_path: Path) -> None:
+    capture = read_capture(write_capture(tmp_path / "c", random_maps(SIDE, SIDE, seed=4)))
+    models = [truth_model(random_maps(SIDE, SIDE, seed=4)), grey_model()]
+    today = evaluate_captures([capture], models)
+    one = evaluate_captures([capture], models, fit_views=1)
+    assert one == today and one.models == ("truth", "grey")
+    assert markdown_table(one) == markdown_table(today) and csv_table(one) == csv_table(today)
+
+
+def test_fitting_three_views_scores_the_others_and_beats_one_view(tmp_path: Path) -> None:
+    capture = read_capture(five_view_capture(tmp_path / "c", random_maps(SIDE, SIDE, seed=6)))
+    single = evaluate_captures([capture], [grey_model()])
+    fitted = evaluate_captures([capture], [grey_model()], fit_views=3, fit_config=FAST_FIT)
+    assert fitted.models == ("grey+fit3",) and fitted.fit_views == 3
+    assert [v.role for v in fitted.views] == ["input", "fitted", "fitted", "relit", "relit"]
+    relit = [v.rmse_fitted for v in fitted.views if v.role == "relit"]
+    assert fitted.mean("grey+fit3") == pytest.approx(sum(relit) / 2)
+    assert len({v.gain for v in fitted.views}) == 1  # one gain, fitted on the input view
+    rows = csv_table(fitted).splitlines()[1:]
+    assert [row.split(",")[3] for row in rows] == ["input", "fitted", "fitted", "relit", "relit"]
+    assert "fitted to the first 3 views" in markdown_table(fitted)
+    assert "| grey+fit3 |" in markdown_table(fitted)
+    # The same views (03, 04) without the fit: the fit moved the flat grey toward the true maps
+    # (measured: 0.28 against 0.48, summed). Not toward their overall tint: the fit gives each view
+    # an RGB gain (white balance), the score one grey gain.
+    before = [v.rmse_fitted for v in single.views if v.view >= 3]
+    assert sum(relit) < 0.75 * sum(before), (relit, before)
+
+
+def test_fit_views_needs_a_view_left_to_relight(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    big = read_capture(write_capture(tmp_path / "big", random_maps(SIDE, SIDE)))
+    small = read_capture(five_view_capture(tmp_path / "small", random_maps(SIDE, SIDE)))
+
+    def never(photo: Tensor, frame: Tensor) -> Tensor:
+        raise AssertionError("a model ran before the captures were checked")
+
+    with pytest.raises(
+        CaptureError, match=r"small: 5 views, but fitting to the first 5 needs at least 6"
+    ) as info:
+        evaluate_captures([big, small], [CaptureModel("never", never)], fit_views=5)
+    assert "\n" not in str(info.value)
+    out = tmp_path / "out"
+    args = [
+        "eval-captures",
+        str(tmp_path / "big"),
+        str(tmp_path / "small"),
+        "--fit-views",
+        "5",
+        "--out",
+        str(out),
+    ]
+    assert main(args) == USER_ERROR_EXIT_CODE
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and "small" in err and "first 5" in err, err
+    assert not out.exists()
+    with pytest.raises(SystemExit):
+        main(["eval-captures", "DIR", "--fit-views", "0"])
+    assert build_parser().parse_args(["eval-captures", "DIR"]).fit_views == 1
+
+
+def test_cli_fit_views_names_the_rows(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    five_view_capture(tmp_path / "tiles", matte_maps())
+    refs = write_references(tmp_path / "refs", only=("photo_basecolor",))
+    out = tmp_path / "out"
+    args = ["eval-captures", str(tmp_path / "tiles"), "--references", str(refs), "--out", str(out),
+            "--refine", "2", "--resolution", "64", "--fit-views", "2"]  # fmt: skip
+    assert main(args) == 0
+    markdown = (out / "captures.md").read_text()
+    assert capsys.readouterr().out == markdown and "fitted to the first 2 views" in markdown
+    rows = [line.split(" | ")[0].lstrip("| ") for line in markdown.splitlines() if line.startswith("| ")][1:]
+    shipped = load_model().model_id
+    assert rows == [f"{shipped}+fit2", f"{shipped}+refine2+fit2", "photo_basecolor+fit2"]
+    roles = [line.split(",")[3] for line in (out / "captures.csv").read_text().splitlines()[1:]]
+    assert roles == ["input", "fitted", "relit", "relit", "relit"] * 3

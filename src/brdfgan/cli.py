@@ -417,6 +417,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="the side the input view is resized to for the models (default: each model's training "
         "resolution); the maps are resized back to the capture's",
     )
+    captures.add_argument(
+        "--fit-views",
+        type=_positive,
+        default=1,
+        metavar="K",
+        help="fit each model's maps to the first K views (predict --views's multi-view fit) and relight "
+        "the others (rows <model>+fit<K>; with --refine, refined then fitted); every capture needs more "
+        "than K views. K = 1 (default): the single-photo protocol, maps from the first view alone",
+    )
     captures.add_argument("--out", type=Path, default=None, metavar="DIR", help="default: the first DIR")
     captures.set_defaults(run=eval_captures_command, interrupted="interrupted: no table was written")
     return parser
@@ -643,6 +652,7 @@ def dataset_stats_command(args: argparse.Namespace) -> int:
 def eval_captures_command(args: argparse.Namespace) -> int:
     from brdfgan.evaluation.captures import (
         capture_models,
+        check_fit_views,
         evaluate_captures,
         find_captures,
         write_capture_results,
@@ -650,13 +660,15 @@ def eval_captures_command(args: argparse.Namespace) -> int:
     from brdfgan.inference.refine import RefineConfig
 
     captures = find_captures(args.captures)  # every folder checked before any model runs
+    check_fit_views(captures, args.fit_views)  # … and its number of views against --fit-views
     refine = None if args.refine is None else RefineConfig(steps=args.refine)
     models = capture_models(args.weights, args.references, refine=refine, resolution=args.resolution)
+    fitted = f", maps fitted to the first {args.fit_views} views" if args.fit_views > 1 else ""
     print(
-        f"{len(captures)} capture(s), {len(models)} model(s): {', '.join(m.name for m in models)}",
+        f"{len(captures)} capture(s), {len(models)} model(s): {', '.join(m.name for m in models)}{fitted}",
         file=sys.stderr,
     )
-    results = evaluate_captures(captures, models)
+    results = evaluate_captures(captures, models, fit_views=args.fit_views)
     markdown, _ = write_capture_results(results, args.out or args.captures[0])
     print(markdown.read_text(encoding="utf-8"), end="")
     return 0

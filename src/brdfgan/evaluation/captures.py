@@ -63,6 +63,13 @@ tflsguoyu/svbrdf-diff-renderer: ``src/microfacet.py``, ``src/svbrdf.py``, ``src/
    beside or above the lens.
 3. The model predicts the maps (with ``refine``: :func:`~brdfgan.inference.refine.refine_maps`
    against the input, as ``brdfgan predict --refine``), resized back to the capture's resolution.
+   With ``fit_views`` = K > 1 (``--fit-views K``; default 1, the single-photo protocol), the maps
+   are then fitted to the first K views (:func:`~brdfgan.inference.views.fit.fit_views`, the fit
+   of ``brdfgan predict --views``: each view whole, seen everywhere, at its calibrated camera and
+   flash, its own RGB gain — so the fit leaves the maps' overall tint as predicted), and the fitted
+   maps are scored; views 1 … K−1 are ``fitted``, the others
+   ``relit``. A capture needs more than K views (one left to relight); every capture is checked
+   before any model runs (:func:`check_fit_views`). Each model's row is named ``<model>+fit<K>``.
 4. Every view is re-rendered at its camera and flash (:func:`~brdfgan.core.render.render_point_lights`,
    radiance × ``light_pow``) and compared with its photo: both clipped to [0, 1], sRGB-encoded,
    RMSE over pixels and channels. Twice: with the calibrated power as is, and with **one gain**
@@ -70,9 +77,10 @@ tflsguoyu/svbrdf-diff-renderer: ``src/microfacet.py``, ``src/svbrdf.py``, ``src/
    saturated in the photo) applied to every view — the headline, as it removes the unknown
    exposure (phones do not record one) and the models' albedo scale.
 
-A capture's score is the mean over its relit views (all but the input); a model's, the mean of
-its captures' scores (each material weighs the same). The input view's own error is in the CSV
-(``role`` = ``input``) but in no mean: a model is judged on views it did not see.
+A capture's score is the mean over its relit views (all but the input and the fitted ones); a
+model's, the mean of its captures' scores (each material weighs the same). The input and fitted
+views' own errors are in the CSV (``role`` = ``input``, ``fitted``) but in no mean: a model is
+judged on views it did not see.
 """
 
 from __future__ import annotations
@@ -103,9 +111,14 @@ from brdfgan.inference.intake.photo import Photo, read_photo
 from brdfgan.inference.intake.preprocess import Crop, preprocess
 from brdfgan.inference.pipeline import unique_names
 from brdfgan.inference.refine import RefineConfig, refine_maps
+from brdfgan.inference.views.config import ViewFitConfig
+from brdfgan.inference.views.fit import fit_views as fit_maps_to_views
 from brdfgan.io.atomic import write_text_atomic
 
 log = logging.getLogger(__name__)
+
+# fit_gain's refits of the gain and of the pixels it is fitted over (it settles in 2-3 on glossy captures).
+GAIN_PASSES = 5
 
 __all__ = [
     "REFERENCE_FILES",
@@ -116,8 +129,10 @@ __all__ = [
     "ViewScore",
     "capture_flash_frame",
     "capture_models",
+    "check_fit_views",
     "evaluate_captures",
     "find_captures",
+    "fit_capture_maps",
     "fit_gain",
     "markdown_table",
     "read_capture",
@@ -498,17 +513,34 @@ def relight(capture: Capture, maps: Tensor) -> Tensor:
 
 def fit_gain(render: Tensor, photo: Tensor, saturation: float = SATURATION_LEVEL) -> float:
     """The gain ``g`` minimising ``Σ (g·render − photo)²`` (linear) over the pixels whose photo is
-    not saturated (every channel below ``saturation``; all pixels when none is left). A black
-    render gets 1 (any gain fits it as badly).
+    not saturated and whose scaled render ``g·render`` is not either (every channel below
+    ``saturation``; all pixels when none is left). A black render gets 1 (any gain fits it as
+    badly).
+
+    The second condition matters on glossy samples: next to a clipped highlight a phone's tone
+    curve leaves the photo just under 1 where the render is several times brighter, and those few
+    pixels would pull a least-squares gain down by a third. ``g`` and the pixel set are refitted
+    together until the set settles (at most :data:`GAIN_PASSES` passes).
 
     Shape: render, photo ``(3, H, W)`` linear.
     """
-    unsaturated = (photo < saturation).all(dim=0, keepdim=True).expand_as(photo)
+    r_all, p_all = render.double(), photo.double()
+    unsaturated = (p_all < saturation).all(dim=0, keepdim=True)
     if not unsaturated.any():
         unsaturated = torch.ones_like(unsaturated)
-    r, p = render.double()[unsaturated], photo.double()[unsaturated]
-    energy = float((r * r).sum())
-    return float((r * p).sum()) / energy if energy > 0 else 1.0
+    pixels, gain = unsaturated, 1.0
+    for _ in range(GAIN_PASSES):
+        chosen = pixels.expand_as(p_all)
+        r, p = r_all[chosen], p_all[chosen]
+        energy = float((r * r).sum())
+        if not energy > 0:
+            return 1.0
+        gain = float((r * p).sum()) / energy
+        settled = unsaturated & (gain * r_all < saturation).all(dim=0, keepdim=True)
+        if not settled.any() or torch.equal(settled, pixels):
+            break
+        pixels = settled
+    return gain
 
 
 def srgb_rmse(render: Tensor, photo: Tensor) -> float:
@@ -609,18 +641,67 @@ def predict_capture_maps(capture: Capture, photo: Photo, model: CaptureModel) ->
     return resize_maps(maps.detach().float().cpu(), side)
 
 
+def check_fit_views(captures: Sequence[Capture], fit_views: int) -> None:
+    """Raise :class:`CaptureError` for the first capture with no view left to relight after
+    fitting to its first ``fit_views`` views (``fit_views`` ≥ 1)."""
+    if fit_views < 1:
+        raise UserError(f"fit_views={fit_views}: expected a positive number of views")
+    for capture in captures:
+        if len(capture.views) <= fit_views:
+            raise CaptureError(
+                f"{capture.folder}: {len(capture.views)} views, but fitting to the first {fit_views} "
+                f"needs at least {fit_views + 1} (one left to relight)"
+            )
+
+
+def fit_capture_maps(
+    capture: Capture,
+    photos: Sequence[Photo],
+    maps: Tensor,
+    fit_views: int,
+    config: ViewFitConfig | None = None,
+) -> Tensor:
+    """``maps`` fitted to the first ``fit_views`` views of ``capture`` (module docstring): the
+    views are rectified onto the sample square already, so each is seen whole, in the maps' frame.
+
+    Shape: maps ``(8, side, side)`` → ``(8, side, side)``.
+    """
+    stacked = torch.stack([photo.linear for photo in photos[:fit_views]])
+    result = fit_maps_to_views(
+        stacked,
+        torch.ones_like(stacked[:, :1]),
+        capture.camera_pos[:fit_views],
+        capture.light_pos[:fit_views],
+        maps,
+        capture.plane_half_size,
+        config,
+    )
+    dropped = [f"{record.index:02d}" for record in result.views if record.dropped is not None]
+    log.debug(
+        "%s: fit to %d views kept the %s (loss %.4g → %.4g; dropped views: %s)",
+        capture.name,
+        fit_views,
+        result.kept,
+        result.loss_start,
+        result.loss_end,
+        ", ".join(dropped) or "none",
+    )
+    return result.maps
+
+
 # --- results -----------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
 class ViewScore:
     """One view's sRGB RMSE for one model: with the gain fitted on the input view, and with the
-    calibrated flash power; ``role`` is ``"input"`` for the view the maps came from."""
+    calibrated flash power; ``role`` is ``"input"`` for the view the maps came from, ``"fitted"``
+    for the other views the maps were fitted to, ``"relit"`` for the views scored."""
 
     model: str
     capture: str
     view: int
-    role: Literal["input", "relit"]
+    role: Literal["input", "fitted", "relit"]
     gain: float
     rmse_fitted: float
     rmse_calibrated: float
@@ -628,11 +709,13 @@ class ViewScore:
 
 @dataclass(frozen=True)
 class CaptureResults:
-    """Every view's scores, with the order of models and captures."""
+    """Every view's scores, with the order of models and captures; ``fit_views``: the number of
+    views the maps were fitted to (1: the input view alone)."""
 
     models: tuple[str, ...]
     captures: tuple[str, ...]
     views: tuple[ViewScore, ...] = field(default_factory=tuple)
+    fit_views: int = 1
 
     def capture_mean(self, model: str, capture: str, key: str = "rmse_fitted") -> float:
         """Mean over the relit views of one capture."""
@@ -649,8 +732,11 @@ class CaptureResults:
         return sum(means) / len(means) if means else math.nan
 
 
-def score_capture(capture: Capture, photos: Sequence[Photo], maps: Tensor, model: str) -> list[ViewScore]:
-    """Relight ``maps`` at every view of ``capture`` and score them against ``photos``."""
+def score_capture(
+    capture: Capture, photos: Sequence[Photo], maps: Tensor, model: str, fit_views: int = 1
+) -> list[ViewScore]:
+    """Relight ``maps`` at every view of ``capture`` and score them against ``photos``; the first
+    ``fit_views`` views are the input and the fitted ones (in no mean)."""
     renders = relight(capture, maps)
     gain = fit_gain(renders[0], photos[0].linear)
     return [
@@ -658,7 +744,7 @@ def score_capture(capture: Capture, photos: Sequence[Photo], maps: Tensor, model
             model=model,
             capture=capture.name,
             view=view_id,
-            role="input" if index == 0 else "relit",
+            role="input" if index == 0 else "fitted" if index < fit_views else "relit",
             gain=gain,
             rmse_fitted=srgb_rmse(gain * render, photo.linear),
             rmse_calibrated=srgb_rmse(render, photo.linear),
@@ -671,28 +757,42 @@ def evaluate_captures(
     captures: Sequence[Capture],
     models: Sequence[CaptureModel],
     on_capture: Callable[[Capture], None] | None = None,
+    fit_views: int = 1,
+    fit_config: ViewFitConfig | None = None,
 ) -> CaptureResults:
     """Every model on every capture (module docstring); ``on_capture`` is called after each
-    capture (progress)."""
+    capture (progress). ``fit_views`` > 1: the maps are fitted to the first ``fit_views`` views
+    with ``fit_config`` (default: ``ViewFitConfig()``) and each row is ``<model>+fit<K>``.
+
+    Raises:
+        CaptureError: a capture with ``fit_views`` views or fewer, before any model runs.
+    """
     if not captures or not models:
         raise UserError("nothing to evaluate: no captures or no models")
+    check_fit_views(captures, fit_views)
+    names = [m.name if fit_views == 1 else f"{m.name}+fit{fit_views}" for m in models]
     views: list[ViewScore] = []
     for capture in captures:
         photos = read_views(capture)
-        for model in models:
+        for model, name in zip(models, names, strict=True):
             maps = predict_capture_maps(capture, photos[0], model)
-            views += score_capture(capture, photos, maps, model.name)
+            if fit_views > 1:
+                maps = fit_capture_maps(capture, photos, maps, fit_views, fit_config)
+            views += score_capture(capture, photos, maps, name, fit_views)
         if on_capture is not None:
             on_capture(capture)
-    return CaptureResults(tuple(m.name for m in models), tuple(c.name for c in captures), tuple(views))
+    return CaptureResults(tuple(names), tuple(c.name for c in captures), tuple(views), fit_views)
 
 
 def markdown_table(results: CaptureResults) -> str:
     """One row per model: the mean relit-view RMSE with the fitted gain (the headline) and with
     the calibrated power, then each capture's mean with the fitted gain."""
     relit = sorted({v.view for v in results.views if v.role == "relit"})
+    source = "maps predicted from the first view"
+    if results.fit_views > 1:
+        source += f" and fitted to the first {results.fit_views} views (not scored)"
     lines = [
-        f"Relit views of {len(results.captures)} capture(s), maps predicted from the first view; "
+        f"Relit views of {len(results.captures)} capture(s), {source}; "
         f"sRGB RMSE, lower is better (views {', '.join(f'{v:02d}' for v in relit)}). Fitted gain: one "
         "gain per model and capture fitted on the input view; calibrated: the capture's flash power as is.",
         "",
@@ -713,7 +813,8 @@ def _cell_text(text: str) -> str:
 
 
 def csv_table(results: CaptureResults) -> str:
-    """One row per model, capture and view (the input view too, ``role`` = ``input``)."""
+    """One row per model, capture and view (the input and fitted views too, ``role`` = ``input``,
+    ``fitted``)."""
     table = io.StringIO(newline="")
     writer = csv.writer(table)
     writer.writerow(["model", "capture", "view", "role", "gain", "rmse_fitted_gain", "rmse_calibrated_power"])
