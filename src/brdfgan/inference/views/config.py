@@ -29,7 +29,9 @@ class ViewFitConfig:
     prior_slopes: float = 0.02
     prior_roughness: float = 0.02
     prior_metallic: float = 0.1  # metal is rarely what a few flash photos prove wrong
-    tv_weight: float = 0.05  # total variation of the slopes' and roughness's per-texel correction
+    # Total variation of the slopes' and roughness's per-texel correction; chosen on synthetic Mitsuba
+    # captures of validation materials (docs/views.md, "Choosing the fit's settings").
+    tv_weight: float = 0.25
     clip_level: float = 0.98  # a pixel with a channel at or above this is clipped: a lower bound
     outlier_mads: float = 3.0  # a view is dropped above median + this many (scaled) MADs of residual
     spike_factor: float = 1.5  # the guard restores the best state when a step's loss exceeds this × best

@@ -391,6 +391,7 @@ def fit_views(
     Args:
         photos: the views, linear, each warped into the reference's texture frame; any exposure
             and white balance (each view gets its own gain). Values outside ``seen`` are ignored.
+            The first is the reference, the photo ``maps`` were predicted from.
         seen: 1 where the view sees the texel (0/1 or bool).
         camera_position, light_position: each view's camera and flash in world units, in the
             renderer's frame (the texture square is ``[-s, s]²`` of z = 0, row 0 at +Y).
@@ -413,6 +414,13 @@ def fit_views(
     if not plane_half_size > 0:
         raise ValueError(f"plane_half_size must be positive, got {plane_half_size}")
     config = config or ViewFitConfig()
+    # Lengths in half-sides of the square: the renders then have the level the start gain's
+    # black-pixel floor and the photo loss's log floor are set for (a unit flash 20-50 cm from a
+    # 10 cm sample renders below them). Scaling every length by 1/s scales every render by s²,
+    # which each view's gain absorbs; the gains reported are those of this unit scene.
+    camera_position = camera_position / plane_half_size
+    light_position = light_position / plane_half_size
+    plane_half_size = 1.0
     started = time.perf_counter()
     device = maps.device
     prediction = maps.detach().float()
@@ -511,7 +519,9 @@ def fit_views(
 
 
 def _drop_reasons(residuals: Tensor, coverage: Tensor, config: ViewFitConfig) -> list[str | None]:
-    """Per view, the one-line reason to leave it out of the fit, or ``None``."""
+    """Per view, the one-line reason to leave it out of the fit, or ``None``. The first view, the
+    reference the prediction was made from, is never an outlier: its residual is the prediction's
+    own error, and without it nothing ties the fit to the photo the material is framed on."""
     outliers = outlier_views(residuals, config.outlier_mads)
     finite = residuals[torch.isfinite(residuals)]
     median = float(finite.median()) if finite.numel() else math.nan
@@ -521,7 +531,7 @@ def _drop_reasons(residuals: Tensor, coverage: Tensor, config: ViewFitConfig) ->
             reasons.append("sees no texel of the reference")
         elif not math.isfinite(float(residuals[v])):
             reasons.append("its residual against the prediction is not finite")
-        elif bool(outliers[v]):
+        elif bool(outliers[v]) and v > 0:
             reasons.append(
                 f"residual {float(residuals[v]):.3f} against the prediction stands out "
                 f"(median {median:.3f}): another surface or a bad registration"
