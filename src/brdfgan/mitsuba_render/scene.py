@@ -84,7 +84,7 @@ def plane_scene_dict(
     plane_half_size: float = 1.0,
     spp: int = 64,
     seed: int = 0,
-    resolution: int | None = None,
+    resolution: int | tuple[int, int] | None = None,
     integrator: dict[str, Any] | None = None,
     extra_emitters: dict[str, dict[str, Any]] | None = None,
     camera: CameraPose | None = None,
@@ -98,7 +98,7 @@ def plane_scene_dict(
         plane_half_size: half the side of the sample square.
         spp: samples per pixel.
         seed: sampler seed.
-        resolution: film size (default: the map size).
+        resolution: film size, square or ``(width, height)`` (default: the map size).
         integrator: integrator dict (default: ``direct``, enough for a single plane).
         extra_emitters: further emitters by name (environment maps, sun/sky).
         camera: the camera pose, field of view included (default: the nominal camera of
@@ -110,7 +110,10 @@ def plane_scene_dict(
     mi = mitsuba()
     _, height, width = maps.shape
     pose = camera if camera is not None else nominal_camera(fov_deg, plane_half_size)
-    film_w, film_h = (resolution, resolution) if resolution else (width, height)
+    if resolution is None:
+        film_w, film_h = width, height
+    else:
+        film_w, film_h = (resolution, resolution) if isinstance(resolution, int) else resolution
     scene: dict[str, Any] = {
         "type": "scene",
         "integrator": integrator or {"type": "direct"},
