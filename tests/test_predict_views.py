@@ -10,12 +10,14 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
+from PIL import Image
 
 from brdfgan.cli import main
 from brdfgan.core.homography import pose_homography
@@ -77,14 +79,28 @@ def flash_photo(maps: torch.Tensor, pose: CameraPose, path: Path) -> Path:
     return path
 
 
+REFERENCE, EAST, NORTH = tilted_pose(0.0, 0.0), tilted_pose(18.0, 0.0), tilted_pose(15.0, 120.0)
+
+
+def camera_in_reference_world(document: dict[str, Any], pose: CameraPose) -> np.ndarray:
+    """Where a view's true camera lies in the reference's world: the crop is the square [-1, 1]²,
+    so a true position moves to the crop's centre and scales by the crop's half side on the plane."""
+    crop = document["crop"]
+    metres_per_px = 2.0 * DISTANCE * math.tan(math.radians(FOV_DEG) / 2.0) / WIDTH  # the nadir reference
+    centre = np.array(
+        [crop["x"] + crop["size"] / 2 - WIDTH / 2, -(crop["y"] + crop["size"] / 2 - HEIGHT / 2), 0.0]
+    )
+    return (np.array(pose.origin) - centre * metres_per_px) / (crop["size"] / 2 * metres_per_px)
+
+
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp("views")
     maps, other = textured_maps(0), textured_maps(1)
     photos = {
-        "ref": flash_photo(maps, tilted_pose(0.0, 0.0), folder / "ref.png"),
-        "east": flash_photo(maps, tilted_pose(18.0, 0.0), folder / "east.png"),  # the poses: see the test
-        "north": flash_photo(maps, tilted_pose(15.0, 120.0), folder / "north.png"),
+        "ref": flash_photo(maps, REFERENCE, folder / "ref.png"),
+        "east": flash_photo(maps, EAST, folder / "east.png"),
+        "north": flash_photo(maps, NORTH, folder / "north.png"),
         "other": flash_photo(other, tilted_pose(0.0, 0.0), folder / "other.png"),
     }
     broken = folder / "broken.jpg"
@@ -135,21 +151,15 @@ def test_views_give_one_material_with_each_views_role(
         assert view["reason"] is None and view["method"] == "sift"
         assert view["reprojection_px"] < 0.5 and view["pose_reprojection_px"] < 1.0
         assert view["camera_position"][2] > 0 and len(view["gain"]) == 3
-    # Each view's camera in the reference's world: the crop is the square [-1, 1]², so a true
-    # position moves to the crop's centre and scales by the crop's half side on the plane.
-    crop = document["crop"]
-    metres_per_px = 2.0 * DISTANCE * math.tan(math.radians(FOV_DEG) / 2.0) / WIDTH  # the nadir reference
-    centre = np.array(
-        [crop["x"] + crop["size"] / 2 - WIDTH / 2, -(crop["y"] + crop["size"] / 2 - HEIGHT / 2), 0.0]
-    )
-    scale = 1.0 / (crop["size"] / 2 * metres_per_px)
-    for view, pose in ((views[1], tilted_pose(18.0, 0.0)), (views[3], tilted_pose(15.0, 120.0))):
-        truth = (np.array(pose.origin) - centre * metres_per_px) * scale
+    for view, pose in ((views[1], EAST), (views[3], NORTH)):
+        truth = camera_in_reference_world(document, pose)
         assert np.abs(np.array(view["camera_position"]) - truth).max() < 0.03, (
             view["camera_position"],
             truth,
         )
-    assert views[0]["camera_position"][2] == pytest.approx(DISTANCE * scale, rel=1e-3)
+    assert views[0]["camera_position"][2] == pytest.approx(
+        camera_in_reference_world(document, REFERENCE)[2], rel=1e-3
+    )
     assert (
         document["view_fit"]["kept"] in ("fit", "prediction") and document["view_fit"]["settings"]["levels"]
     )
@@ -197,3 +207,60 @@ def test_more_views_than_the_fit_takes_is_a_one_line_usage_error(
     assert code == USER_ERROR_EXIT_CODE
     assert captured.err.strip() == "error: --views takes at most 12 photos of one surface, got 13"
     assert not (tmp_path / "o").exists()
+
+
+def test_views_stored_rotated_smaller_or_as_jpeg_give_the_same_cameras(
+    scene: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # east.jpg is stored turned a quarter (EXIF orientation 6: turn it clockwise to view it), so
+    # its width and height swap on disk: misread, its field of view would span the wrong side and
+    # its camera's distance would be off by 4:3. north.jpg is 3/4 the size.
+    east = np.asarray(Image.open(scene["east"]).convert("RGB"))
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    Image.fromarray(np.ascontiguousarray(np.rot90(east, 1))).save(
+        tmp_path / "east.jpg", quality=95, exif=exif
+    )
+    north = Image.open(scene["north"]).convert("RGB")
+    north.resize((WIDTH * 3 // 4, HEIGHT * 3 // 4), Image.Resampling.LANCZOS).save(
+        tmp_path / "north.jpg", quality=95
+    )
+    out = tmp_path / "out"
+    inputs = [scene["ref"], tmp_path / "east.jpg", tmp_path / "north.jpg"]
+    options = ["--out", str(out), "--resolution", "128", "--fov", str(FOV_DEG), "--no-preview"]
+    assert main(["predict", "--views", *map(str, inputs), *options]) == 0, capsys.readouterr().err
+    document = json.loads((out / "ref" / "material.json").read_text())
+    views = document["views"]
+    assert [view["role"] for view in views] == ["reference", "fitted", "fitted"]
+    for view, pose in ((views[1], EAST), (views[2], NORTH)):
+        truth = camera_in_reference_world(document, pose)
+        assert np.abs(np.array(view["camera_position"]) - truth).max() < 0.05, (
+            view["camera_position"],
+            truth,
+        )
+
+
+def test_one_photo_is_the_single_photo_output_two_a_warning_and_none_readable_one_line(
+    scene: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    options = ["--out", str(out), "--resolution", "128", "--no-preview"]
+    assert main(["predict", "--views", str(scene["ref"]), *options]) == 0
+    captured = capsys.readouterr()
+    assert "views" not in json.loads((out / "ref" / "material.json").read_text())
+    assert any("single-photo" in line for line in captured.err.splitlines())
+    assert main(["predict", "--views", str(scene["ref"]), str(scene["east"]), *options]) == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning:")]
+    assert [line for line in warnings if "only two usable photos" in line] == [
+        f"warning: {scene['ref']}: only two usable photos: a fit to two can come out worse than one "
+        "photo (glossy surfaces); 3-5 photos are what it needs"
+    ]
+    code = main(
+        ["predict", "--views", str(scene["broken"]), str(scene["broken"]), "--out", str(tmp_path / "o")]
+    )
+    captured = capsys.readouterr()
+    assert code == USER_ERROR_EXIT_CODE
+    errors = [line for line in captured.err.splitlines() if not line.startswith("model ")]  # the banner
+    assert len(errors) == 1 and errors[0].startswith("error: none of the 2 views can be read (")
+    assert f"{scene['broken']}: not an image file" in errors[0]
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())

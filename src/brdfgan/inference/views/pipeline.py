@@ -4,8 +4,9 @@
 
     read_photo each view (an unreadable one: a warning naming it, left out)
       → the first readable view is the reference: preprocess + network, as predict_photo
-      → each other view registered to the reference photo (features, highlight masked) and checked
-        (check_registration: a view that fails is left out with a warning naming it)
+      → each other view registered to the reference photo — by MaterialGAN's marker board where
+        both photos show it, else by features (highlight masked) — and checked (check_registration:
+        a view that fails is left out with a warning naming it)
       → its camera in the reference's world (views.geometry), its photo warped into the
         reference's texture frame (views.warp)
       → fit_views: the maps and each view's gain fitted to every view (views.fit)
@@ -20,7 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +30,7 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.exposure import luminance
-from brdfgan.core.homography import intrinsics
+from brdfgan.core.homography import apply_homography, intrinsics
 from brdfgan.core.render import CameraPose
 from brdfgan.errors import UserError, one_line
 from brdfgan.inference.intake.lens import crop_field_of_view
@@ -51,11 +52,13 @@ from brdfgan.inference.views.geometry import (
     view_camera,
 )
 from brdfgan.inference.views.register import (
+    MIN_MARKER_CORNERS,
     Registration,
     check_registration,
     detect_features,
     highlight_mask,
     homography_to_view,
+    marker_homography,
 )
 from brdfgan.inference.views.warp import warp_to_reference
 
@@ -87,6 +90,18 @@ def _finite_or_none(value: Any) -> Any:
     return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
+# The board's printed size: only the ratio of two views' board homographies is used, in which it
+# cancels, so any value gives the same registration.
+BOARD_SIZE_CM = 1.0
+
+
+def find_board(photo: Photo) -> Registration | None:
+    """The marker board's homography (board plane → the photo's pixels) when the photo shows
+    enough of its tags (:data:`MIN_MARKER_CORNERS` corners), else ``None``."""
+    board = marker_homography(luminance(photo.linear)[0].numpy(), BOARD_SIZE_CM)
+    return board if board is not None and board.inliers >= MIN_MARKER_CORNERS else None
+
+
 def reference_features(reference: ReferencePrediction) -> tuple[np.ndarray, np.ndarray]:
     """The reference photo's keypoints and descriptors, away from its flash highlight (found once
     for every view registered to it)."""
@@ -99,26 +114,36 @@ def register_view(
     photo: Photo,
     reference: ReferencePrediction,
     features: tuple[np.ndarray, np.ndarray],
+    board: Registration | None,
     predictor: Predictor,
 ) -> RegisteredView | str:
-    """One view registered to the reference (whose :func:`reference_features` are ``features``),
-    checked, posed and warped; or the one-line reason it is left out."""
+    """One view registered to the reference (whose :func:`reference_features` are ``features``
+    and :func:`find_board` is ``board``), checked, posed and warped; or the one-line reason it is
+    left out. Where both photos show the marker board it registers them (tag corners are exact
+    where features may be few); a view without it falls back to the features."""
     side = reference.side
     photo_from_texture = texture_to_photo(reference.prepared.crop, side)
-    registration = homography_to_view(
-        features, luminance(photo.linear)[0].numpy(), highlight_mask(photo.linear)
-    )
-    if registration is None:
-        return "too few features match the reference photo's to fit a homography"
     corners = np.array([[0.0, 0.0], [side, 0.0], [side, side], [0.0, side]])
-    square = np.concatenate([corners, np.ones((4, 1))], axis=1) @ photo_from_texture.T
-    reason = check_registration(
-        registration,
-        square[:, :2],
-        photo.width,
-        photo.height,
-        reference_size=(reference.photo.width, reference.photo.height),
-    )
+    square = apply_homography(photo_from_texture, corners)  # the reference square, reference pixels
+    view_board = find_board(photo) if board is not None else None
+    if board is not None and view_board is not None:
+        # Checked in the board's frame, where check_registration knows a marker view's orientation.
+        reason = check_registration(
+            view_board, apply_homography(np.linalg.inv(board.homography), square), photo.width, photo.height
+        )
+        registration = replace(view_board, homography=view_board.homography @ np.linalg.inv(board.homography))
+    else:
+        found = homography_to_view(features, luminance(photo.linear)[0].numpy(), highlight_mask(photo.linear))
+        if found is None:
+            return "too few features match the reference photo's to fit a homography"
+        registration = found
+        reason = check_registration(
+            registration,
+            square,
+            photo.width,
+            photo.height,
+            reference_size=(reference.photo.width, reference.photo.height),
+        )
     if reason is not None:
         return reason
     view_from_texture = registration.homography @ photo_from_texture
@@ -171,8 +196,9 @@ def predict_views(
                 message = one_line(error)
                 prefix = f"{path}: "
                 leave_out(index, message[len(prefix) :] if message.startswith(prefix) else message)
-    if not photos:
-        raise UserError(f"none of the {len(paths)} views can be read")
+    if not photos:  # the first one's reason, for a line that says what to fix
+        first = warnings[0].replace(": left out: ", ": ", 1)
+        raise UserError(f"none of the {len(paths)} views can be read ({first})")
     reference_index, *others = sorted(photos)
     reference = predict_reference(photos[reference_index], predictor, clock)
     entries[reference_index]["role"] = "reference"
@@ -183,8 +209,9 @@ def predict_views(
     with clock("register"):
         # The reference's features once for all views (none to find when it is alone).
         features = reference_features(reference) if others else (np.zeros((0, 2)), np.zeros((0, 0)))
+        board = find_board(reference.photo) if others else None
         for index in others:
-            outcome = register_view(index, photos[index], reference, features, predictor)
+            outcome = register_view(index, photos[index], reference, features, board, predictor)
             if isinstance(outcome, str):
                 leave_out(index, outcome)
             else:
@@ -195,6 +222,11 @@ def predict_views(
         )
         return refine_and_write(reference, out_dir, predictor, clock, warnings=tuple(warnings))
 
+    if len(registered) == 1:  # measured on synthetic captures: docs/views.md
+        warnings.append(
+            f"{reference_path}: only two usable photos: a fit to two can come out worse than one "
+            "photo (glossy surfaces); 3-5 photos are what it needs"
+        )
     camera = reference_camera(reference.flash_frame, reference.side)
     cameras = [camera, *(view.camera for view in registered)]
     positions = torch.tensor([list(pose.origin) for pose in cameras], dtype=torch.float32)

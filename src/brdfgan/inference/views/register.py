@@ -350,7 +350,7 @@ class MarkerBoard:
         }
 
 
-# MaterialGAN's board (Guo et al. 2020; outputs/issue47_design.md §2): tags 0–15 on the border of a
+# MaterialGAN's board (Guo et al. 2020; docs/views.md): tags 0–15 on the border of a
 # 5×5 grid of pitch 4 units, clockwise from the top-left; a unit is size/18.
 MATERIALGAN_BOARD = MarkerBoard(
     dictionary=cv2.aruco.DICT_APRILTAG_36h11,
