@@ -80,6 +80,7 @@ bench: setup
 	$(PY) -m benchmarks.bench_predict
 	$(PY) -m benchmarks.bench_preview
 	$(PY) -m benchmarks.bench_tiling
+	$(PY) -m benchmarks.bench_views
 
 data: setup
 	$(PY) generate.py
