@@ -211,6 +211,7 @@ def _wandb_records(path: Path) -> Iterator[Any]:
 
 
 @pytest.mark.mitsuba
+@pytest.mark.slow  # 13-18 s: kept out of make test's 6 minutes (make test-slow runs it)
 def test_sweep_of_a_dozen_overrides_logs_each_job_to_its_own_wandb_run_and_reports_by_loss(
     tiny_data: Path, tmp_path: Path
 ) -> None:

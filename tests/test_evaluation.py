@@ -203,6 +203,7 @@ def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> N
 
 
 @pytest.mark.mitsuba
+@pytest.mark.slow  # 13-18 s: kept out of make test's 6 minutes (make test-slow runs it)
 def test_baseline_trains_and_is_evaluated_by_the_same_commands(tiny_data: Path) -> None:
     # The baseline trains with the content losses only (no discriminator); 6 levels fit 64² crops.
     baseline = ["model=deschaintre2018", "model.generator.levels=6"]

@@ -77,6 +77,7 @@ def _val_loss(job: Path) -> float:
 
 
 @pytest.mark.mitsuba
+@pytest.mark.slow  # 13-18 s: kept out of make test's 6 minutes (make test-slow runs it)
 def test_two_trials_on_the_tiny_data_record_the_best_parameters(tiny_data: Path, tmp_path: Path) -> None:
     sweep = tmp_path / "sweep"
     overrides = [

@@ -321,6 +321,7 @@ def test_ablation_sweep_config_lists_the_grid(tmp_path: Path) -> None:
 
 
 @pytest.mark.mitsuba
+@pytest.mark.slow  # 13-18 s: kept out of make test's 6 minutes (make test-slow runs it)
 def test_ddp_on_two_cpu_processes_trains_and_tests(tiny_data: Path) -> None:
     # The paper trains with DDP; two gloo processes on the CPU exercise the same code path:
     # per-rank shard splitting, both networks in one module, toggled optimizers.
