@@ -279,6 +279,8 @@ def test_train_py_prints_each_log_line_once_and_not_the_whole_config(tiny_data: 
     assert console.count("Seed set to 3") == 1
     assert console.count("Total params") == 1  # the model summary
     assert "run folder: " in console and "_target_:" not in console
+    # Lightning's rank-zero lines stay, its cloud-logging advertisement goes.
+    assert "GPU available: " in console and "💡" not in console and "litlogger" not in console
     run = sorted((tiny_data / "logs" / "once" / "runs").iterdir())[-1]
     assert "_target_:" in (run / ".hydra" / "config.yaml").read_text()
 

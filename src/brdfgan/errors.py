@@ -168,7 +168,8 @@ def single_console_logging() -> None:
     Importing ``lightning`` gives its package logger a stderr handler of its own, and its records
     also propagate to the root logger, which Hydra's job logging sends to stdout and the run's log
     file: every Lightning line (and the model summary) appeared twice. Its own handler goes; the
-    root's handlers keep each line once, in the console and in the log file."""
+    root's handlers keep each line once, in the console and in the log file. Lightning's tips
+    (an advertisement for its cloud logger) are dropped."""
     import logging
 
     import lightning  # noqa: F401  (the import adds the handler removed here)
@@ -176,6 +177,23 @@ def single_console_logging() -> None:
     package_logger = logging.getLogger("lightning")
     for handler in list(package_logger.handlers):
         package_logger.removeHandler(handler)
+    # Lightning's Trainer also advertises a cloud logger ("💡 Tip: … litlogger …") on every run.
+    for name in LIGHTNING_TIP_LOGGERS:
+        tip_logger = logging.getLogger(name)
+        if not any(isinstance(f, LightningTipFilter) for f in tip_logger.filters):
+            tip_logger.addFilter(LightningTipFilter())
+
+
+# The loggers Lightning's rank-zero messages (its tips among them) are written to.
+LIGHTNING_TIP_LOGGERS = ("lightning.pytorch.utilities.rank_zero", "lightning.fabric.utilities.rank_zero")
+
+
+class LightningTipFilter:
+    """Drops Lightning's advertising tips (messages starting with "💡 Tip"), keeps the rest."""
+
+    def filter(self, record: object) -> bool:
+        message = getattr(record, "msg", "")
+        return not (isinstance(message, str) and message.lstrip().startswith("💡"))
 
 
 def run_hydra_app(app: Callable[[], object]) -> None:
