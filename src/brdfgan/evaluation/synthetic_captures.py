@@ -25,10 +25,7 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
-import uuid
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -46,6 +43,7 @@ from brdfgan.core.render import CameraPose, Vector3, camera_frame, capture_camer
 from brdfgan.core.svbrdf import validate_maps
 from brdfgan.data.capture import tilted_camera
 from brdfgan.data.sensor import SensorEffects, encode_srgb8
+from brdfgan.inference.outputs.export import staged_directory
 from brdfgan.inference.views.register import MATERIALGAN_BOARD, MarkerBoard
 from brdfgan.inference.views.warp import warp_to_reference
 from brdfgan.io.images import write_image
@@ -364,20 +362,6 @@ def _vector(values: Sequence[float]) -> list[float]:
     return [float(v) for v in values]
 
 
-@contextmanager
-def _staged_folder(folder: Path) -> Iterator[Path]:
-    # Written beside the target and renamed over it: a killed run leaves no half capture behind.
-    staging = folder.parent / f".{folder.name}.{uuid.uuid4().hex[:12]}.tmp"
-    staging.mkdir(parents=True)
-    try:
-        yield staging
-        if folder.exists():
-            shutil.rmtree(folder)
-        os.rename(staging, folder)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-
-
 def write_synthetic_capture(
     capture: SyntheticCapture, maps: Tensor, folder: str | os.PathLike[str], name: str | None = None
 ) -> Path:
@@ -388,7 +372,8 @@ def write_synthetic_capture(
     """
     folder = Path(folder)
     settings = capture.settings
-    with _staged_folder(folder) as staging:
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    with staged_directory(folder) as staging:
         (staging / "handheld").mkdir()
         for index in range(settings.views):
             rectified = encode_srgb8(capture.rectified[index]).permute(1, 2, 0).numpy() / 255.0

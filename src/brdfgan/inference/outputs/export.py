@@ -55,8 +55,9 @@ import os
 import re
 import shutil
 import uuid
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -296,23 +297,38 @@ def write_material(
         ) from None
     if target.exists() and not target.is_dir():
         raise ExportError(f"{target}: exists and is not a directory")
-    owner = _owner()
-    staging = parent / f".{target.name}.{owner}.tmp"
     try:
-        staging.mkdir()
-        files = _write_files(staging, target.name, textures, gltf_textures, options, extra_files or {})
-        document = {"format": MATERIAL_JSON_FORMAT, **metadata, "relief": relief.to_json(), "files": files}
-        (staging / "material.json").write_text(json.dumps(document, indent=2, sort_keys=False) + "\n")
-        _swap_directory(staging, target, owner)
+        with staged_directory(target) as staging:
+            files = _write_files(staging, target.name, textures, gltf_textures, options, extra_files or {})
+            document = {
+                "format": MATERIAL_JSON_FORMAT,
+                **metadata,
+                "relief": relief.to_json(),
+                "files": files,
+            }
+            (staging / "material.json").write_text(json.dumps(document, indent=2, sort_keys=False) + "\n")
     except OSError as error:
         if is_disk_full(error):
             # The folder is what the user asked for; the file that hit the limit is a hidden temporary.
             raise DiskFullError(target) from None
         raise ExportError(f"{target}: cannot write the outputs ({error.strerror or error})") from None
-    finally:
-        # Also on KeyboardInterrupt (SIGINT, and SIGTERM while predict runs): nothing hidden stays.
-        shutil.rmtree(staging, ignore_errors=True)
     return target
+
+
+@contextmanager
+def staged_directory(target: Path) -> Iterator[Path]:
+    """A fresh hidden folder beside ``target`` (its parent must exist) to write a result into; when
+    the block ends without error it takes ``target``'s place (:func:`_swap_directory`: the old
+    result survives any failure), and whatever is left of it is removed in any case — also on
+    KeyboardInterrupt (SIGINT, and SIGTERM while predict runs): nothing hidden stays."""
+    owner = _owner()
+    staging = target.parent / f".{target.name}.{owner}.tmp"
+    try:
+        staging.mkdir()
+        yield staging
+        _swap_directory(staging, target, owner)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def recover_outputs(out_root: str | os.PathLike[str]) -> list[str]:
