@@ -104,7 +104,6 @@ from torch import Tensor
 from brdfgan.core.checks import check_shape
 from brdfgan.core.exposure import SATURATION_LEVEL
 from brdfgan.core.flash_geometry import check_flash_frame, resize_flash_frame
-from brdfgan.core.render import PointLights, render_point_lights
 from brdfgan.core.svbrdf import check_map_shape, linear_to_srgb, resize_maps
 from brdfgan.errors import UserError
 from brdfgan.inference.intake.photo import Photo, read_photo
@@ -113,6 +112,7 @@ from brdfgan.inference.pipeline import unique_names
 from brdfgan.inference.refine import RefineConfig, refine_maps
 from brdfgan.inference.views.config import ViewFitConfig
 from brdfgan.inference.views.fit import fit_views as fit_maps_to_views
+from brdfgan.inference.views.fit import render_views
 from brdfgan.io.atomic import write_text_atomic
 
 log = logging.getLogger(__name__)
@@ -497,18 +497,14 @@ def relight(capture: Capture, maps: Tensor) -> Tensor:
         - output: ``(V, 3, side, side)`` in the maps' dtype
     """
     check_map_shape(maps)
-    dtype = maps.dtype
-    color = torch.tensor(capture.light_pow, dtype=dtype).view(1, 1, 1, 3)
-    renders = []
-    for view in range(len(capture.views)):
-        camera = capture.camera_pos[view].to(dtype).view(1, 1, 3)
-        lights = PointLights(
-            position=capture.light_pos[view].to(dtype).view(1, 1, 1, 3),
-            intensity=torch.ones(1, 1, 1, dtype=dtype),
-            color=color,
-        )
-        renders.append(render_point_lights(maps[None], camera, lights, capture.plane_half_size)[0, 0])
-    return torch.stack(renders)
+    power = torch.tensor(capture.light_pow, dtype=maps.dtype).view(3, 1, 1)
+    renders = [
+        render_views(
+            maps[None], capture.camera_pos[v : v + 1], capture.light_pos[v : v + 1], capture.plane_half_size
+        )[0]
+        for v in range(len(capture.views))
+    ]
+    return torch.stack(renders) * power
 
 
 def fit_gain(render: Tensor, photo: Tensor, saturation: float = SATURATION_LEVEL) -> float:
