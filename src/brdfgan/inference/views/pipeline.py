@@ -95,18 +95,22 @@ def _finite_or_none(value: Any) -> Any:
 BOARD_SIZE_CM = 1.0
 
 
-def find_board(photo: Photo) -> Registration | None:
-    """The marker board's homography (board plane → the photo's pixels) when the photo shows
-    enough of its tags (:data:`MIN_MARKER_CORNERS` corners), else ``None``."""
-    board = marker_homography(luminance(photo.linear)[0].numpy(), BOARD_SIZE_CM)
+def grey_of(photo: Photo) -> np.ndarray:
+    """The photo's linear luminance, what the board and the features are found on. Shape: ``(H, W)``."""
+    return luminance(photo.linear)[0].numpy()
+
+
+def find_board(grey: np.ndarray) -> Registration | None:
+    """The marker board's homography (board plane → the photo's pixels) when the photo (its
+    :func:`grey_of`) shows enough of its tags (:data:`MIN_MARKER_CORNERS` corners), else ``None``."""
+    board = marker_homography(grey, BOARD_SIZE_CM)
     return board if board is not None and board.inliers >= MIN_MARKER_CORNERS else None
 
 
-def reference_features(reference: ReferencePrediction) -> tuple[np.ndarray, np.ndarray]:
-    """The reference photo's keypoints and descriptors, away from its flash highlight (found once
-    for every view registered to it)."""
-    linear = reference.photo.linear
-    return detect_features(luminance(linear)[0].numpy(), highlight_mask(linear))
+def reference_features(reference: ReferencePrediction, grey: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reference photo's keypoints and descriptors (on its :func:`grey_of`), away from its
+    flash highlight (found once for every view registered to it)."""
+    return detect_features(grey, highlight_mask(reference.photo.linear))
 
 
 def register_view(
@@ -125,7 +129,8 @@ def register_view(
     photo_from_texture = texture_to_photo(reference.prepared.crop, side)
     corners = np.array([[0.0, 0.0], [side, 0.0], [side, side], [0.0, side]])
     square = apply_homography(photo_from_texture, corners)  # the reference square, reference pixels
-    view_board = find_board(photo) if board is not None else None
+    grey = grey_of(photo)
+    view_board = find_board(grey) if board is not None else None
     if board is not None and view_board is not None:
         # Checked in the board's frame, where check_registration knows a marker view's orientation.
         reason = check_registration(
@@ -133,7 +138,7 @@ def register_view(
         )
         registration = replace(view_board, homography=view_board.homography @ np.linalg.inv(board.homography))
     else:
-        found = homography_to_view(features, luminance(photo.linear)[0].numpy(), highlight_mask(photo.linear))
+        found = homography_to_view(features, grey, highlight_mask(photo.linear))
         if found is None:
             return "too few features match the reference photo's to fit a homography"
         registration = found
@@ -207,9 +212,9 @@ def predict_views(
 
     registered: list[RegisteredView] = []
     with clock("register"):
-        # The reference's features once for all views (none to find when it is alone).
-        features = reference_features(reference) if others else (np.zeros((0, 2)), np.zeros((0, 0)))
-        board = find_board(reference.photo) if others else None
+        if others:  # the reference's features and board, found once for all views
+            grey = grey_of(reference.photo)
+            features, board = reference_features(reference, grey), find_board(grey)
         for index in others:
             outcome = register_view(index, photos[index], reference, features, board, predictor)
             if isinstance(outcome, str):
