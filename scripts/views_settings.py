@@ -14,14 +14,12 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from brdfgan.data.shards import iter_shard, list_shards
 from brdfgan.evaluation.captures import (
     capture_models,
     fit_capture_maps,
     predict_capture_maps,
     read_capture,
     read_views,
-    score_capture,
 )
 from brdfgan.evaluation.synthetic_captures import (
     HandheldSettings,
@@ -30,7 +28,7 @@ from brdfgan.evaluation.synthetic_captures import (
     write_synthetic_capture,
 )
 from brdfgan.inference.views.config import ViewFitConfig
-from scripts.views_table import HELD_OUT, map_errors
+from scripts.views_table import held_out_errors, map_errors, materials
 
 MATERIALS = (
     ("vproc", "data/procedural_and_scans_val_procedural", 4),
@@ -59,27 +57,22 @@ def main() -> None:
     args = parser.parse_args()
     phone = locked_phone("conf/sensor/phone_eval.yaml")
     captures = []
-    for name, folder, count in MATERIALS:
-        samples = [sample for shard in list_shards(folder, "test") for sample in iter_shard(shard)][:count]
-        for index, sample in enumerate(samples):
-            target = args.out / "captures" / f"{name}_{index}"
-            if not (target / "parameters.json").is_file():
-                capture = render_synthetic_capture(
-                    sample.maps, HandheldSettings(), phone, seed=100 + len(captures)
-                )
-                write_synthetic_capture(capture, sample.maps, target)
-            captures.append((read_capture(target), sample.maps.float()))
+    for seed, (name, maps) in enumerate(materials(MATERIALS)):
+        target = args.out / "captures" / name
+        if not (target / "parameters.json").is_file():
+            write_synthetic_capture(
+                render_synthetic_capture(maps, HandheldSettings(), phone, seed=100 + seed), maps, target
+            )
+        captures.append((read_capture(target), maps.float()))
     model = capture_models()[0]
     results: dict[str, list[list[float]]] = {}
     for capture, truth in captures:
         photos = read_views(capture)
         prediction = predict_capture_maps(capture, photos[0], model)
 
-        def held_out(maps: object) -> float:
-            scores = [s for s in score_capture(capture, photos, maps, model.name) if s.view in HELD_OUT]  # noqa: B023
-            return sum(s.rmse_fitted for s in scores) / len(scores)
-
-        results.setdefault("prediction", []).append([held_out(prediction)])
+        results.setdefault("prediction", []).append(
+            [held_out_errors(capture, photos, prediction, model.name)[0]]
+        )
         for variant in args.variants:
             for views in (2, 3, 5):
                 start = time.perf_counter()
@@ -87,7 +80,7 @@ def main() -> None:
                 errors = map_errors(maps, truth)
                 results.setdefault(f"{variant} K={views}", []).append(
                     [
-                        held_out(maps),
+                        held_out_errors(capture, photos, maps, model.name)[0],
                         errors["normal_angle_deg"],
                         errors["rmse/basecolor"],
                         errors["rmse/roughness"],

@@ -72,10 +72,11 @@ def render_handheld(
         raise ValueError(f"need one flash position per camera, got {len(flash_positions)} for {len(cameras)}")
     if width < 1 or height < 1:
         raise ValueError(f"film size must be positive, got {width}×{height}")
+    plane = maps.float().cpu()
     photos = []
     for view, (camera, flash) in enumerate(zip(cameras, flash_positions, strict=True)):
         scene = plane_scene_dict(
-            maps.float().cpu(),
+            plane,
             lights=[MitsubaPointLight((float(flash[0]), float(flash[1]), float(flash[2])), flash_intensity)],
             plane_half_size=plane_half_size,
             spp=spp,
