@@ -11,7 +11,7 @@ ifneq ($(LIBLLVM),)
 export DRJIT_LIBLLVM_PATH ?= $(LIBLLVM)
 endif
 
-.PHONY: setup test test-slow faults demo demo-renderer lint format bench data ood clean
+.PHONY: setup test test-fast test-slow faults demo demo-renderer lint format bench data ood clean
 
 setup: $(STAMP)
 
@@ -38,6 +38,11 @@ $(STAMP): pyproject.toml Makefile scripts/install_gltf_validator.sh scripts/inst
 
 test: setup
 	$(PY) -m pytest -q
+
+# The unit tier, ~1.5 min on 2 cores: no subprocesses (train/evaluate/generate, the CLI, DDP workers,
+# Chromium), Lightning Trainer, Hydra composition or Mitsuba; those are marked integration.
+test-fast: setup
+	$(PY) -m pytest -q -m 'not slow and not integration'
 
 test-slow: setup
 	$(PY) -m pytest -q -m slow

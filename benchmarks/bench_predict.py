@@ -306,7 +306,7 @@ def quality(photo: Path, weights: Path, scans: list[Path]) -> None:
         _print_quality("Flash renders of scanned material sets at 1024², the network at each cap", results)
 
 
-def main() -> None:
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", nargs="+", default=["256", "512", "1024", "2048", "4096", "default"])
     parser.add_argument(
@@ -321,7 +321,11 @@ def main() -> None:
     parser.add_argument("--quality", action="store_true", help="the fast path's fidelity instead of timings")
     parser.add_argument("--scans", nargs="*", type=Path, default=[], help="with --quality: material sets")
     parser.add_argument("--child", nargs=5, help=argparse.SUPPRESS)
-    args = parser.parse_args()
+    return parser
+
+
+def main() -> None:
+    args = _parser().parse_args()
     if args.child:
         photo, weights, size, out, cap = args.child
         resolution = None if size == "default" else int(size)
@@ -346,8 +350,21 @@ def main() -> None:
             if (row := _child(photo, weights, "default", directory, str(cap)))
         ]
         v3_rows = {size: row for size in args.v3_sizes if (row := _child(photo, v3, size, directory))}
-    threads = torch.get_num_threads()
     model = rows[0][1]["model"] if rows else "?"
+    _print_timings(rows, model)
+    if v3_rows:
+        _print_against_v3(rows, v3_rows, model)
+    _print_floor()
+
+
+def _size_label(size: str, row: dict[str, Any]) -> str:
+    """The output side, and which default run it was."""
+    return f"{row['side']}²" + (f" ({size})" if size.startswith("default") else "")
+
+
+def _print_timings(rows: list[tuple[str, dict[str, Any]]], model: str) -> None:
+    """The timings table, seconds per stage, and the default path against the exact one."""
+    threads = torch.get_num_threads()
     print(
         f"\nbrdfgan predict on a 4000×3000 JPEG, model: {model}, {threads} threads; "
         "ratios against the first size\n"
@@ -360,7 +377,7 @@ def main() -> None:
     base = rows[0][1] if rows else {}
     for size, row in rows:
         cells = [
-            f"{row['side']}²" + (f" ({size})" if size.startswith("default") else ""),
+            _size_label(size, row),
             f"{row['network_side']}²",
             f"{row['total']:.1f}",
             f"{row['generator']:.1f}",
@@ -376,7 +393,7 @@ def main() -> None:
     print("\nseconds per stage (predict --verbose):\n")
     for size, row in rows:
         stages = ", ".join(f"{stage} {seconds:.2f}" for stage, seconds in row["stages"].items())
-        print(f"- {row['side']}²" + (f" ({size})" if size.startswith("default") else "") + f": {stages}")
+        print(f"- {_size_label(size, row)}: {stages}")
     by_size = dict(rows)
     fast, exact = by_size.get("default"), by_size.get("2048")
     if fast is not None and exact is not None and fast["side"] == exact["side"]:
@@ -386,23 +403,32 @@ def main() -> None:
             f"{exact['total']:.1f} s = {exact['total'] / fast['total']:.1f}× faster; network "
             f"{fast['generator']:.1f} s / {exact['generator']:.1f} s"
         )
-    if v3_rows:
-        print(f"\nAgainst v3's architecture (random weights, same photo and options): {model} / v3\n")
-        header = ["resolution", "wall s", "v3 wall s", "wall ratio", "generator s", "v3 generator s",
-                  "generator ratio", "peak RSS MiB", "v3 peak RSS MiB"]  # fmt: skip
-        print("| " + " | ".join(header) + " |")
-        print("|---|---|---|---|---|---|---|---|---|")
-        for size, row in rows:
-            old = v3_rows.get(size)
-            if old is None:
-                continue
-            cells = [
-                f"{row['side']}²", f"{row['total']:.1f}", f"{old['total']:.1f}",
-                f"{row['total'] / old['total']:.2f}×", f"{row['generator']:.2f}", f"{old['generator']:.2f}",
-                f"{row['generator'] / old['generator']:.2f}×",
-                f"{row['peak_mib']:.0f}", f"{old['peak_mib']:.0f}",
-            ]  # fmt: skip
-            print("| " + " | ".join(cells) + " |")
+
+
+def _print_against_v3(
+    rows: list[tuple[str, dict[str, Any]]], v3_rows: dict[str, dict[str, Any]], model: str
+) -> None:
+    """The sizes timed for both architectures, side by side."""
+    print(f"\nAgainst v3's architecture (random weights, same photo and options): {model} / v3\n")
+    header = ["resolution", "wall s", "v3 wall s", "wall ratio", "generator s", "v3 generator s",
+              "generator ratio", "peak RSS MiB", "v3 peak RSS MiB"]  # fmt: skip
+    print("| " + " | ".join(header) + " |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for size, row in rows:
+        old = v3_rows.get(size)
+        if old is None:
+            continue
+        cells = [
+            f"{row['side']}²", f"{row['total']:.1f}", f"{old['total']:.1f}",
+            f"{row['total'] / old['total']:.2f}×", f"{row['generator']:.2f}", f"{old['generator']:.2f}",
+            f"{row['generator'] / old['generator']:.2f}×",
+            f"{row['peak_mib']:.0f}", f"{old['peak_mib']:.0f}",
+        ]  # fmt: skip
+        print("| " + " | ".join(cells) + " |")
+
+
+def _print_floor() -> None:
+    """This machine's sgemm rate against the paper generator's forward pass at 512²."""
     rate = sgemm_gflops()
     forward = paper_forward_512()
     floor = PAPER_GFLOP_512 / rate

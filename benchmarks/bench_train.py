@@ -140,11 +140,48 @@ def _direct_rendering_loss(
     return (log_transform(image) - log_transform(reference)).abs().mean()
 
 
+def _step_timer(warmup: int, steps: int, profiled: int) -> Any:
+    """A Lightning callback that times the ``steps`` training steps after ``warmup`` ones
+    (``step_times``, seconds) and profiles the ``profiled`` steps after those (``components``:
+    seconds per step, by the loss's ``record_function`` labels, and the profiled step itself)."""
+    import lightning as L
+    from torch.profiler import ProfilerActivity, profile
+
+    class StepTimer(L.Callback):
+        def __init__(self) -> None:
+            self.start = 0.0
+            self.profiler: profile | None = None
+            self.step_times: list[float] = []
+            self.components: dict[str, float] = {}
+
+        def on_train_batch_start(self, trainer: Any, pl_module: Any, batch: Any, batch_idx: int) -> None:
+            if batch_idx == warmup + steps:
+                self.profiler = profile(activities=[ProfilerActivity.CPU])
+                self.profiler.__enter__()
+            self.start = time.perf_counter()
+
+        def on_train_batch_end(
+            self, trainer: Any, pl_module: Any, outputs: Any, batch: Any, batch_idx: int
+        ) -> None:
+            elapsed = time.perf_counter() - self.start
+            components = self.components
+            if warmup <= batch_idx < warmup + steps:
+                self.step_times.append(elapsed)
+            if batch_idx >= warmup + steps:
+                components["step (profiled)"] = components.get("step (profiled)", 0.0) + elapsed / profiled
+            if batch_idx == warmup + steps + profiled - 1 and self.profiler is not None:
+                self.profiler.__exit__(None, None, None)
+                for event in self.profiler.key_averages():
+                    if event.key.startswith(LABEL_PREFIX):
+                        components[event.key[len(LABEL_PREFIX) :]] = event.cpu_time_total / 1e6 / profiled
+
+    return StepTimer()
+
+
 def _measure(case: Case, steps: int) -> dict[str, Any]:
     import hydra
     import lightning as L
     from tests.render_reference import render_point_lights_direct
-    from torch.profiler import ProfilerActivity, profile
     from torch.utils.data import DataLoader
 
     import brdfgan.losses.rendering as rendering_module
@@ -160,34 +197,8 @@ def _measure(case: Case, steps: int) -> dict[str, Any]:
     warmup, profiled = 3, 3
     batches = _synthetic_batches(4, case.batch, case.crop)
     stream = [batches[i % len(batches)] for i in range(warmup + steps + profiled)]
-    step_times: list[float] = []
-    components: dict[str, float] = {}
-
-    class StepTimer(L.Callback):
-        def __init__(self) -> None:
-            self.start = 0.0
-            self.profiler: profile | None = None
-
-        def on_train_batch_start(self, trainer: Any, pl_module: Any, batch: Any, batch_idx: int) -> None:
-            if batch_idx == warmup + steps:
-                self.profiler = profile(activities=[ProfilerActivity.CPU])
-                self.profiler.__enter__()
-            self.start = time.perf_counter()
-
-        def on_train_batch_end(
-            self, trainer: Any, pl_module: Any, outputs: Any, batch: Any, batch_idx: int
-        ) -> None:
-            elapsed = time.perf_counter() - self.start
-            if warmup <= batch_idx < warmup + steps:
-                step_times.append(elapsed)
-            if batch_idx >= warmup + steps:
-                components["step (profiled)"] = components.get("step (profiled)", 0.0) + elapsed / profiled
-            if batch_idx == warmup + steps + profiled - 1 and self.profiler is not None:
-                self.profiler.__exit__(None, None, None)
-                for event in self.profiler.key_averages():
-                    if event.key.startswith(LABEL_PREFIX):
-                        components[event.key[len(LABEL_PREFIX) :]] = event.cpu_time_total / 1e6 / profiled
-
+    timer = _step_timer(warmup, steps, profiled)
+    step_times, components = timer.step_times, timer.components
     trainer = L.Trainer(
         accelerator="cpu",
         devices=1,
@@ -198,7 +209,7 @@ def _measure(case: Case, steps: int) -> dict[str, Any]:
         enable_model_summary=False,
         limit_val_batches=0,
         num_sanity_val_steps=0,
-        callbacks=[StepTimer()],
+        callbacks=[timer],
     )
     first = time.perf_counter()
     trainer.fit(module, train_dataloaders=DataLoader(stream, batch_size=None))

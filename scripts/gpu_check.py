@@ -635,10 +635,6 @@ def run_checks(
     """Every check of :func:`main`; returns the table rows, the raw numbers and whether any failed."""
     rows = environment_rows(device)
     raw: dict[str, Any] = {"plan": dataclasses.asdict(plan)}
-
-    def left() -> float:
-        return deadline - time.monotonic()
-
     start = time.perf_counter()
     try:
         data_dir, train_samples = make_data(work / "data", plan)
@@ -653,8 +649,48 @@ def run_checks(
     rows.append(
         ("configuration", f"experiment=paper, batch {plan.batch}, {plan.resolution}² samples", networks)
     )
+    runs = _Runs(data_dir, work, env, deadline, raw)
+
+    main_run, plan, failed = _main_run(runs, plan, rows)
+    if main_run.timer is not None:
+        row, render_failed = _rendering_loss_row(main_run, data_dir, device, plan, raw)
+        failed |= render_failed
+        rows.append(row)
+        if device.type == "cuda":
+            torch.cuda.empty_cache()
+
+    compare = runs.train(
+        plan,
+        f"compare_{_slug(plan.compare_precision)}",
+        plan.compare_precision,
+        plan.compare_warmup,
+        plan.compare_steps,
+    )
+    failed |= compare.timer is None
+    rows.append(compare_row(compare, main_run, plan, raw))
+
+    rendered = runs.train(plan, "rendered", plan.precision, plan.warmup, plan.steps, rendered=True)
+    failed |= rendered.timer is None
+    rows.append(rendered_row(rendered, plan, raw))
+
+    row, ddp_failed = _ddp_row(runs, plan, device, force_ddp=force_ddp)
+    rows.append(row)
+    return rows, raw, failed or ddp_failed
+
+
+@dataclass
+class _Runs:
+    """What every training run of :func:`run_checks` shares: the data, the work folder, the
+    environment, the deadline and the raw numbers each run adds to."""
+
+    data_dir: Path
+    work: Path
+    env: dict[str, str]
+    deadline: float
+    raw: dict[str, Any]
 
     def train(
+        self,
         run_plan: Plan,
         name: str,
         precision: str,
@@ -669,10 +705,10 @@ def run_checks(
         result = run_training(
             name,
             run_plan,
-            data_dir,
-            work,
-            env,
-            left() - reserve,
+            self.data_dir,
+            self.work,
+            self.env,
+            self.deadline - time.monotonic() - reserve,
             precision=precision,
             batches=warmup + steps,
             ddp=ddp,
@@ -680,13 +716,17 @@ def run_checks(
         )
         if result.timer is not None:
             try:
-                raw[name] = {"stats": step_stats(result.timer, warmup)}
+                self.raw[name] = {"stats": step_stats(result.timer, warmup)}
             except ValueError as error:  # the run stopped before its timed batches
                 result.timer, result.error = None, one_line(error)
-        raw.setdefault(name, {}).update(seconds=result.seconds, timer=result.timer, error=result.error)
+        self.raw.setdefault(name, {}).update(seconds=result.seconds, timer=result.timer, error=result.error)
         return result
 
-    main_run = train(plan, f"main_{_slug(plan.precision)}", plan.precision, plan.warmup, plan.steps)
+
+def _main_run(runs: _Runs, plan: Plan, rows: list[Row]) -> tuple[RunResult, Plan, bool]:
+    """The main run, once more with the loss eager when the compiled one fails; its rows are
+    appended to ``rows``. Returns the run, the plan it ran and whether the first try failed."""
+    main_run = runs.train(plan, f"main_{_slug(plan.precision)}", plan.precision, plan.warmup, plan.steps)
     failed = main_run.timer is None
     if (
         main_run.timer is None
@@ -694,58 +734,47 @@ def run_checks(
         and not str(main_run.error).startswith(GAVE_UP)
     ):
         # The compiled rendering loss is the newest part of the step: without it, is the rest ready?
-        rows += main_rows(main_run, plan, raw)
+        rows.extend(main_rows(main_run, plan, runs.raw))
         rows.append(("retry", EAGER_LOSS, "the run above failed; the rows below run the loss eager"))
         plan = dataclasses.replace(plan, overrides=(*plan.overrides, EAGER_LOSS))
-        main_run = train(plan, f"main_{_slug(plan.precision)}_eager", plan.precision, plan.warmup, plan.steps)
-    rows += main_rows(main_run, plan, raw)
-    if main_run.timer is not None:
-        try:
-            batch = first_batch(data_dir, plan.batch)
-            render = time_rendering_loss(
-                main_run.overrides, batch, device, plan.precision, plan.render_repeats
-            )
-            raw["rendering_loss"] = dataclasses.asdict(render)
-            share = render.seconds / raw[main_run.name]["stats"]["step_s"]
-            how = (
-                f"same batch, {'bf16 autocast' if plan.precision == 'bf16-mixed' else 'no autocast'}, "
-                f"{render.maps_dtype} maps, "
-                f"{'compiled' if render.compiled else 'eager'}; median of {plan.render_repeats}"
-            )
-            rows.append(("rendering loss fwd+bwd", f"{ms(render.seconds)} ({share:.0%} of the step)", how))
-        except Exception as error:  # a row, not an abort: the other numbers still count
-            failed = True
-            rows.append(("rendering loss fwd+bwd", "FAILED", one_line(error)))
-        if device.type == "cuda":
-            torch.cuda.empty_cache()
+        main_run = runs.train(
+            plan, f"main_{_slug(plan.precision)}_eager", plan.precision, plan.warmup, plan.steps
+        )
+    rows.extend(main_rows(main_run, plan, runs.raw))
+    return main_run, plan, failed
 
-    compare = train(
-        plan,
-        f"compare_{_slug(plan.compare_precision)}",
-        plan.compare_precision,
-        plan.compare_warmup,
-        plan.compare_steps,
-    )
-    failed |= compare.timer is None
-    rows.append(compare_row(compare, main_run, plan, raw))
 
-    rendered = train(plan, "rendered", plan.precision, plan.warmup, plan.steps, rendered=True)
-    failed |= rendered.timer is None
-    rows.append(rendered_row(rendered, plan, raw))
+def _rendering_loss_row(
+    main_run: RunResult, data_dir: Path, device: torch.device, plan: Plan, raw: dict[str, Any]
+) -> tuple[Row, bool]:
+    """The rendering loss's forward and backward alone on the main run's first batch, as a share
+    of its step; and whether it failed."""
+    try:
+        batch = first_batch(data_dir, plan.batch)
+        render = time_rendering_loss(main_run.overrides, batch, device, plan.precision, plan.render_repeats)
+        raw["rendering_loss"] = dataclasses.asdict(render)
+        share = render.seconds / raw[main_run.name]["stats"]["step_s"]
+        how = (
+            f"same batch, {'bf16 autocast' if plan.precision == 'bf16-mixed' else 'no autocast'}, "
+            f"{render.maps_dtype} maps, "
+            f"{'compiled' if render.compiled else 'eager'}; median of {plan.render_repeats}"
+        )
+        return ("rendering loss fwd+bwd", f"{ms(render.seconds)} ({share:.0%} of the step)", how), False
+    except Exception as error:  # a row, not an abort: the other numbers still count
+        return ("rendering loss fwd+bwd", "FAILED", one_line(error)), True
 
+
+def _ddp_row(runs: _Runs, plan: Plan, device: torch.device, *, force_ddp: bool) -> tuple[Row, bool]:
+    """Two DDP processes' step time where there are two GPUs (or ``force_ddp``); and whether it failed."""
     gpus = torch.cuda.device_count() if device.type == "cuda" else 0
-    if gpus > 1 or force_ddp:
-        ddp = train(plan, "ddp", plan.precision, plan.warmup, plan.ddp_steps, ddp=True)
-        failed |= ddp.timer is None
-        if ddp.timer is None:
-            rows.append(("DDP, 2 processes", "FAILED", str(ddp.error)))
-        else:
-            stats = raw["ddp"]["stats"]
-            note = f"{stats['samples_per_s']:.1f} samples/s over both; median of {stats['timed']}"
-            rows.append((f"DDP step time, 2 processes, {plan.precision}", ms(stats["step_s"]), note))
-    else:
-        rows.append(("DDP, 2 processes", "skipped", f"{gpus} GPU(s) visible"))
-    return rows, raw, failed
+    if not (gpus > 1 or force_ddp):
+        return ("DDP, 2 processes", "skipped", f"{gpus} GPU(s) visible"), False
+    ddp = runs.train(plan, "ddp", plan.precision, plan.warmup, plan.ddp_steps, ddp=True)
+    if ddp.timer is None:
+        return ("DDP, 2 processes", "FAILED", str(ddp.error)), True
+    stats = runs.raw["ddp"]["stats"]
+    note = f"{stats['samples_per_s']:.1f} samples/s over both; median of {stats['timed']}"
+    return (f"DDP step time, 2 processes, {plan.precision}", ms(stats["step_s"]), note), False
 
 
 def _slug(precision: str) -> str:

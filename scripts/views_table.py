@@ -154,29 +154,10 @@ def main() -> None:
     parser.add_argument("--figure-capture", default="scans_0")
     args = parser.parse_args()
     fits = [int(k) for k in args.fit.split(",")]
-    sensor, settings = locked_phone("conf/sensor/phone_eval.yaml"), HandheldSettings()
-    captures = []
-    for seed, (name, maps) in enumerate(
-        materials([(name, folder, args.per_set) for name, folder in SETS.items()])
-    ):
-        folder = args.out / "captures" / name
-        if not (folder / "parameters.json").is_file():
-            capture = render_synthetic_capture(maps, settings, sensor, seed=seed)
-            write_synthetic_capture(capture, maps, folder, name)
-        captures.append((read_capture(folder, name), maps))
+    captures = make_captures(args.out / "captures", args.per_set)
     models = capture_models()
     shipped, references = models[0], models[1:]
     rows: dict[str, Row] = {}
-
-    def add(
-        capture: Capture, photos: list[Photo], model: str, views: int, maps: Tensor, truth: Tensor
-    ) -> None:
-        relit, calibrated = held_out_errors(capture, photos, maps, model)
-        row = rows.setdefault(f"{model}|{views}", Row(model, views, [], [], []))
-        row.relit.append(relit)
-        row.calibrated.append(calibrated)
-        row.maps.append(map_errors(maps, truth))
-
     seconds: dict[int, list[float]] = {k: [] for k in fits}
     for capture, truth in captures:
         photos = read_views(capture)
@@ -188,35 +169,94 @@ def main() -> None:
             maps = prediction if k == 1 else fit_capture_maps(capture, photos, prediction, k)
             seconds[k].append(time.perf_counter() - start)
             fitted[k] = maps
-            add(capture, photos, shipped.name, k, maps, truth)
+            add_errors(rows, capture, photos, shipped.name, k, maps, truth)
         for reference in references:
-            add(
-                capture, photos, reference.name, 1, predict_capture_maps(capture, photos[0], reference), truth
-            )
+            maps = predict_capture_maps(capture, photos[0], reference)
+            add_errors(rows, capture, photos, reference.name, 1, maps, truth)
         # The floor: the true maps, relit by the project's renderer against Mitsuba's phone photos.
-        add(capture, photos, "true maps", 0, truth, truth)
+        add_errors(rows, capture, photos, "true maps", 0, truth, truth)
         if args.figure is not None and capture.name == args.figure_capture:
             rows_shown = [(f"{k} photo{'s' if k > 1 else ''}", fitted[k]) for k in (1, max(fits))]
             write_figure(args.figure, capture, photos, [*rows_shown, ("truth", truth)])
         print(capture.name, {key: round(row.relit[-1], 4) for key, row in rows.items()}, flush=True)
 
-    def mean(values: list[float]) -> float:
-        return sum(values) / len(values)
+    names = [capture.name for capture, _ in captures]
+    table = markdown_table(rows, seconds, names, fits, shipped.name, args.per_set)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "views_table.md").write_text(table, encoding="utf-8")
+    (args.out / "views_table.json").write_text(
+        json.dumps(
+            {
+                "captures": names,
+                "rows": [row.__dict__ for row in rows.values()],
+                "fit_seconds": seconds,
+            },
+            indent=1,
+        ),
+        encoding="utf-8",
+    )
+    print(table)
 
+
+def make_captures(folder: Path, per_set: int) -> list[tuple[Capture, Tensor]]:
+    """Each material's capture (module docstring) with its true maps: rendered into
+    ``folder/<set>_<n>/`` unless an earlier run left it there."""
+    sensor, settings = locked_phone("conf/sensor/phone_eval.yaml"), HandheldSettings()
+    captures = []
+    for seed, (name, maps) in enumerate(materials([(name, path, per_set) for name, path in SETS.items()])):
+        capture_folder = folder / name
+        if not (capture_folder / "parameters.json").is_file():
+            capture = render_synthetic_capture(maps, settings, sensor, seed=seed)
+            write_synthetic_capture(capture, maps, capture_folder, name)
+        captures.append((read_capture(capture_folder, name), maps))
+    return captures
+
+
+def add_errors(
+    rows: dict[str, Row],
+    capture: Capture,
+    photos: list[Photo],
+    model: str,
+    views: int,
+    maps: Tensor,
+    truth: Tensor,
+) -> None:
+    """``maps``' held-out and map errors on one capture, into the row of ``model`` fitted to ``views``."""
+    relit, calibrated = held_out_errors(capture, photos, maps, model)
+    row = rows.setdefault(f"{model}|{views}", Row(model, views, [], [], []))
+    row.relit.append(relit)
+    row.calibrated.append(calibrated)
+    row.maps.append(map_errors(maps, truth))
+
+
+def _mean(values: list[float]) -> float:
+    return sum(values) / len(values)
+
+
+def markdown_table(
+    rows: dict[str, Row],
+    seconds: dict[int, list[float]],
+    captures: list[str],
+    fits: list[int],
+    shipped: str,
+    per_set: int,
+) -> str:
+    """views_table.md: every row's mean errors (relit ones also over the shipped model's one-view
+    row), then the shipped model's relit errors per set and number of views fitted."""
     lines = [
-        f"{len(captures)} synthetic captures ({', '.join(SETS)}: {args.per_set} each), held-out views "
+        f"{len(captures)} synthetic captures ({', '.join(SETS)}: {per_set} each), held-out views "
         f"{', '.join(map(str, HELD_OUT))}",
         "",
         "| model | views fitted | held-out relit, one gain | × one view | calibrated | × one view "
         "| base colour | normal ° | roughness | metallic | fit time s |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    single = mean(rows[f"{shipped.name}|1"].relit)
-    single_calibrated = mean(rows[f"{shipped.name}|1"].calibrated)
+    single = _mean(rows[f"{shipped}|1"].relit)
+    single_calibrated = _mean(rows[f"{shipped}|1"].calibrated)
     for row in rows.values():
-        relit, calibrated = mean(row.relit), mean(row.calibrated)
-        errors = {key: mean([m[key] for m in row.maps]) for key in row.maps[0]}
-        time_s = mean(seconds[row.views]) if row.model == shipped.name and row.views > 1 else float("nan")
+        relit, calibrated = _mean(row.relit), _mean(row.calibrated)
+        errors = {key: _mean([m[key] for m in row.maps]) for key in row.maps[0]}
+        time_s = _mean(seconds[row.views]) if row.model == shipped and row.views > 1 else float("nan")
         lines.append(
             f"| {row.model} | {row.views} | {relit:.4f} | {relit / single:.2f} "
             f"| {calibrated:.4f} | {calibrated / single_calibrated:.2f} "
@@ -226,28 +266,14 @@ def main() -> None:
         )
     by_set = ["", "| set | " + " | ".join(f"K = {k}" for k in fits) + " |", "|---|" + "---|" * len(fits)]
     for name in SETS:
-        indices = [i for i, (capture, _) in enumerate(captures) if capture.name.startswith(name)]
+        indices = [i for i, capture in enumerate(captures) if capture.startswith(name)]
         cells = [
-            f"{mean([rows[f'{shipped.name}|{k}'].relit[i] for i in indices]):.4f} / "
-            f"{mean([rows[f'{shipped.name}|{k}'].calibrated[i] for i in indices]):.4f}"
+            f"{_mean([rows[f'{shipped}|{k}'].relit[i] for i in indices]):.4f} / "
+            f"{_mean([rows[f'{shipped}|{k}'].calibrated[i] for i in indices]):.4f}"
             for k in fits
         ]
         by_set.append(f"| {name} (one gain / calibrated) | " + " | ".join(cells) + " |")
-    table = "\n".join(lines + by_set) + "\n"
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "views_table.md").write_text(table, encoding="utf-8")
-    (args.out / "views_table.json").write_text(
-        json.dumps(
-            {
-                "captures": [capture.name for capture, _ in captures],
-                "rows": [row.__dict__ for row in rows.values()],
-                "fit_seconds": seconds,
-            },
-            indent=1,
-        ),
-        encoding="utf-8",
-    )
-    print(table)
+    return "\n".join(lines + by_set) + "\n"
 
 
 if __name__ == "__main__":

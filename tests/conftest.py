@@ -12,8 +12,9 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig, OmegaConf
 from torch import Tensor
 
-from brdfgan.core.svbrdf import flat_maps, join_maps, normalize_normal
+from brdfgan.core.svbrdf import flat_maps, join_maps, normalize_normal, validate_maps
 from brdfgan.data.generate_config import register_configs as register_generate_configs
+from brdfgan.data.materials.base import MaterialFamily
 from brdfgan.evaluation.config import register_configs as register_evaluate_configs
 from brdfgan.training.config import register_configs
 
@@ -33,11 +34,28 @@ def random_maps(
     return join_maps(rand(3), normalize_normal(normal), 0.1 + 0.9 * rand(), (rand() > 0.5).to(dtype))
 
 
-def tilted_plane(size: int = 32, normal: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> Tensor:
-    """A white-ish dielectric plane ``(8, size, size)``, optionally with every normal tilted the same
-    way (for relighting and preview tests)."""
-    maps = flat_maps(size, size, basecolor=(0.8, 0.8, 0.8), roughness=0.5, metallic=0.0)
+def tilted_plane(
+    size: int = 32,
+    normal: tuple[float, float, float] = (0.0, 0.0, 1.0),
+    *,
+    basecolor: tuple[float, float, float] = (0.8, 0.8, 0.8),
+    roughness: float = 0.5,
+    metallic: float = 0.0,
+) -> Tensor:
+    """A uniform plane ``(8, size, size)``, by default a white-ish dielectric, optionally with every
+    normal tilted the same way (for relighting, preview and statistics tests)."""
+    maps = flat_maps(size, size, basecolor=basecolor, roughness=roughness, metallic=metallic)
     maps[3:6] = normalize_normal(torch.tensor(normal).view(3, 1, 1).expand(3, size, size).clone())
+    return maps
+
+
+def family_maps(
+    family: MaterialFamily, params: dict[str, float] | None = None, seed: int = 0, size: int = 128
+) -> Tensor:
+    """The checked map set ``(8, size, size)`` that ``family`` paints with ``params`` (its defaults
+    for the rest) from a generator seeded with ``seed``."""
+    maps = family.make_maps(params or {}, size, torch.Generator().manual_seed(seed))
+    validate_maps(maps)
     return maps
 
 

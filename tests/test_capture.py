@@ -22,7 +22,7 @@ from brdfgan.data.lighting import load_environment, room_spec, sunsky_spec
 from brdfgan.mitsuba_render.environment import ENVMAP_TO_WORLD
 from tests.conftest import random_maps
 
-pytestmark = pytest.mark.mitsuba
+pytestmark = [pytest.mark.mitsuba, pytest.mark.integration]
 
 RES = 32
 ENV_RES = 64

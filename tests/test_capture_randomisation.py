@@ -275,6 +275,7 @@ def _old_capture_photo(maps: torch.Tensor, spp: int, seed: int) -> torch.Tensor:
     return torch.from_numpy(np.array(image, dtype=np.float32)).permute(2, 0, 1)[:3].contiguous()
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_the_default_draw_renders_todays_photo_bit_for_bit() -> None:
     from brdfgan.mitsuba_render.capture import CaptureRenderer, render_capture
@@ -324,6 +325,7 @@ def renderer():  # type: ignore[no-untyped-def]
     return CaptureRenderer(RES, 64, FlashCapture(), 16)
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 @pytest.mark.parametrize(
     "draw",
@@ -360,6 +362,7 @@ def _highlight_centroid(image: torch.Tensor) -> tuple[float, float]:
     )
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_the_highlight_lands_on_hotspot_px() -> None:
     from brdfgan.mitsuba_render.capture import CaptureRenderer

@@ -67,6 +67,7 @@ def test_a_kill_mid_write_leaves_the_previous_checkpoint_whole(tmp_path: Path) -
     assert stale_temp_files(last) == [] and sorted(p.name for p in checkpoints.iterdir()) == ["last.ckpt"]
 
 
+@pytest.mark.integration
 def test_the_trainer_writes_checkpoints_through_the_atomic_plugin_and_loads_safely(tmp_path: Path) -> None:
     _, _, trainer = build(compose_train(["debug=default"], tmp_path))
     assert isinstance(trainer.strategy.checkpoint_io, AtomicCheckpointIO)
@@ -76,6 +77,7 @@ def test_the_trainer_writes_checkpoints_through_the_atomic_plugin_and_loads_safe
         AtomicCheckpointIO().load_checkpoint(target, weights_only=False)
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_a_full_disk_while_training_names_the_checkpoint_and_leaves_only_whole_files(
     tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
@@ -104,6 +106,7 @@ def test_a_full_disk_while_training_names_the_checkpoint_and_leaves_only_whole_f
     assert torch.load(checkpoints / "last.ckpt", weights_only=True)["global_step"] == 4
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_an_interrupted_fit_says_where_to_resume(tiny_data: Path, tmp_path: Path) -> None:
     cfg = compose_train(["debug=default", "callbacks.mid_epoch_checkpoint.every_n_train_steps=2"], tiny_data)

@@ -140,6 +140,7 @@ def test_references_writes_the_three_weight_files(tmp_path: Path, capsys: pytest
     assert torch.allclose(predicted[[0, 1, 2, 6, 7]], expected[[0, 1, 2, 6, 7]], atol=1e-3)
 
 
+@pytest.mark.integration
 def test_a_user_error_is_one_line_from_the_console_script(tmp_path: Path) -> None:
     result = run_python("-m", "brdfgan.cli", "report", str(tmp_path), cwd=tmp_path)
     assert result.returncode == USER_ERROR_EXIT_CODE

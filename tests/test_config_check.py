@@ -16,6 +16,7 @@ from tests.conftest import compose_train, run_python
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     ("override", "message"),
     [
@@ -55,6 +56,7 @@ def test_a_wrong_value_names_the_key_before_anything_is_built(
     assert not (tmp_path / "data").exists() and not (tmp_path / "run").exists()  # nothing prepared or written
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     "overrides",
     [[], ["debug=default"], ["debug=fdr"], ["debug=overfit"], ["debug=limit"],
@@ -67,6 +69,7 @@ def test_every_shipped_config_passes_the_check(tmp_path: Path, overrides: list[s
     check_config(compose_train(overrides, tmp_path), CHECKED_GROUPS)
 
 
+@pytest.mark.integration
 def test_an_interpolated_target_node_is_checked_where_it_is_defined(tmp_path: Path) -> None:
     # data=rendered's bank takes ${data.prepare.spec}: a wrong value there names the defining key.
     cfg = compose_train(["data=rendered", "data.prepare.spec.spp=lots"], tmp_path)
@@ -87,6 +90,7 @@ def test_fits_and_describe_on_the_annotation_kinds() -> None:
         check_config(node, ["x"])
 
 
+@pytest.mark.integration
 def test_train_and_evaluate_print_one_line_and_exit_2(tmp_path: Path) -> None:
     cases = [
         (

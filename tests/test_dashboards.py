@@ -45,6 +45,7 @@ def test_column_header_names_every_column_and_refuses_a_mismatch() -> None:
         with_column_header(grid, ["a", "b", "c", "d"])
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_comparison_grid_has_labelled_columns_and_one_row_per_sample(tiny_data: Path) -> None:
     samples = fixed_samples(tiny_data / "data" / "tiny", "val", 2)
@@ -126,6 +127,7 @@ def tensorboard_server(tmp_path: Path) -> Iterator[tuple[str, Path]]:
         server.wait(timeout=30)
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_tensorboard_server_shows_scalars_prediction_grids_and_hparams(
     tiny_data: Path, tensorboard_server: tuple[str, Path]
@@ -210,6 +212,7 @@ def _wandb_records(path: Path) -> Iterator[Any]:
             yield record
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 @pytest.mark.slow  # 13-18 s: kept out of make test's 6 minutes (make test-slow runs it)
 def test_sweep_of_a_dozen_overrides_logs_each_job_to_its_own_wandb_run_and_reports_by_loss(

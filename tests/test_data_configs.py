@@ -34,6 +34,7 @@ def _compose(overrides: list[str], config_name: str = "generate"):  # type: igno
         return compose(config_name=config_name, overrides=overrides)
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", ["default", "tiny", "paper", WITH_SCANS, CLOSE_OOD])
 def test_every_dataset_config_builds_a_valid_spec(name: str) -> None:
     spec = hydra.utils.instantiate(_compose([f"dataset_spec={name}"]).dataset_spec, _convert_="all")
@@ -41,6 +42,7 @@ def test_every_dataset_config_builds_a_valid_spec(name: str) -> None:
     assert plan_shards(spec)
 
 
+@pytest.mark.integration
 def test_paper_dataset_follows_the_paper_protocol() -> None:
     spec = hydra.utils.instantiate(_compose(["dataset_spec=paper"]).dataset_spec, _convert_="all")
     assert (spec.material_resolution, spec.resolution, spec.spp) == (2048, 512, 196)
@@ -51,6 +53,7 @@ def test_paper_dataset_follows_the_paper_protocol() -> None:
     assert abs(train_samples - 40544) / 40544 < 0.01  # the paper's training-set size
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("name", ["default", "tiny", "paper", "deschaintre", WITH_SCANS, CLOSE_OOD])
 def test_data_configs_instantiate_a_datamodule(name: str) -> None:
     cfg = _compose([f"data={name}"], config_name="train")
@@ -152,6 +155,7 @@ def test_other_instantiation_errors_keep_hydras_message() -> None:
         spec_from_config(cfg.dataset_spec)
 
 
+@pytest.mark.integration
 @NEEDS_SCANS
 def test_the_phone_delivered_data_configs() -> None:
     # Training photos and their validation/test photos go through the phone's white balance and

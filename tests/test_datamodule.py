@@ -263,6 +263,7 @@ class _KeyRecorder(L.LightningModule):
         return torch.optim.SGD(self.parameters(), lr=0.01)
 
 
+@pytest.mark.integration
 def test_lightning_fit_consumes_the_datamodule(dataset: tuple[Path, dict[str, list[str]]]) -> None:
     root, keys = dataset
     dm = ShardDataModule(str(root), batch_size=4, shuffle_buffer=4)

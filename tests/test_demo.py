@@ -8,7 +8,7 @@ import pytest
 from brdfgan.io.maps import read_maps
 from brdfgan.renderer_demo import main
 
-pytestmark = pytest.mark.mitsuba
+pytestmark = [pytest.mark.mitsuba, pytest.mark.integration]
 
 
 def test_demo_writes_maps_and_agreeing_renders(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -318,6 +318,7 @@ def test_wrong_input_is_a_value_error() -> None:
 # --- config ------------------------------------------------------------------------------------------
 
 
+@pytest.mark.integration
 def test_config_composes_and_builds_without_discriminator(tmp_path: Path) -> None:
     cfg = compose_train(["model=deschaintre2018", "loss=no_adv", "loss.switches.feature=false"], tmp_path)
     keys = {"_target_", "in_channels", "width", "levels", "normal_head"}

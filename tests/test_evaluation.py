@@ -146,6 +146,7 @@ def test_runs_are_grouped_by_every_key_that_varies_and_duplicates_are_kept(
     ] == "loss,model.generator.width,n,diffuse"
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> None:
     trained = run_python("train.py", "debug=default", "task_name=evaltest", cwd=tiny_data)
@@ -202,6 +203,7 @@ def test_train_then_evaluate_writes_tables_chart_and_grids(tiny_data: Path) -> N
     assert missing.returncode == 2 and "not a training run directory" in missing.stderr
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 @pytest.mark.slow  # 13-18 s: kept out of make test's 6 minutes (make test-slow runs it)
 def test_baseline_trains_and_is_evaluated_by_the_same_commands(tiny_data: Path) -> None:
@@ -333,6 +335,7 @@ def test_checkpoint_of_another_architecture_is_a_clear_error(tmp_path: Path) -> 
         load_generator(ckpt)
 
 
+@pytest.mark.integration
 def test_evaluating_an_empty_split_names_the_folder(tmp_path: Path) -> None:
     generator, config = tiny_generator()
     weights = save_weights(tmp_path / "w.safetensors", generator, target=TARGET, config=config, model_id="t")
@@ -356,6 +359,7 @@ def _fake_training_run(run_dir: Path, overrides: list[str], epoch: int, step: in
     return checkpoint
 
 
+@pytest.mark.integration
 def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> None:
     from brdfgan.inference.model.export_weights import training_summary
 
@@ -382,6 +386,7 @@ def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> 
     assert from_outside["recipe"] == {"stages": 1, "optimizer_steps": 350, "wall_time_s": None}
 
 
+@pytest.mark.integration
 def test_the_summary_says_how_the_training_photos_were_made(tmp_path: Path) -> None:
     from brdfgan.inference.model.export_weights import recipe_totals, training_summary
 
@@ -401,6 +406,7 @@ def test_the_summary_says_how_the_training_photos_were_made(tmp_path: Path) -> N
     assert recipe_totals(stages) == {"stages": 2, "optimizer_steps": 7000, "wall_time_s": 6000.5}
 
 
+@pytest.mark.integration
 def test_the_summary_records_the_share_of_scanned_materials(tmp_path: Path) -> None:
     from brdfgan.inference.model.export_weights import training_summary
 
@@ -412,6 +418,7 @@ def test_the_summary_records_the_share_of_scanned_materials(tmp_path: Path) -> N
     assert "scans" not in training_summary(tmp_path / "v3", v3, None)["dataset"]
 
 
+@pytest.mark.integration
 def test_exported_test_metrics_belong_to_the_exported_checkpoint(tmp_path: Path) -> None:
     from brdfgan.inference.model.export_weights import evaluation_metrics, training_summary
 

@@ -327,6 +327,7 @@ def test_unwritable_output_is_a_clear_error(tmp_path: Path) -> None:
         run_generation(tiny_spec(), blocker / "sub", progress=False, photographer=torch_photographer)
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_end_to_end_mitsuba_generation_feeds_the_datamodule(tmp_path: Path) -> None:
     from brdfgan.data.datamodule import ShardDataModule
@@ -351,6 +352,7 @@ def test_end_to_end_mitsuba_generation_feeds_the_datamodule(tmp_path: Path) -> N
     assert isinstance(MitsubaPhotographer(spec).renderer.variant, str)
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     ("override", "message"),
     [
@@ -382,6 +384,7 @@ def test_cli_bad_input_is_one_line_and_writes_nothing(tmp_path: Path, override: 
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.integration
 def test_cli_plan_lists_every_shard(tmp_path: Path) -> None:
     result = run_python("generate.py", "dataset_spec=tiny", "plan=true", "progress=false", cwd=tmp_path)
     assert result.returncode == 0, result.stderr

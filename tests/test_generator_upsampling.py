@@ -178,6 +178,7 @@ def test_invalid_upsampling_is_a_one_line_user_error() -> None:
         Generator(**TINY, upsampling="bilinear")  # type: ignore[arg-type]
 
 
+@pytest.mark.integration
 def test_resize_config_round_trips(tmp_path: Path) -> None:
     cfg = compose_train(["model=default_resize"], tmp_path)
     assert cfg.model.generator.upsampling == "resize"

@@ -18,6 +18,7 @@ from tests.conftest import compose_train
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.integration
 def test_gpu_overrides_compose_to_the_paper_configuration_on_one_gpu(tmp_path: Path) -> None:
     overrides = gpu_check.training_overrides(
         gpu_check.GPU_PLAN,
@@ -44,6 +45,7 @@ def test_gpu_overrides_compose_to_the_paper_configuration_on_one_gpu(tmp_path: P
     assert list(cfg.callbacks) == ["gpu_check_timer"] and cfg.test is False
 
 
+@pytest.mark.integration
 def test_ddp_overrides_compose_to_two_processes(tmp_path: Path) -> None:
     overrides = gpu_check.training_overrides(
         gpu_check.GPU_PLAN,
@@ -66,6 +68,7 @@ def test_ddp_overrides_compose_to_two_processes(tmp_path: Path) -> None:
     assert compose_train(tiny, tmp_path).trainer.accelerator == "cpu"
 
 
+@pytest.mark.integration
 def test_rendered_overrides_compose_to_v5_on_a_bank_without_mitsuba(tmp_path: Path) -> None:
     overrides = gpu_check.rendered_overrides(
         gpu_check.GPU_PLAN, tmp_path / "data", tmp_path / "banks", tmp_path / "t.json",
@@ -106,6 +109,7 @@ def test_gpu_mode_without_cuda_is_one_line_and_exit_2(
     assert captured.err.count("\n") == 1 and captured.err.startswith("gpu_check: no CUDA device")
 
 
+@pytest.mark.integration
 @pytest.mark.slow
 def test_cpu_smoke_mode_prints_the_table_and_writes_out(tmp_path: Path) -> None:
     env = {**os.environ, "OUT": str(tmp_path / "out")}

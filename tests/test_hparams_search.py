@@ -23,6 +23,8 @@ ROOT = Path(__file__).resolve().parents[1]
 OPTUNA_SWEEPER = "hydra_plugins.hydra_optuna_sweeper.optuna_sweeper.OptunaSweeper"
 MISSING = object()
 
+pytestmark = pytest.mark.integration
+
 
 def _compose(overrides: list[str]) -> DictConfig:
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):

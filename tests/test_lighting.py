@@ -227,6 +227,7 @@ def test_environment_file_errors(tmp_path: Path) -> None:
         read_environment_file(tmp_path / "square.exr", RES)
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_sunsky_maps_have_sky_above_and_a_separate_sun() -> None:
     spec = sunsky_spec(3, seed=0)
@@ -341,6 +342,7 @@ def test_sun_and_map_rotate_together() -> None:
     np.testing.assert_allclose(quarter.direction, (0.0, 1.0, 0.0), atol=1e-12)  # +X → +Y
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_sunsky_scalar_variant_fallback_agrees() -> None:
     # Without a JIT variant, the emitter is evaluated one direction at a time; same numbers.

@@ -9,6 +9,7 @@ from brdfgan.core.svbrdf import validate_maps
 from brdfgan.data.materials.albedo import metal_basecolor
 from brdfgan.data.materials.base import MaterialFamily
 from brdfgan.data.materials.families import brushed_metal, concrete, ground, leather, rusted_metal
+from tests.conftest import family_maps
 
 FAMILIES: list[MaterialFamily] = [
     brushed_metal.FAMILY,
@@ -20,12 +21,6 @@ FAMILIES: list[MaterialFamily] = [
 SIZE = 128
 
 
-def _maps(
-    family: MaterialFamily, params: dict[str, float] | None = None, seed: int = 0, size: int = SIZE
-) -> torch.Tensor:
-    return family.make_maps(params or {}, size, torch.Generator().manual_seed(seed))
-
-
 @pytest.mark.parametrize("family", FAMILIES, ids=lambda f: f.name)
 def test_defaults_and_samples_are_valid(family: MaterialFamily) -> None:
     generator = torch.Generator().manual_seed(123)
@@ -34,7 +29,7 @@ def test_defaults_and_samples_are_valid(family: MaterialFamily) -> None:
         for key, value in params.items():
             p = family.parameters[key]
             assert p.low <= value <= p.high
-        maps = _maps(family, params, seed=draw)
+        maps = family_maps(family, params, seed=draw)
         assert maps.shape == (8, SIZE, SIZE)
         validate_maps(maps)
         assert (maps[5] < 0.9999).any(), "normals are all flat"
@@ -45,16 +40,16 @@ def test_defaults_and_samples_are_valid(family: MaterialFamily) -> None:
 def test_dielectric_families_not_metallic(family: MaterialFamily) -> None:
     generator = torch.Generator().manual_seed(9)
     for params in ({}, family.sample_parameters(generator)):
-        assert torch.all(_maps(family, params)[7] == 0.0)
+        assert torch.all(family_maps(family, params)[7] == 0.0)
 
 
 def test_brushed_metal_metallic_and_scratches() -> None:
     family = brushed_metal.FAMILY
     generator = torch.Generator().manual_seed(3)
     for params in ({}, family.sample_parameters(generator), {"metal": 3.5, "vertical": 1.0}):
-        assert torch.all(_maps(family, params)[7] > 0.99)
-    clean = _maps(family, {"scratch_density": 0.0}, seed=1, size=256)
-    scratched = _maps(family, {"scratch_density": 1.0}, seed=1, size=256)
+        assert torch.all(family_maps(family, params)[7] > 0.99)
+    clean = family_maps(family, {"scratch_density": 0.0}, seed=1, size=256)
+    scratched = family_maps(family, {"scratch_density": 1.0}, seed=1, size=256)
     assert scratched[6].mean() > clean[6].mean() + 0.01
     # Scratches tilt the normals: the tangential spread of the normals grows.
     assert scratched[3:5].std() > clean[3:5].std() * 1.1
@@ -63,7 +58,7 @@ def test_brushed_metal_metallic_and_scratches() -> None:
 def test_brushed_metal_base_colour_is_metal_f0() -> None:
     for metal, name in zip((0.0, 1.0, 2.0, 3.0), ("steel", "aluminium", "brass", "copper"), strict=True):
         f0 = torch.tensor(metal_basecolor(name)).view(3, 1, 1)
-        maps = _maps(brushed_metal.FAMILY, {"metal": metal + 0.5, "scratch_density": 0.0})
+        maps = family_maps(brushed_metal.FAMILY, {"metal": metal + 0.5, "scratch_density": 0.0})
         # The measured F0, only shaded by smudges (darker, ≤ 6 %) and the brushing (± 1.5 %).
         ratio = maps[0:3] / f0
         assert ratio.max() <= 1.016 and ratio.min() >= 0.92, name
@@ -71,7 +66,7 @@ def test_brushed_metal_base_colour_is_metal_f0() -> None:
 
 
 def test_brushing_is_streaky_along_its_direction() -> None:
-    maps = _maps(brushed_metal.FAMILY, {"scratch_density": 0.0, "smudge": 0.0}, size=256)
+    maps = family_maps(brushed_metal.FAMILY, {"scratch_density": 0.0, "smudge": 0.0}, size=256)
     rough = maps[6]
     # Horizontal brushing: neighbours along a row are far more alike than neighbours down a column.
     along = (rough[:, 1:] - rough[:, :-1]).abs().mean()
@@ -80,7 +75,7 @@ def test_brushing_is_streaky_along_its_direction() -> None:
 
 
 def test_rusted_metal_rust_is_rough_and_not_metallic() -> None:
-    maps = _maps(rusted_metal.FAMILY, size=256)
+    maps = family_maps(rusted_metal.FAMILY, size=256)
     rough, metal = maps[6].flatten(), maps[7].flatten()
     assert (metal < 0.01).any() and (metal > 0.99).any()
     assert torch.corrcoef(torch.stack([rough, metal]))[0, 1] < -0.2
@@ -92,24 +87,24 @@ def test_rusted_metal_rust_is_rough_and_not_metallic() -> None:
 
 
 def test_rusted_metal_without_rust_or_paint_is_bare_steel() -> None:
-    maps = _maps(rusted_metal.FAMILY, {"rust_coverage": 0.0, "paint_coverage": 0.0})
+    maps = family_maps(rusted_metal.FAMILY, {"rust_coverage": 0.0, "paint_coverage": 0.0})
     assert torch.all(maps[7] > 0.99)
 
 
 def test_leather_weave_switch_gives_regular_threads() -> None:
-    fabric = _maps(leather.FAMILY, {"weave": 1.0, "threads": 64.0}, size=256)
+    fabric = family_maps(leather.FAMILY, {"weave": 1.0, "threads": 64.0}, size=256)
     validate_maps(fabric)
     # 64 threads over 256 texels: the relief repeats every 2 threads = 8 texels (plain weave).
     nx = fabric[3]
     assert (nx - nx.roll(8, dims=1)).abs().mean() < 0.5 * (nx - nx.roll(4, dims=1)).abs().mean()
-    assert fabric[6].mean() > _maps(leather.FAMILY, {"weave": 0.0}, size=256)[6].mean()
+    assert fabric[6].mean() > family_maps(leather.FAMILY, {"weave": 0.0}, size=256)[6].mean()
 
 
 def test_concrete_is_rough_with_dark_rough_pores() -> None:
-    maps = _maps(concrete.FAMILY, size=256)
+    maps = family_maps(concrete.FAMILY, size=256)
     assert maps[6].mean() > 0.6
-    no_pores = _maps(concrete.FAMILY, {"pore_density": 0.0}, size=256)
-    many = _maps(concrete.FAMILY, {"pore_density": 0.25}, size=256)
+    no_pores = family_maps(concrete.FAMILY, {"pore_density": 0.0}, size=256)
+    many = family_maps(concrete.FAMILY, {"pore_density": 0.25}, size=256)
     assert many[0:3].mean() < no_pores[0:3].mean()
     assert many[6].mean() > no_pores[6].mean()
 

@@ -19,6 +19,7 @@ from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
 from brdfgan.data.materials.families import mosaic
 from brdfgan.data.materials.noise import worley
+from tests.conftest import family_maps
 
 SIZE = 128
 MODULES = ("mosaic", "relief_tiles", "painted_wood", "plastic", "fabric")
@@ -38,10 +39,6 @@ def _layers(
 ) -> MaterialLayers:
     family = _family(module)
     return family.generate({**family.defaults(), **(params or {})}, size, torch.Generator().manual_seed(seed))
-
-
-def _maps(module: str, params: dict[str, float] | None = None, size: int = SIZE, seed: int = 0) -> Tensor:
-    return _family(module).make_maps(params or {}, size, torch.Generator().manual_seed(seed))
 
 
 def _hue_turns(basecolor: Tensor) -> Tensor:
@@ -93,7 +90,7 @@ def test_relief_is_resolution_independent(
 ) -> None:
     # Heights are in texels ∝ size and features per image width, so once features span a few
     # texels the mean normal tilt barely changes with the resolution.
-    tilts = [_tilt(_maps(module, params, size=size)).mean().item() for size in sizes]
+    tilts = [_tilt(family_maps(_family(module), params, size=size)).mean().item() for size in sizes]
     assert tilts[0] == pytest.approx(tilts[1], rel=0.3)
 
 
@@ -155,7 +152,7 @@ def test_mosaic_tilt_tilts_the_tessera_faces() -> None:
     def face_tilt(tilt: float) -> float:
         height = _layers("mosaic", {"tilt": tilt}).height[0]
         faces = height >= height.quantile(0.6)
-        return _tilt(_maps("mosaic", {"tilt": tilt}))[faces].mean().item()
+        return _tilt(family_maps(_family("mosaic"), {"tilt": tilt}))[faces].mean().item()
 
     assert face_tilt(0.7) > 1.2 * face_tilt(0.0)
 
@@ -188,7 +185,7 @@ def test_relief_tiles_glaze_pools_dark_and_saturated_in_recesses(pattern: float)
 @pytest.mark.parametrize("pattern", [0.0, 1.0, 2.0, 3.0])
 def test_relief_tiles_motif_relief_is_strong_and_follows_the_parameter(pattern: float) -> None:
     def tilt(relief: float) -> float:
-        maps = _maps("relief_tiles", {"tile_count": 2.0, "pattern": pattern, "relief": relief})
+        maps = family_maps(_family("relief_tiles"), {"tile_count": 2.0, "pattern": pattern, "relief": relief})
         return _tilt(maps)[_tile_interiors(SIZE, 2, margin=5)].mean().item()
 
     # A flat glazed tile face has 1 − n_z ≈ 0; these motifs tilt the face by 10–25° on average.
@@ -262,7 +259,8 @@ def test_painted_wood_grain_shows_through_the_paint_as_relief() -> None:
     faces = _board_rows(SIZE, 4, 0.07, 0.93)
     plain = {"boards": 4.0, "chipping": 0.0, "paint": 1.0}
     tilts = [
-        _tilt(_maps("painted_wood", {**plain, "grain_relief": r}))[faces].mean() for r in (0.0002, 0.002)
+        _tilt(family_maps(_family("painted_wood"), {**plain, "grain_relief": r}))[faces].mean()
+        for r in (0.0002, 0.002)
     ]
     assert tilts[1] > 1e-3 and tilts[1] > 20.0 * tilts[0]
 
@@ -279,8 +277,9 @@ PLASTIC_MODES = {
 
 def test_plastic_textures_have_strong_relief_and_smooth_plastic_is_flat() -> None:
     # At the coarsest scale every texture spans ≥ 8 texels at 256².
+    plastic = _family("plastic")
     tilts = {
-        name: _tilt(_maps("plastic", {"mode": mode, "texture_scale": 0.0}, size=256)).mean().item()
+        name: _tilt(family_maps(plastic, {"mode": mode, "texture_scale": 0.0}, size=256)).mean().item()
         for name, mode in PLASTIC_MODES.items()
     }
     assert tilts["smooth"] < 1e-3
@@ -291,7 +290,7 @@ def test_plastic_textures_have_strong_relief_and_smooth_plastic_is_flat() -> Non
 def test_plastic_rubber_is_dark_and_rough_plastic_keeps_its_colour_and_gloss() -> None:
     colour = {"hue": 0.3, "saturation": 0.75, "value": 0.9, "roughness": 0.1, "wear": 0.0}
     for name, mode in PLASTIC_MODES.items():
-        parts = split_maps(_maps("plastic", {**colour, "mode": mode}))
+        parts = split_maps(family_maps(_family("plastic"), {**colour, "mode": mode}))
         if name.startswith("rubber"):
             assert parts.basecolor.max() < 0.3 and parts.roughness.min() > 0.6, name
         else:
@@ -339,7 +338,7 @@ def test_fabric_is_rough_with_sheen_on_the_thread_crowns() -> None:
 
 def test_fabric_threads_have_strong_relief() -> None:
     for weave in (0.0, 1.0):
-        assert _tilt(_maps("fabric", {**FABRIC, "weave": weave})).mean() > 0.02
+        assert _tilt(family_maps(_family("fabric"), {**FABRIC, "weave": weave})).mean() > 0.02
 
 
 def test_fabric_weave_structure_plain_and_twill() -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from brdfgan.core.svbrdf import srgb_to_linear, validate_maps
+from brdfgan.core.svbrdf import srgb_to_linear
 from brdfgan.data.materials.albedo import (
     DIELECTRIC_ALBEDO_LINEAR,
     METAL_F0_LINEAR,
@@ -14,14 +14,9 @@ from brdfgan.data.materials.albedo import (
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
 from brdfgan.data.materials.families import anodized_metal, metallic_paint, polished_metal, tread_plate
 from brdfgan.data.materials.noise import fbm, hsv_to_rgb, worley
+from tests.conftest import family_maps
 
 SIZE = 128
-
-
-def _maps(family: MaterialFamily, params: dict[str, float], size: int = SIZE, seed: int = 0) -> torch.Tensor:
-    maps = family.make_maps(params, size, torch.Generator().manual_seed(seed))
-    validate_maps(maps)
-    return maps
 
 
 def _tilt_degrees(maps: torch.Tensor) -> torch.Tensor:
@@ -38,7 +33,9 @@ def test_polished_metal_is_exactly_the_named_metal_everywhere() -> None:
     assert len(polished_metal.METALS) == 9
     for index, name in enumerate(polished_metal.METALS):
         # Fingerprints, haze and swirls at their strongest still leave the colour alone.
-        maps = _maps(polished_metal.FAMILY, {"metal": index + 0.5, "smudge": 1.0, "swirl": 1.0}, size=64)
+        maps = family_maps(
+            polished_metal.FAMILY, {"metal": index + 0.5, "smudge": 1.0, "swirl": 1.0}, size=64
+        )
         assert torch.allclose(maps[0:3], _f0(name).expand(3, 64, 64), atol=1e-6), name
         assert torch.equal(maps[7], torch.ones(64, 64)), name
     # Gold is yellow, chrome neutral: the index really picks different measured colours.
@@ -48,13 +45,13 @@ def test_polished_metal_is_exactly_the_named_metal_everywhere() -> None:
 
 def test_hammered_dents_tilt_the_normals_strongly() -> None:
     flat = {"hammered": 0.0, "waviness": 0.0, "swirl": 0.0}
-    assert _tilt_degrees(_maps(polished_metal.FAMILY, flat)).max() < 1e-3
-    half = _tilt_degrees(_maps(polished_metal.FAMILY, {**flat, "hammered": 0.5}))
-    full = _tilt_degrees(_maps(polished_metal.FAMILY, {**flat, "hammered": 1.0}))
+    assert _tilt_degrees(family_maps(polished_metal.FAMILY, flat)).max() < 1e-3
+    half = _tilt_degrees(family_maps(polished_metal.FAMILY, {**flat, "hammered": 0.5}))
+    full = _tilt_degrees(family_maps(polished_metal.FAMILY, {**flat, "hammered": 1.0}))
     assert 10.0 < full.mean() < 25.0 and full.flatten().quantile(0.95) > 20.0
     assert full.mean() > 1.7 * half.mean()
     # Relief is in image-width units: the tilt is alike at twice the resolution.
-    full_256 = _tilt_degrees(_maps(polished_metal.FAMILY, {**flat, "hammered": 1.0}, size=256))
+    full_256 = _tilt_degrees(family_maps(polished_metal.FAMILY, {**flat, "hammered": 1.0}, size=256))
     assert abs(full_256.mean() - full.mean()) < 0.2 * full.mean()
 
 
@@ -78,9 +75,9 @@ def test_smooth_fbm_is_fbm_evaluated_coarsely() -> None:
 
 def test_polished_metal_smudges_and_swirls_only_roughen() -> None:
     clean = {"roughness": 0.1, "smudge": 0.0, "swirl": 0.0}
-    assert torch.allclose(_maps(polished_metal.FAMILY, clean, size=256)[6], torch.full((256, 256), 0.1))
-    smudged = _maps(polished_metal.FAMILY, {**clean, "smudge": 1.0}, size=256)[6]
-    swirled = _maps(polished_metal.FAMILY, {**clean, "swirl": 1.0}, size=256)[6]
+    assert torch.allclose(family_maps(polished_metal.FAMILY, clean, size=256)[6], torch.full((256, 256), 0.1))
+    smudged = family_maps(polished_metal.FAMILY, {**clean, "smudge": 1.0}, size=256)[6]
+    swirled = family_maps(polished_metal.FAMILY, {**clean, "swirl": 1.0}, size=256)[6]
     for roughness in (smudged, swirled):
         assert roughness.min() >= 0.1 - 1e-6
         assert (roughness > 0.15).float().mean() > 0.005
@@ -116,14 +113,14 @@ def test_tread_plate_lozenges_are_raised_and_alternate() -> None:
 
 def test_tread_plate_clean_is_bare_metal_with_polished_tops() -> None:
     for index, name in enumerate(tread_plate.METALS):
-        maps = _maps(tread_plate.FAMILY, {"metal": index + 0.5, "dirt": 0.0, "rust": 0.0})
+        maps = family_maps(tread_plate.FAMILY, {"metal": index + 0.5, "dirt": 0.0, "rust": 0.0})
         assert torch.equal(maps[7], torch.ones(SIZE, SIZE)), name
         assert torch.allclose(maps[0:3], _f0(name).expand(3, SIZE, SIZE), atol=1e-6), name
     profile, _, _ = tread_plate.lozenge_profile(SIZE, 8, tread_plate.FAMILY.defaults()["width"])
     tops, plate = profile > 0.9, profile == 0.0
     clean = {"dirt": 0.0, "rust": 0.0, "lozenge_count": 8.0, "roughness": 0.4}
-    unworn = _maps(tread_plate.FAMILY, {**clean, "wear": 0.0})[6]
-    worn = _maps(tread_plate.FAMILY, {**clean, "wear": 1.0})[6]
+    unworn = family_maps(tread_plate.FAMILY, {**clean, "wear": 0.0})[6]
+    worn = family_maps(tread_plate.FAMILY, {**clean, "wear": 1.0})[6]
     assert abs(unworn[tops].mean() - unworn[plate].mean()) < 0.02
     assert worn[tops].mean() < worn[plate].mean() - 0.1
     assert torch.equal(worn[plate], unworn[plate])  # traffic polishes only what it touches
@@ -133,7 +130,7 @@ def test_tread_plate_dirt_and_rust_only_in_the_valleys() -> None:
     profile, _, _ = tread_plate.lozenge_profile(SIZE, 8, tread_plate.FAMILY.defaults()["width"])
     for metal in (0.5, 1.5):
         params = {"metal": metal, "dirt": 0.5, "rust": 0.4, "lozenge_count": 8.0}
-        maps = _maps(tread_plate.FAMILY, params)
+        maps = family_maps(tread_plate.FAMILY, params)
         metallic, rough = maps[7], maps[6]
         covered = metallic < 0.01
         assert 0.2 < covered.float().mean() < 0.8
@@ -150,8 +147,8 @@ def test_tread_plate_dirt_and_rust_only_in_the_valleys() -> None:
             linear.min() >= DIELECTRIC_ALBEDO_LINEAR[0] - 1e-4 and linear.max() <= DIELECTRIC_ALBEDO_LINEAR[1]
         )
     # Rust on steel is orange (red well above blue); the oxide on aluminium is not.
-    steel = _maps(tread_plate.FAMILY, {"metal": 0.5, "dirt": 0.0, "rust": 0.5})
-    aluminium = _maps(tread_plate.FAMILY, {"metal": 1.5, "dirt": 0.0, "rust": 0.5})
+    steel = family_maps(tread_plate.FAMILY, {"metal": 0.5, "dirt": 0.0, "rust": 0.5})
+    aluminium = family_maps(tread_plate.FAMILY, {"metal": 1.5, "dirt": 0.0, "rust": 0.5})
     for maps, orange in ((steel, True), (aluminium, False)):
         rust = maps[7] < 0.01
         assert ((maps[0] - maps[2])[rust].mean() > 0.15) == orange
@@ -162,7 +159,7 @@ def test_anodized_metal_is_dyed_aluminium_of_the_chosen_hue() -> None:
     # Red, green and blue dyes: the dominant channel of the base colour follows the hue.
     for hue, channel in ((0.0, 0), (1 / 3, 1), (2 / 3, 2)):
         params = {"hue": hue, "saturation": 0.9, "value": 0.8}
-        maps = _maps(anodized_metal.FAMILY, params, size=64)
+        maps = family_maps(anodized_metal.FAMILY, params, size=64)
         assert torch.equal(maps[7], torch.ones(64, 64))
         mean = maps[0:3].mean(dim=(1, 2))
         assert mean.argmax() == channel and mean.max() - mean.min() > 0.4, hue
@@ -170,15 +167,15 @@ def test_anodized_metal_is_dyed_aluminium_of_the_chosen_hue() -> None:
         # A dye only absorbs: 4 % oxide reflection ≤ F0 ≤ the bare aluminium F0.
         linear = srgb_to_linear(maps[0:3])
         assert linear.min() >= 0.04 - 1e-4 and torch.all(linear <= aluminium + 1e-3)
-    clear = _maps(anodized_metal.FAMILY, {"saturation": 0.0, "value": 1.0}, size=64)[0:3]
+    clear = family_maps(anodized_metal.FAMILY, {"saturation": 0.0, "value": 1.0}, size=64)[0:3]
     assert torch.allclose(clear.mean(dim=(1, 2)), _f0("aluminium").flatten(), atol=0.02)
-    black = _maps(anodized_metal.FAMILY, {"saturation": 0.0, "value": 0.15}, size=64)[0:3]
+    black = family_maps(anodized_metal.FAMILY, {"saturation": 0.0, "value": 0.15}, size=64)[0:3]
     assert 0.04 <= srgb_to_linear(black).mean() < 0.07
 
 
 def test_anodized_metal_brushed_is_streaky_and_blasted_is_isotropic() -> None:
     def anisotropy(params: dict[str, float]) -> float:
-        rough = _maps(anodized_metal.FAMILY, params)[6]
+        rough = family_maps(anodized_metal.FAMILY, params)[6]
         along_rows = (rough[:, 1:] - rough[:, :-1]).abs().mean()
         along_columns = (rough[1:] - rough[:-1]).abs().mean()
         ratio = float(along_rows / along_columns)
@@ -191,7 +188,7 @@ def test_anodized_metal_brushed_is_streaky_and_blasted_is_isotropic() -> None:
 
 def test_anodized_metal_holes_are_dark_voids_with_bright_chamfers() -> None:
     params = {"holes": 4.0, "hole_size": 0.25, "saturation": 0.9, "value": 0.6}
-    maps = _maps(anodized_metal.FAMILY, params)
+    maps = family_maps(anodized_metal.FAMILY, params)
     height = _layers(anodized_metal.FAMILY, params).height[0]
     metallic, basecolor = maps[7], maps[0:3]
     void = metallic < 0.01
@@ -209,7 +206,7 @@ def test_anodized_metal_holes_are_dark_voids_with_bright_chamfers() -> None:
 
 def test_metallic_paint_is_paint_with_metal_flakes() -> None:
     params = {"mode": 0.0, "hue": 0.0, "saturation": 0.9, "value": 0.7, "flake_count": 40.0, "tint": 0.0}
-    maps = _maps(metallic_paint.FAMILY, params, size=256)
+    maps = family_maps(metallic_paint.FAMILY, params, size=256)
     metallic, basecolor = maps[7], maps[0:3]
     flake, paint = metallic == 1.0, metallic == 0.0
     # Flakes cover about the flake density; metallic is 0 or 1 but along their one-texel edges.
@@ -228,26 +225,27 @@ def test_metallic_paint_is_paint_with_metal_flakes() -> None:
     assert tilt[flake].mean() > 3.0 * tilt[paint].mean() and tilt[paint].mean() < 2.0
     assert maps[3][flake].std() > 0.05
     # A fully tinted coat colours the flakes with the paint's hue.
-    tinted = _maps(metallic_paint.FAMILY, {**params, "tint": 1.0}, size=256)
+    tinted = family_maps(metallic_paint.FAMILY, {**params, "tint": 1.0}, size=256)
     flake_color = tinted[0:3][:, tinted[7] == 1.0].mean(dim=1)
     assert flake_color[0] > flake_color[2] + 0.3
 
 
 def test_metallic_paint_hue_moves_the_paint_hue() -> None:
     for hue, channel in ((0.0, 0), (1 / 3, 1), (2 / 3, 2)):
-        maps = _maps(metallic_paint.FAMILY, {"mode": 0.0, "hue": hue, "saturation": 0.8}, size=64)
+        maps = family_maps(metallic_paint.FAMILY, {"mode": 0.0, "hue": hue, "saturation": 0.8}, size=64)
         paint = maps[7] == 0.0
         assert maps[0:3][:, paint].mean(dim=1).argmax() == channel, hue
 
 
 def test_foil_is_exactly_the_named_metal_with_strong_crinkles() -> None:
     for index, name in enumerate(metallic_paint.FOIL_METALS):
-        maps = _maps(metallic_paint.FAMILY, {"mode": 1.0, "foil_metal": index + 0.5}, size=64)
+        maps = family_maps(metallic_paint.FAMILY, {"mode": 1.0, "foil_metal": index + 0.5}, size=64)
         assert torch.equal(maps[7], torch.ones(64, 64)), name
         assert torch.allclose(maps[0:3], _f0(name).expand(3, 64, 64), atol=1e-6), name
     tilts = [
-        _tilt_degrees(_maps(metallic_paint.FAMILY, {"mode": 1.0, "crinkle": c})).mean() for c in (0.0, 1.0)
+        _tilt_degrees(family_maps(metallic_paint.FAMILY, {"mode": 1.0, "crinkle": c})).mean()
+        for c in (0.0, 1.0)
     ]
     assert tilts[1] > 18.0 and tilts[1] > 3.0 * tilts[0]
     # The mode switches at 0.5: just below it is paint with dielectric texels.
-    assert (_maps(metallic_paint.FAMILY, {"mode": 0.49}, size=64)[7] == 0.0).any()
+    assert (family_maps(metallic_paint.FAMILY, {"mode": 0.49}, size=64)[7] == 0.0).any()

@@ -13,6 +13,7 @@ from brdfgan.core.svbrdf import split_maps, srgb_to_linear
 from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers
 from brdfgan.data.materials.families import asphalt, leaves, paper, pavers, plaster, terrazzo
+from tests.conftest import family_maps
 
 SIZE = 64
 MODULES = ("paper", "plaster", "terrazzo", "pavers", "asphalt", "leaves")
@@ -28,10 +29,6 @@ def _layers(
     family: MaterialFamily, params: dict[str, float], seed: int = 0, size: int = SIZE
 ) -> MaterialLayers:
     return family.generate({**family.defaults(), **params}, size, torch.Generator().manual_seed(seed))
-
-
-def _maps(family: MaterialFamily, params: dict[str, float], seed: int = 0, size: int = SIZE) -> torch.Tensor:
-    return family.make_maps(params, size, torch.Generator().manual_seed(seed))
 
 
 def _tilt(maps: torch.Tensor) -> float:
@@ -84,7 +81,8 @@ def test_cork_is_rougher_and_deeper_than_cardboard_and_paper() -> None:
     family = paper.FAMILY
     for seed in range(3):
         maps = {
-            mode: _maps(family, {"mode": mode, "creases": 0.0}, seed) for mode in (PAPER, CARDBOARD, CORK)
+            mode: family_maps(family, {"mode": mode, "creases": 0.0}, seed, size=SIZE)
+            for mode in (PAPER, CARDBOARD, CORK)
         }
         tilts = {mode: _tilt(m) for mode, m in maps.items()}
         assert tilts[PAPER] < tilts[CARDBOARD] < tilts[CORK], tilts
@@ -105,7 +103,7 @@ def test_cardboard_flutes_repeat_scale_times_per_width(flutes: int) -> None:
 
 @pytest.mark.parametrize("hue", [0.0, 0.33, 0.62, 0.85])
 def test_paper_colour_follows_hue(hue: float) -> None:
-    maps = _maps(paper.FAMILY, {"mode": PAPER, "hue": hue, "saturation": 0.6, "ink": 0.0})
+    maps = family_maps(paper.FAMILY, {"mode": PAPER, "hue": hue, "saturation": 0.6, "ink": 0.0}, size=SIZE)
     assert _hue_distance(_mean_hue(split_maps(maps).basecolor), hue) < 0.02
 
 
@@ -114,8 +112,8 @@ def test_print_is_darker_and_smoother_than_the_sheet(mode: float) -> None:
     # Print is painted last, so the same seed gives the same sheet with and without it: the texels
     # that change are the printed ones.
     params = {"mode": mode, "saturation": 0.5, "value": 0.85}
-    blank = split_maps(_maps(paper.FAMILY, {**params, "ink": 0.0}, seed=4))
-    printed = split_maps(_maps(paper.FAMILY, {**params, "ink": 1.0}, seed=4))
+    blank = split_maps(family_maps(paper.FAMILY, {**params, "ink": 0.0}, seed=4, size=SIZE))
+    printed = split_maps(family_maps(paper.FAMILY, {**params, "ink": 1.0}, seed=4, size=SIZE))
     ink = (printed.basecolor - blank.basecolor).abs().sum(dim=0) > 1e-4
     assert 0.05 < ink.float().mean() < 0.8
     assert printed.basecolor[:, ink].mean() < blank.basecolor[:, ink].mean() - 0.2
@@ -140,7 +138,7 @@ CLEAN = {"cracks": 0.0, "dirt": 0.0}
 
 @pytest.mark.parametrize("hue", [0.05, 0.3, 0.58, 0.8])
 def test_plaster_paint_follows_hue_and_value(hue: float) -> None:
-    maps = _maps(plaster.FAMILY, {**CLEAN, "hue": hue, "saturation": 0.7, "value": 0.6})
+    maps = family_maps(plaster.FAMILY, {**CLEAN, "hue": hue, "saturation": 0.7, "value": 0.6}, size=SIZE)
     basecolor = split_maps(maps).basecolor
     assert _hue_distance(_mean_hue(basecolor), hue) < 0.02
     assert basecolor.amax(dim=0).mean().item() == pytest.approx(0.6, abs=0.03)  # HSV value
@@ -150,7 +148,7 @@ def test_plaster_paint_follows_hue_and_value(hue: float) -> None:
 def test_plaster_roughness_follows_the_paint(stucco: float) -> None:
     means = []
     for roughness in (0.3, 0.6, 0.9):
-        maps = _maps(plaster.FAMILY, {**CLEAN, "stucco": stucco, "roughness": roughness})
+        maps = family_maps(plaster.FAMILY, {**CLEAN, "stucco": stucco, "roughness": roughness}, size=SIZE)
         means.append(split_maps(maps).roughness.mean().item())
         assert means[-1] == pytest.approx(roughness, abs=0.12)  # trowelling only polishes a little
     assert means[0] < means[1] < means[2]
@@ -160,7 +158,7 @@ def test_knock_down_plateaus_are_raised_and_burnished() -> None:
     for seed in range(3):
         params = {**CLEAN, "stucco": KNOCK_DOWN}
         height = _layers(plaster.FAMILY, params, seed).height.flatten()
-        roughness = split_maps(_maps(plaster.FAMILY, params, seed)).roughness.flatten()
+        roughness = split_maps(family_maps(plaster.FAMILY, params, seed, size=SIZE)).roughness.flatten()
         plateau, base = height >= height.quantile(0.7), height <= height.quantile(0.3)
         assert roughness[plateau].mean() < roughness[base].mean() - 0.05
 
@@ -179,8 +177,10 @@ def test_cracks_are_dark_rough_grooves() -> None:
 
 def test_dirt_darkens_and_roughens_the_paint() -> None:
     for seed in range(3):
-        clean = split_maps(_maps(plaster.FAMILY, {**CLEAN, "roughness": 0.5}, seed))
-        dirty = split_maps(_maps(plaster.FAMILY, {"cracks": 0.0, "dirt": 1.0, "roughness": 0.5}, seed))
+        clean = split_maps(family_maps(plaster.FAMILY, {**CLEAN, "roughness": 0.5}, seed, size=SIZE))
+        dirty = split_maps(
+            family_maps(plaster.FAMILY, {"cracks": 0.0, "dirt": 1.0, "roughness": 0.5}, seed, size=SIZE)
+        )
         assert dirty.basecolor.mean() < clean.basecolor.mean() - 0.05
         assert dirty.roughness.mean() > clean.roughness.mean() + 0.02
 
@@ -188,7 +188,7 @@ def test_dirt_darkens_and_roughens_the_paint() -> None:
 def test_plaster_relief_parameter_deepens_the_texture() -> None:
     for stucco in (ORANGE_PEEL, TROWEL, KNOCK_DOWN):
         tilts = [
-            _tilt(_maps(plaster.FAMILY, {**CLEAN, "stucco": stucco, "relief": r}, size=128))
+            _tilt(family_maps(plaster.FAMILY, {**CLEAN, "stucco": stucco, "relief": r}, size=128))
             for r in (0.002, 0.008)
         ]
         assert tilts[1] > 2.0 * tilts[0], stucco
@@ -205,7 +205,7 @@ def _chip_coverage(params: dict[str, float], seed: int = 0) -> torch.Tensor:
 
 def test_terrazzo_is_polished_flat_and_pits_are_dark_rough_hollows() -> None:
     for seed in range(3):
-        flat = split_maps(_maps(terrazzo.FAMILY, {"pits": 0.0}, seed))
+        flat = split_maps(family_maps(terrazzo.FAMILY, {"pits": 0.0}, seed, size=SIZE))
         assert flat.roughness.mean() < 0.3
         assert (1.0 - flat.normal[2]).max() < 1e-3  # chips stand only a hair proud
         layers = _layers(terrazzo.FAMILY, {"pits": 1.0}, seed, size=128)
@@ -292,7 +292,8 @@ def test_cobbles_are_domed_with_polished_tops() -> None:
     for seed in range(3):
         cobbles = {"layout": COBBLES, "count": 6, "moss": 0.0, "relief": 0.02}
         flat = {**cobbles, "layout": RUNNING_BOND}
-        assert _tilt(_maps(pavers.FAMILY, cobbles, seed)) > 1.5 * _tilt(_maps(pavers.FAMILY, flat, seed))
+        cobbled, laid_flat = (family_maps(pavers.FAMILY, p, seed, size=SIZE) for p in (cobbles, flat))
+        assert _tilt(cobbled) > 1.5 * _tilt(laid_flat)
         layers = _layers(pavers.FAMILY, cobbles, seed, size=128)
         height, roughness = layers.height.flatten(), layers.roughness.flatten()
         top = height >= height.quantile(0.9)
@@ -326,7 +327,7 @@ NO_MARKING, WHITE, YELLOW = 0.5, 1.5, 2.5
 def test_road_marking_is_a_bright_smooth_stripe_of_its_width(marking: float, width: float) -> None:
     params = {"marking": marking, "marking_width": width, "wear": 0.0, "cracks": 0.0, "aggregate_value": 0.4}
     for seed in range(2):
-        maps = split_maps(_maps(asphalt.FAMILY, params, seed, size=128))
+        maps = split_maps(family_maps(asphalt.FAMILY, params, seed, size=128))
         hsv = _texel_hsv(maps.basecolor)
         # Only paint is saturated (yellow) or brighter than 0.75 (white): stones stay below.
         paint = hsv[:, 1] > 0.5 if marking == YELLOW else hsv[:, 2] > 0.75
@@ -352,8 +353,8 @@ def test_bare_aggregate_lightens_and_wear_smooths() -> None:
         coated = _layers(asphalt.FAMILY, {**base, "aggregate": 0.0, "wear": 0.0}, seed)
         bare = _layers(asphalt.FAMILY, {**base, "aggregate": 1.0, "wear": 0.0}, seed)
         assert bare.basecolor.mean() > coated.basecolor.mean() + 0.05
-        worn = _maps(asphalt.FAMILY, {**base, "aggregate": 1.0, "wear": 1.0}, seed)
-        fresh = _maps(asphalt.FAMILY, {**base, "aggregate": 1.0, "wear": 0.0}, seed)
+        worn = family_maps(asphalt.FAMILY, {**base, "aggregate": 1.0, "wear": 1.0}, seed, size=SIZE)
+        fresh = family_maps(asphalt.FAMILY, {**base, "aggregate": 1.0, "wear": 0.0}, seed, size=SIZE)
         assert _tilt(worn) < 0.8 * _tilt(fresh)
         assert split_maps(worn).roughness.mean() < split_maps(fresh).roughness.mean() - 0.03
 

@@ -664,6 +664,7 @@ def _ddp_worker(rank: int, world: int, port: int, out_dir: str) -> None:
         dist.destroy_process_group()
 
 
+@pytest.mark.integration
 def test_real_gloo_all_gather_equals_single_process(tmp_path) -> None:
     import socket
 

@@ -16,7 +16,7 @@ from brdfgan.core.render import FlashCapture, render_flash
 from brdfgan.core.svbrdf import CHANNELS, flat_maps, normalize_normal
 from tests.conftest import random_maps
 
-pytestmark = pytest.mark.mitsuba
+pytestmark = [pytest.mark.mitsuba, pytest.mark.integration]
 
 RESOLUTION = 48
 SUPERSAMPLE = 4

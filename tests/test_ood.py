@@ -96,6 +96,7 @@ def test_resolved_families_are_recorded() -> None:
     assert recorded == list(FAMILIES)
 
 
+@pytest.mark.integration
 def test_ood_config_composes_with_its_folder_from_the_environment(scanned_root: Path, tmp_path: Path) -> None:
     out = tmp_path / "plan"
     env = {"BRDFGAN_OOD_DIR": str(scanned_root), "PATH": "/usr/bin"}
@@ -113,6 +114,7 @@ def test_ood_config_composes_with_its_folder_from_the_environment(scanned_root: 
     assert "test" in result.stdout and "train" not in result.stdout.replace("train_", "")
 
 
+@pytest.mark.integration
 def test_eval_sensor_gives_val_and_test_predicts_intake(tiny_data: Path) -> None:
     from brdfgan.core.exposure import auto_expose
     from brdfgan.data.datamodule import ShardDataModule

@@ -73,6 +73,7 @@ def test_samples_without_a_recorded_camera_are_untouched() -> None:
     Sample("k", torch.rand(3, 16, 16), maps_as_photographed(maps, meta), meta)  # valid maps
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_mitsuba_photographs_the_aligned_maps_pixel_for_pixel() -> None:
     """A high-frequency base colour photographed by Mitsuba through a tilted, closer camera: the

@@ -175,6 +175,7 @@ def batch_args(tmp_path: Path, out: Path, weights: Path) -> list[str]:
     ]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
 def test_signal_mid_batch_leaves_no_staging_folder(
     tmp_path: Path, weights: Path, sig: signal.Signals

@@ -87,6 +87,7 @@ def test_environment_lights_put_the_sun_last_and_nothing_for_a_black_sky() -> No
         environment_lights(black, 0, torch.Generator())
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     ("environment", "ratio", "tolerance"),
     [(room_spec(0, 1), 0.05, 0.015), (room_spec(1, 1), 1.0, 0.03), (sunsky_spec(0, 2), 1.0, 0.03)],
@@ -117,6 +118,7 @@ def test_torch_photo_agrees_with_mitsuba(environment, ratio: float, tolerance: f
     assert difference < tolerance
 
 
+@pytest.mark.integration
 def test_torch_photo_shows_the_tilted_views_hotspot_where_mitsuba_does() -> None:
     # Rendered in texture space, then warped into the photo: a glossy uniform sample's highlight
     # sits where the mirror geometry puts it, in both renderers.
@@ -194,6 +196,7 @@ def test_stream_is_a_pure_function_of_seed_epoch_and_batch(bank: MaterialBank) -
     assert not torch.equal(batches(1)[0]["light_rgb"], first[0]["light_rgb"])
 
 
+@pytest.mark.integration
 def test_datamodule_renders_training_photos_and_generates_only_the_eval_shards(tmp_path: Path) -> None:
     cfg = compose_train(
         ["debug=default", "data=rendered", "dataset_spec@data.prepare.spec=tiny",
@@ -293,6 +296,7 @@ def test_relief_sampling_names_a_bad_key() -> None:
         ReliefSampling(bump_slope_min=0.3, bump_slope_max=0.1)
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_a_fresh_clone_trains_the_v5_recipe_without_a_training_set(tmp_path: Path) -> None:
     # experiment=v5 at toy sizes: the bank is painted, only the validation shards are generated,

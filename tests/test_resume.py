@@ -47,6 +47,7 @@ def _weights(module: L.LightningModule) -> dict[str, torch.Tensor]:
     return {k: v.detach().clone() for k, v in module.state_dict().items()}
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_interrupted_and_resumed_runs_equal_the_straight_run_bit_for_bit(
     tiny_data: Path, tmp_path: Path
@@ -79,6 +80,7 @@ def test_round_robin_share_follows_the_dataloader_order() -> None:
     assert _round_robin_share([2, 2], 0) == [0, 0]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     ("content", "message"),
     [
@@ -95,6 +97,7 @@ def test_an_unreadable_checkpoint_to_resume_is_one_line(tmp_path: Path, content:
         train(cfg)
 
 
+@pytest.mark.integration
 def test_a_truncated_real_checkpoint_is_refused(tmp_path: Path) -> None:
     cfg = compose_train(["debug=default"], tmp_path)
     _, module, _ = build(cfg)
@@ -107,6 +110,7 @@ def test_a_truncated_real_checkpoint_is_refused(tmp_path: Path) -> None:
         train(cfg)
 
 
+@pytest.mark.integration
 def test_another_architectures_checkpoint_is_refused_before_training(tmp_path: Path) -> None:
     wider = compose_train(["debug=default", "model.generator.width=16"], tmp_path)
     _, module, _ = build(wider)

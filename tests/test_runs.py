@@ -91,6 +91,7 @@ def test_a_crafted_run_config_is_refused_without_running_anything(tmp_path: Path
     _untouched(tmp_path)
 
 
+@pytest.mark.integration
 def test_evaluate_and_export_weights_refuse_a_crafted_run_in_one_line(tmp_path: Path) -> None:
     node, _ = _evil_nodes(tmp_path)["pickle"]
     run, checkpoint = _crafted_run(tmp_path, node)
@@ -148,6 +149,7 @@ def test_the_allowed_classes_still_load(tmp_path: Path) -> None:
     assert sum(p.numel() for p in discriminator.parameters()) > 0
 
 
+@pytest.mark.integration
 def test_predict_refuses_a_crafted_weights_file_in_one_line(tmp_path: Path) -> None:
     generator = Generator(**SMALL)
     victim = tmp_path / "victim.txt"

@@ -221,6 +221,7 @@ def test_unknown_formats_are_refused_when_writing(tmp_path: Path) -> None:
 # dataset_spec.shard_format
 
 
+@pytest.mark.integration
 def test_the_config_key_is_validated_naming_it() -> None:
     with pytest.raises(
         DatasetConfigError, match=r"^dataset_spec\.shard_format='jpeg': must be one of u16z, png$"

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import math
+from functools import partial
 from pathlib import Path
 
 import pytest
 import torch
 
 from brdfgan.cli import main
-from brdfgan.core.svbrdf import join_maps
 from brdfgan.data.capture import CaptureSampling
 from brdfgan.data.generation import run_generation
 from brdfgan.data.material_source import ScanSampling
@@ -29,27 +29,24 @@ from tests.conftest import random_maps, tilted_plane
 from tests.test_generation import tiny_spec, torch_photographer
 from tests.test_ood import _write_scanned_set
 
-
-def _maps(colour: tuple[float, float, float], metallic: float, size: int = 16) -> torch.Tensor:
-    basecolor = torch.tensor(colour).view(3, 1, 1).expand(3, size, size)
-    normal = tilted_plane(size, (math.sin(math.radians(30.0)), 0.0, math.cos(math.radians(30.0))))[3:6]
-    return join_maps(
-        basecolor, normal, torch.full((1, size, size), 0.4), torch.full((1, size, size), metallic)
-    )
+# Uniform 16² planes of roughness 0.4 whose normals all lean 30° from +Z, in a given colour.
+_plane = partial(
+    tilted_plane, 16, (math.sin(math.radians(30.0)), 0.0, math.cos(math.radians(30.0))), roughness=0.4
+)
 
 
 def test_golden_figures_of_known_maps() -> None:
     stats = MapStatistics("toy")
-    stats.add(_maps((0.8, 0.1, 0.1), 0.0), "red")  # saturated red dielectric
-    stats.add(_maps((0.5, 0.5, 0.5), 1.0), "grey", mixed=True)  # grey metal
+    stats.add(_plane(basecolor=(0.8, 0.1, 0.1)), "red")  # saturated red dielectric
+    stats.add(_plane(basecolor=(0.5, 0.5, 0.5), metallic=1.0), "grey", mixed=True)  # grey metal
     row = stats.row()
     assert row["samples"] == 2 and row["metallic_share"] == pytest.approx(0.5)
     assert row["coloured_share"] == pytest.approx(0.5)
     assert row["hue_evenness"] == pytest.approx(0.0)  # every coloured texel is red
     assert row["roughness_p50"] == pytest.approx(0.4)
     assert row["relief_deg"] == pytest.approx(30.0, abs=1e-3)
-    stats.add(_maps((0.1, 0.8, 0.1), 0.0), "green")
-    stats.add(_maps((0.1, 0.1, 0.8), 0.0), "blue")
+    stats.add(_plane(basecolor=(0.1, 0.8, 0.1)), "green")
+    stats.add(_plane(basecolor=(0.1, 0.1, 0.8)), "blue")
     # Three of six hue sectors equally full: entropy log 3 / log 6.
     assert stats.row()["hue_evenness"] == pytest.approx(math.log(3) / math.log(6), abs=1e-6)
     table = statistics_table([stats])
@@ -58,6 +55,7 @@ def test_golden_figures_of_known_maps() -> None:
     )
 
 
+@pytest.mark.integration
 def test_dataset_statistics_and_cli(tiny_data: Path, capsys: pytest.CaptureFixture[str]) -> None:
     data = tiny_data / "data" / "tiny"
     stats = dataset_statistics(data, "train")
@@ -103,13 +101,15 @@ def mixed_dataset(tmp_path: Path) -> Path:
             meta = _meta(i, "bricks" if i % 2 else "wood", **extra)
             if i < 2:
                 meta["crop"] = {**meta["crop"], "mirror": True}  # type: ignore[dict-item]
-            samples.append(_sample(f"train-m{i}", _maps((0.8, 0.1, 0.1), 0.0), meta))
+            samples.append(_sample(f"train-m{i}", _plane(basecolor=(0.8, 0.1, 0.1)), meta))
         else:
             family = "scanned/SetA" if i < 10 else "scanned/SetB"
-            samples.append(_sample(f"train-m{i}", _maps((0.5, 0.5, 0.5), 1.0), _meta(i, family)))
+            samples.append(
+                _sample(f"train-m{i}", _plane(basecolor=(0.5, 0.5, 0.5), metallic=1.0), _meta(i, family))
+            )
     write_shard(shard_path(root, "train", 0), samples[:5])
     write_shard(shard_path(root, "train", 1), samples[5:])
-    old = [_sample(f"val-m{i}", _maps((0.1, 0.8, 0.1), 0.0), {"family": "bricks"}) for i in range(2)]
+    old = [_sample(f"val-m{i}", _plane(basecolor=(0.1, 0.8, 0.1)), {"family": "bricks"}) for i in range(2)]
     write_shard(shard_path(root, "val", 0), old)
     return root
 

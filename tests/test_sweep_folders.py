@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 import yaml
 from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -41,6 +42,7 @@ def test_long_override_lists_are_cut_with_a_hash_and_stay_distinct() -> None:
     assert set(odd) <= set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789._-")
 
 
+@pytest.mark.integration
 def test_a_multirun_with_a_dozen_overrides_gets_short_folders_that_evaluate_accepts(tmp_path: Path) -> None:
     # A real Hydra multirun (nothing trained: train=false test=false): 2 jobs, 14 overrides each.
     overrides = [

@@ -50,7 +50,7 @@ from tests.conftest import random_maps
 from tests.test_views_fit import FAST, corrupted, map_errors, truth_maps
 from tests.test_views_register import smooth_texture
 
-pytestmark = pytest.mark.mitsuba
+pytestmark = [pytest.mark.mitsuba, pytest.mark.integration]
 REPO = Path(__file__).resolve().parents[1]
 
 

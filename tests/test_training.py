@@ -27,6 +27,7 @@ CONF = ROOT / "conf"
 LOSSES = ["full", "no_adv", "no_feat", "no_param", "no_render"]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("loss", LOSSES)
 @pytest.mark.parametrize("experiment", ["null", "cpu", "debug", "paper", "default_model"])
 def test_every_loss_and_experiment_composes_and_builds(tmp_path: Path, loss: str, experiment: str) -> None:
@@ -56,6 +57,7 @@ def test_every_loss_and_experiment_composes_and_builds(tmp_path: Path, loss: str
     assert isinstance(trainer, L.Trainer)
 
 
+@pytest.mark.integration
 def test_default_model_finetune_is_stage_one_without_a_discriminator(tmp_path: Path) -> None:
     stage1 = compose_train(["experiment=default_model"], tmp_path)
     stage2 = compose_train(["experiment=default_model_finetune"], tmp_path)
@@ -66,18 +68,21 @@ def test_default_model_finetune_is_stage_one_without_a_discriminator(tmp_path: P
     assert module.discriminator is None and module.loss.switches.parameter and module.loss.switches.rendering
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("group", ["trainer=gpu", "trainer=ddp", "logger=tensorboard", "logger=wandb"])
 def test_other_groups_compose(tmp_path: Path, group: str) -> None:
     cfg = compose_train([group], tmp_path)
     assert cfg.trainer._target_ == "lightning.pytorch.Trainer"
 
 
+@pytest.mark.integration
 def test_paper_model_has_the_paper_generator(tmp_path: Path) -> None:
     cfg = compose_train(["model=paper", "loss=no_adv"], tmp_path)
     generator = hydra.utils.instantiate(cfg.model.generator)
     assert abs(sum(p.numel() for p in generator.parameters()) / 1e6 - 45.6) < 0.2
 
 
+@pytest.mark.integration
 def test_wrong_key_or_type_fails_at_composition(tmp_path: Path) -> None:
     with pytest.raises(ConfigCompositionException, match="no_such_key"):
         compose_train(["no_such_key=1"], tmp_path)
@@ -85,6 +90,7 @@ def test_wrong_key_or_type_fails_at_composition(tmp_path: Path) -> None:
         compose_train(["seed=abc"], tmp_path)
 
 
+@pytest.mark.integration
 def test_without_adversarial_and_feature_terms_there_is_no_discriminator(tmp_path: Path) -> None:
     cfg = compose_train(["loss=supervised"], tmp_path)
     assert cfg.loss == compose_train(["loss=no_adv", "loss.switches.feature=false"], tmp_path).loss
@@ -97,6 +103,7 @@ def test_without_adversarial_and_feature_terms_there_is_no_discriminator(tmp_pat
     assert module.discriminator is not None
 
 
+@pytest.mark.integration
 def test_validation_loss_renders_every_sample_under_the_same_fixed_lights(tmp_path: Path) -> None:
     # val/loss is a per-sample quantity: the batch's value is the mean of its samples' values,
     # whatever the batch size or position, and the same on every call.
@@ -134,6 +141,7 @@ def _same(a: nn.Module | list[torch.Tensor], b: nn.Module, atol: float = 0.0) ->
                zip(first, b.state_dict().values(), strict=True))  # fmt: skip
 
 
+@pytest.mark.integration
 def test_warm_start_takes_the_weights_and_nothing_else(tmp_path: Path) -> None:
     torch.manual_seed(1)
     _, gan, _ = build(compose_train(["loss=full"], tmp_path))
@@ -161,6 +169,7 @@ def test_warm_start_takes_the_weights_and_nothing_else(tmp_path: Path) -> None:
     assert _same(gan.generator, from_weights.generator, atol=1e-3)
 
 
+@pytest.mark.integration
 def test_warm_start_errors_name_the_file(tmp_path: Path) -> None:
     _, module, _ = build(compose_train(["loss=supervised"], tmp_path))
     _, wider, _ = build(compose_train(["loss=no_adv", "model.generator.width=8"], tmp_path))
@@ -184,6 +193,7 @@ def _fit(cfg: DictConfig, ckpt_path: str | None = None) -> tuple[L.LightningModu
     return module, trainer
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 @pytest.mark.parametrize("loss", ["full", "no_adv"])
 def test_gan_step_counts_and_schedule_follow_generator_steps(tiny_data: Path, loss: str) -> None:
@@ -202,6 +212,7 @@ def test_gan_step_counts_and_schedule_follow_generator_steps(tiny_data: Path, lo
     assert math.isfinite(float(logged["val/loss"]))
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 @pytest.mark.parametrize(("debug", "batches"), [("fdr", 1), ("limit", 3 * 2)])
 def test_debug_configs_run_the_loop_on_the_batches_they_name(
@@ -214,11 +225,13 @@ def test_debug_configs_run_the_loop_on_the_batches_they_name(
     assert math.isfinite(float(trainer.callback_metrics["val/loss"]))
 
 
+@pytest.mark.integration
 def test_debug_overfit_trains_on_a_few_batches_for_many_epochs(tmp_path: Path) -> None:
     trainer = compose_train(["debug=overfit"], tmp_path).trainer
     assert trainer.overfit_batches == 3 and trainer.max_epochs == 20 and trainer.accelerator == "cpu"
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_resume_continues_with_the_same_step_count_and_lr(tiny_data: Path, tmp_path: Path) -> None:
     overrides = ["debug=default", "logger=csv", "trainer.max_epochs=3"]
@@ -260,6 +273,7 @@ def test_resume_continues_with_the_same_step_count_and_lr(tiny_data: Path, tmp_p
     assert list((tmp_path / "interrupted" / "checkpoints").glob("epoch*.ckpt"))
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_train_py_runs_the_loop_and_returns_the_metric(tiny_data: Path) -> None:
     result = run_python("train.py", "debug=default", cwd=tiny_data)
@@ -270,6 +284,7 @@ def test_train_py_runs_the_loop_and_returns_the_metric(tiny_data: Path) -> None:
     assert (runs[-1] / "csv").exists()
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_train_py_prints_each_log_line_once_and_not_the_whole_config(tiny_data: Path) -> None:
     # Lightning's own stderr handler used to print every line a second time beside Hydra's console.
@@ -285,6 +300,7 @@ def test_train_py_prints_each_log_line_once_and_not_the_whole_config(tiny_data: 
     assert "_target_:" in (run / ".hydra" / "config.yaml").read_text()
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     ("overrides", "error", "message"),
     [
@@ -305,6 +321,7 @@ def test_bad_run_input_is_a_user_error_before_any_work(
     assert not (tmp_path / "data").exists()  # nothing was prepared
 
 
+@pytest.mark.integration
 def test_train_py_reports_a_user_error_in_one_line(tmp_path: Path) -> None:
     # The command-line property the in-process cases above rely on: one line, exit 2, no traceback.
     result = run_python("train.py", "debug=default", "ckpt_path=/nonexistent.ckpt", cwd=tmp_path)
@@ -313,6 +330,7 @@ def test_train_py_reports_a_user_error_in_one_line(tmp_path: Path) -> None:
     assert lines == ["error: ckpt_path: checkpoint /nonexistent.ckpt does not exist"], result.stderr[-2000:]
 
 
+@pytest.mark.integration
 def test_ablation_sweep_config_lists_the_grid(tmp_path: Path) -> None:
     result = run_python("train.py", "--config-dir", str(ROOT / "sweeps"), "--config-name", "ablation",
                         "--cfg", "hydra", cwd=tmp_path)  # fmt: skip
@@ -322,6 +340,7 @@ def test_ablation_sweep_config_lists_the_grid(tmp_path: Path) -> None:
     torch.manual_seed(0)  # keep the random state of later tests independent of this one
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 @pytest.mark.slow  # 13-18 s: kept out of make test's 6 minutes (make test-slow runs it)
 def test_ddp_on_two_cpu_processes_trains_and_tests(tiny_data: Path) -> None:
@@ -337,6 +356,7 @@ def test_ddp_on_two_cpu_processes_trains_and_tests(tiny_data: Path) -> None:
     assert "test/loss" in result.stdout + result.stderr
 
 
+@pytest.mark.integration
 def test_seed_reaches_the_data_order_and_trainer_switches_need_no_plus(tmp_path: Path) -> None:
     overrides = ["debug=default", "seed=2", "trainer.limit_train_batches=3", "trainer.fast_dev_run=true"]
     cfg = compose_train(overrides, tmp_path)

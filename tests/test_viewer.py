@@ -157,6 +157,7 @@ def _plane_pixels(canvas: np.ndarray) -> np.ndarray:
     return canvas[np.abs(canvas - BACKGROUND).max(axis=-1) > 12]
 
 
+@pytest.mark.integration
 @needs_browser
 def test_chromium_renders_the_material_from_file_url(tmp_path: Path) -> None:
     folder = _material(tmp_path, random_maps(64, 64, seed=1))
@@ -172,6 +173,7 @@ def test_chromium_renders_the_material_from_file_url(tmp_path: Path) -> None:
     assert np.abs(mean - BACKGROUND).max() > 8  # the page's own read-back saw more than the background
 
 
+@pytest.mark.integration
 @needs_browser
 def test_chromium_shows_the_base_colour_and_light_from_the_normals_side(tmp_path: Path) -> None:
     # Red, with every normal tilted towards the texture's top (+Y, OpenGL): lit from the top

@@ -32,7 +32,10 @@ if TYPE_CHECKING:  # imported lazily below: --help must not wait for torch
     import torch
 
     from brdfgan.inference.intake.preprocess import Crop
-    from brdfgan.inference.pipeline import Predictor
+    from brdfgan.inference.pipeline import BatchResult, PhotoFailure, PhotoResult, PredictOptions, Predictor
+
+    # What ``add_subparsers`` returns: each ``_add_<command>`` adds its subcommand to it.
+    Commands = argparse._SubParsersAction[argparse.ArgumentParser]
 
 # predict --views: the most photos of one surface fitted together (the issue's 2-12; each view adds
 # a render to every fit step).
@@ -118,6 +121,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"brdfgan {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    # In this order in ``brdfgan --help``.
+    for add_command in (
+        _add_predict,
+        _add_export_weights,
+        _add_contact_sheet,
+        _add_convert_deschaintre,
+        _add_report,
+        _add_references,
+        _add_dataset_stats,
+        _add_eval_captures,
+    ):
+        add_command(commands)
+    return parser
+
+
+def _add_predict(commands: Commands) -> None:
     predict = commands.add_parser(
         "predict",
         help="flash photo(s) → engine-ready PBR textures, material.glb and relit previews",
@@ -129,36 +148,38 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=PREDICT_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    predict.add_argument(
+    # --help reads in these sections, in this order.
+    _add_predict_input(predict)
+    _add_predict_output(predict)
+    _add_predict_model(predict)
+    _add_predict_speed(predict)
+    _add_predict_console(predict)
+    predict.set_defaults(run=predict_command, interrupted=PREDICT_INTERRUPTED)
+
+
+def _add_predict_input(predict: argparse.ArgumentParser) -> None:
+    group = predict.add_argument_group("input")
+    group.add_argument(
         "inputs",
         nargs="+",
         metavar="PHOTO|DIR",
         help="JPEG, PNG, HEIC/HEIF, TIFF (8/16-bit), EXR or camera RAW/DNG files, or folders of them",
     )
-    predict.add_argument(
-        "--out", required=True, type=Path, metavar="DIR", help="output folder (one subfolder per photo)"
+    group.add_argument(
+        "--views",
+        action="store_true",
+        help="the photos are views of one flat surface (2-12, flash on; the first is the reference): "
+        "one material fitted to all of them, in OUT/<first photo's name>/; a photo that does not "
+        "register is left out with a warning (docs/views.md)",
     )
-    predict.add_argument(
-        "--weights",
-        type=Path,
-        metavar="PATH",
-        help="a .safetensors weights file (default: the weights shipped with brdfgan)",
-    )
-    predict.add_argument(
-        "--resolution",
-        type=_positive,
-        metavar="N",
-        help="output size N×N (default: the crop's size in the photo, at least the model's training "
-        "resolution and at most 2048); sizes above the tile (--tile) run tiled",
-    )
-    predict.add_argument(
+    group.add_argument(
         "--crop",
         type=_crop,
         metavar="X,Y,SIZE",
         help="use this square (top-left x, y and side, in pixels of the upright photo) "
         "instead of finding the flash hotspot",
     )
-    field_of_view = predict.add_mutually_exclusive_group()
+    field_of_view = group.add_mutually_exclusive_group()
     field_of_view.add_argument(
         "--fov",
         type=_field_of_view,
@@ -174,41 +195,39 @@ def build_parser() -> argparse.ArgumentParser:
         help="the 35 mm equivalent focal length, as EXIF FocalLengthIn35mmFilm states it (a phone's "
         "main camera: ~24-28); the crop's field of view follows as from EXIF",
     )
-    predict.add_argument(
+    group.add_argument(
         "--input-colorspace",
         choices=("srgb", "linear"),
         help="how JPEG/PNG/HEIC/TIFF values are encoded (default srgb; EXR and RAW are always linear)",
     )
-    predict.add_argument(
+
+
+def _add_predict_output(predict: argparse.ArgumentParser) -> None:
+    group = predict.add_argument_group("output")
+    group.add_argument(
+        "--out", required=True, type=Path, metavar="DIR", help="output folder (one subfolder per photo)"
+    )
+    group.add_argument(
+        "--resolution",
+        type=_positive,
+        metavar="N",
+        help="output size N×N (default: the crop's size in the photo, at least the model's training "
+        "resolution and at most 2048); sizes above the tile (--tile) run tiled",
+    )
+    group.add_argument(
         "--format",
         choices=("png", "exr"),
         default="png",
         help="texture file format (default png; EXR stores colours linear)",
     )
-    predict.add_argument(
-        "--bit-depth", type=int, choices=(8, 16), default=8, help="PNG bit depth (default 8)"
-    )
-    predict.add_argument(
+    group.add_argument("--bit-depth", type=int, choices=(8, 16), default=8, help="PNG bit depth (default 8)")
+    group.add_argument(
         "--normal-convention",
         choices=("opengl", "directx"),
         default="opengl",
         help="normal map green channel: opengl (+Y up: Blender, Unity, glTF; default) or directx (Unreal)",
     )
-    predict.add_argument(
-        "--animate",
-        nargs="?",
-        const="gif",
-        choices=("gif", "mp4"),
-        help="also write a turntable-light preview animation (default gif)",
-    )
-    predict.add_argument(
-        "--tileable",
-        action="store_true",
-        help="make every map wrap seamlessly: the flash mark repaired where it leaked into a map, then "
-        "the maps rolled by about half a side and each seam cut along a minimum-error path through "
-        "their copies, the same cut for all maps; height and occlusion are then periodic too",
-    )
-    predict.add_argument(
+    group.add_argument(
         "--normal-strength",
         type=_non_negative,
         default=1.0,
@@ -216,22 +235,45 @@ def build_parser() -> argparse.ArgumentParser:
         help="scale the normals' tilt by S (0 flat, 1 as predicted, 2 twice the slope; default 1); "
         "baked into normal.png, normalTexture.scale in material.glb",
     )
-    predict.add_argument(
+    group.add_argument(
         "--height-scale",
         type=_positive_float,
         metavar="S",
         help="height.png value = 0.5 + S·h, h in units of the sample side (default: fill the 16-bit range; "
         "S is recorded in material.json)",
     )
-    predict.add_argument("--no-preview", action="store_true", help="do not render preview.png")
-    predict.add_argument(
-        "--views",
+    group.add_argument(
+        "--tileable",
         action="store_true",
-        help="the photos are views of one flat surface (2-12, flash on; the first is the reference): "
-        "one material fitted to all of them, in OUT/<first photo's name>/; a photo that does not "
-        "register is left out with a warning (docs/views.md)",
+        help="make every map wrap seamlessly: the flash mark repaired where it leaked into a map, then "
+        "the maps rolled by about half a side and each seam cut along a minimum-error path through "
+        "their copies, the same cut for all maps; height and occlusion are then periodic too",
     )
-    predict.add_argument(
+    group.add_argument(
+        "--prefix",
+        action="store_true",
+        help="name the textures <material>_basecolor.png, <material>_normal.png, … (engines' importers "
+        "match materials by file name); material.glb/.json keep their names",
+    )
+    group.add_argument(
+        "--animate",
+        nargs="?",
+        const="gif",
+        choices=("gif", "mp4"),
+        help="also write a turntable-light preview animation (default gif)",
+    )
+    group.add_argument("--no-preview", action="store_true", help="do not render preview.png")
+
+
+def _add_predict_model(predict: argparse.ArgumentParser) -> None:
+    group = predict.add_argument_group("model")
+    group.add_argument(
+        "--weights",
+        type=Path,
+        metavar="PATH",
+        help="a .safetensors weights file (default: the weights shipped with brdfgan)",
+    )
+    group.add_argument(
         "--refine",
         nargs="?",
         const=DEFAULT_REFINE_STEPS,
@@ -242,25 +284,27 @@ def build_parser() -> argparse.ArgumentParser:
         "surface's, the roughness map moves away from the true one (docs/refinement.md); STEPS Adam steps "
         f"(default {DEFAULT_REFINE_STEPS} when given bare; ~4 s per photo at 256² on 2 CPU cores)",
     )
-    predict.add_argument(
-        "--tile",
-        type=_positive,
-        metavar="N",
-        help="photos above N² run as N² tiles (default 1024: memory of one 1024² pass, any resolution)",
-    )
-    predict.add_argument(
-        "--prefix",
-        action="store_true",
-        help="name the textures <material>_basecolor.png, <material>_normal.png, … (engines' importers "
-        "match materials by file name); material.glb/.json keep their names",
-    )
-    predict.add_argument(
+
+
+def _add_predict_speed(predict: argparse.ArgumentParser) -> None:
+    group = predict.add_argument_group("speed and memory")
+    group.add_argument(
         "--device",
         choices=("auto", "cpu", "cuda"),
         default="auto",
         help="where the network runs (default auto: a CUDA GPU when there is one, else the CPU)",
     )
-    chatter = predict.add_mutually_exclusive_group()
+    group.add_argument(
+        "--tile",
+        type=_positive,
+        metavar="N",
+        help="photos above N² run as N² tiles (default 1024: memory of one 1024² pass, any resolution)",
+    )
+
+
+def _add_predict_console(predict: argparse.ArgumentParser) -> None:
+    group = predict.add_argument_group("console")
+    chatter = group.add_mutually_exclusive_group()
     chatter.add_argument(
         "--quiet",
         action="store_true",
@@ -268,8 +312,9 @@ def build_parser() -> argparse.ArgumentParser:
         "stdout still lists the outputs",
     )
     chatter.add_argument("--verbose", action="store_true", help="also print each photo's time per stage")
-    predict.set_defaults(run=predict_command, interrupted=PREDICT_INTERRUPTED)
 
+
+def _add_export_weights(commands: Commands) -> None:
     export = commands.add_parser(
         "export-weights",
         help="a training run → a .safetensors weights file that predict can load",
@@ -286,6 +331,8 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--metrics-model", help="the model's name in --metrics (default: the only one)")
     export.set_defaults(run=export_weights_command, interrupted="interrupted: no weights file was written")
 
+
+def _add_contact_sheet(commands: Commands) -> None:
     sheet = commands.add_parser(
         "contact-sheet",
         help="a dataset → a PNG grid of samples (input | base color | normal | roughness | metallic)",
@@ -307,6 +354,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sheet.set_defaults(run=contact_sheet_command, interrupted="interrupted: no contact sheet was written")
 
+
+def _add_convert_deschaintre(commands: Commands) -> None:
     convert = commands.add_parser(
         "convert-deschaintre",
         help="a folder of Deschaintre 2018 samples → brdfgan shards (for evaluate.py)",
@@ -328,6 +377,8 @@ def build_parser() -> argparse.ArgumentParser:
         interrupted="interrupted: the split has no manifest yet; run again with --overwrite",
     )
 
+
+def _add_report(commands: Commands) -> None:
     report = commands.add_parser(
         "report",
         help="training runs compared by what varies across them (runs.md/.csv; ablation.md/.csv)",
@@ -339,6 +390,8 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--out", type=Path, default=None, help="default: the first RUN_DIR")
     report.set_defaults(run=report_command, interrupted="interrupted")
 
+
+def _add_references(commands: Commands) -> None:
     references = commands.add_parser(
         "references",
         help="a dataset → weights of the trivial reference predictors (mean maps, photo as base "
@@ -354,6 +407,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     references.set_defaults(run=references_command, interrupted="interrupted")
 
+
+def _add_dataset_stats(commands: Commands) -> None:
     stats = commands.add_parser(
         "dataset-stats",
         help="dataset splits (and scanned sets) → coverage statistics: families, metallic, HSV, relief, "
@@ -373,6 +428,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     stats.set_defaults(run=dataset_stats_command, interrupted="interrupted")
 
+
+def _add_eval_captures(commands: Commands) -> None:
     captures = commands.add_parser(
         "eval-captures",
         help="real multi-view flash captures (MaterialGAN layout) → relit-view RMSE per model "
@@ -428,33 +485,46 @@ def build_parser() -> argparse.ArgumentParser:
     )
     captures.add_argument("--out", type=Path, default=None, metavar="DIR", help="default: the first DIR")
     captures.set_defaults(run=eval_captures_command, interrupted="interrupted: no table was written")
-    return parser
 
 
 def predict_command(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
+    from brdfgan.inference.pipeline import collect_photos
 
-    from brdfgan.errors import interrupts_raise
+    options, device = _predict_options(args)
+    if args.quiet:  # errors only: library warnings (logging) are not errors
+        logging.getLogger("brdfgan").setLevel(logging.ERROR)
+    predictor = _load_predictor(args.weights, options, device)
+    photos = collect_photos(args.inputs)
+    if not photos:
+        print("error: no photos to process", file=sys.stderr)
+        return USER_ERROR_EXIT_CODE
+    if args.views and len(photos) > MAX_VIEWS:
+        raise UserError(f"--views takes at most {MAX_VIEWS} photos of one surface, got {len(photos)}")
+    if not args.quiet:
+        model = predictor.model
+        print(
+            f"model {model.model_id} ({model.path}) on {device}; "
+            f"{len(photos)} photo(s) at {predictor.describe_resolution()}",
+            file=sys.stderr,
+        )
+    if args.views:
+        return _predict_views(args, photos, predictor)
+    outcome = _predict_batch(args, photos, predictor)
+    return _batch_exit_code(outcome, len(photos), out=args.out, quiet=args.quiet)
+
+
+def _predict_options(args: argparse.Namespace) -> tuple[PredictOptions, torch.device]:
+    """predict's options checked against each other and resolved into the pipeline's options and
+    the device, before any model or photo is loaded."""
     from brdfgan.inference.intake.lens import FieldOfView
-    from brdfgan.inference.model.memory import check_memory
     from brdfgan.inference.model.tiling import TilingConfig
-    from brdfgan.inference.model.weights import load_model
     from brdfgan.inference.outputs.export import ExportOptions
-    from brdfgan.inference.pipeline import (
-        PhotoFailure,
-        PhotoResult,
-        PredictOptions,
-        Predictor,
-        collect_photos,
-        predict_batch,
-    )
+    from brdfgan.inference.pipeline import PredictOptions
     from brdfgan.inference.refine import RefineConfig
 
     if args.views and args.refine is not None:
         raise UserError("--refine cannot be combined with --views (the multi-view fit refines the maps)")
     device = _predict_device(args.device)
-    if args.quiet:  # errors only: library warnings (logging) are not errors
-        logging.getLogger("brdfgan").setLevel(logging.ERROR)
     options = PredictOptions(
         resolution=args.resolution,
         crop=args.crop,
@@ -474,70 +544,106 @@ def predict_command(args: argparse.Namespace) -> int:
         refine=None if args.refine is None else RefineConfig(steps=args.refine),
         field_of_view=FieldOfView(args.fov, args.focal_length_35mm),
     )
-    model = load_model(args.weights)
+    return options, device
+
+
+def _load_predictor(weights: Path | None, options: PredictOptions, device: torch.device) -> Predictor:
+    """The model (``--weights`` or the shipped one) on ``device`` with this run's options."""
+    from brdfgan.inference.model.memory import check_memory
+    from brdfgan.inference.model.weights import load_model
+    from brdfgan.inference.pipeline import Predictor
+
+    model = load_model(weights)
     model.generator.to(device)
     predictor = Predictor.create(model, options)
     # Before any photo is read or anything large allocated.
     check_memory(predictor.model, predictor.largest_resolution, options.tiling)
-    photos = collect_photos(args.inputs)
-    if not photos:
-        print("error: no photos to process", file=sys.stderr)
-        return USER_ERROR_EXIT_CODE
-    if args.views and len(photos) > MAX_VIEWS:
-        raise UserError(f"--views takes at most {MAX_VIEWS} photos of one surface, got {len(photos)}")
-    if not args.quiet:
-        print(
-            f"model {model.model_id} ({model.path}) on {device}; "
-            f"{len(photos)} photo(s) at {predictor.describe_resolution()}",
-            file=sys.stderr,
-        )
-    if args.views:
-        return _predict_views(args, photos, predictor)
-    bar = tqdm(total=len(photos), unit="photo", disable=args.quiet or None, file=sys.stderr)
-    # The refinement's steps of the photo in progress, under the batch's bar.
-    quiet_steps = args.quiet or args.refine is None
-    steps_bar = tqdm(unit="step", leave=False, position=1, disable=quiet_steps or None, file=sys.stderr)
+    return predictor
 
-    def refine_step(photo: Path, step: int, steps: int) -> None:
-        if step == 1:
-            steps_bar.reset(total=steps)
-            steps_bar.set_description(f"refining {photo.name}")
-        steps_bar.update(1)
 
-    def report(result: PhotoResult | PhotoFailure) -> None:
-        if isinstance(result, PhotoFailure):
-            bar.write(f"error: {result.message}", file=sys.stderr)
-        else:
-            for warning in () if args.quiet else result.warnings:
-                bar.write(f"warning: {result.photo}: {warning}", file=sys.stderr)
-            if args.verbose:
-                stages = ", ".join(f"{stage} {seconds:.2f} s" for stage, seconds in result.timings.items())
-                bar.write(f"{result.photo.name}: {stages}", file=sys.stderr)
-        bar.update(1)
+def _predict_batch(args: argparse.Namespace, photos: list[Path], predictor: Predictor) -> BatchResult:
+    """Every photo into ``OUT/<name>/``, with the batch's progress on stderr."""
+    from brdfgan.errors import interrupts_raise
+    from brdfgan.inference.pipeline import predict_batch
 
+    progress = _BatchProgress(
+        len(photos), quiet=args.quiet, verbose=args.verbose, refining=args.refine is not None
+    )
     try:
         # SIGTERM too: the photo in progress then leaves no hidden staging folder behind.
         with interrupts_raise():
-            outcome = predict_batch(photos, args.out, predictor, on_result=report, on_refine_step=refine_step)
+            return predict_batch(
+                photos, args.out, predictor, on_result=progress.report, on_refine_step=progress.refine_step
+            )
     finally:
-        steps_bar.close()
-        bar.close()
+        progress.close()
+
+
+class _BatchProgress:
+    """predict's progress on stderr: a bar over the batch's photos, each photo's error, warnings
+    and (``--verbose``) stage times written above it, and under it the refinement steps of the
+    photo in progress. ``quiet``: errors only."""
+
+    def __init__(self, photo_count: int, *, quiet: bool, verbose: bool, refining: bool) -> None:
+        from tqdm import tqdm
+
+        self.quiet = quiet
+        self.verbose = verbose
+        # disable=None: tqdm draws only on a terminal.
+        self.bar = tqdm(total=photo_count, unit="photo", disable=quiet or None, file=sys.stderr)
+        quiet_steps = quiet or not refining
+        self.steps_bar = tqdm(
+            unit="step", leave=False, position=1, disable=quiet_steps or None, file=sys.stderr
+        )
+
+    def refine_step(self, photo: Path, step: int, steps: int) -> None:
+        if step == 1:
+            self.steps_bar.reset(total=steps)
+            self.steps_bar.set_description(f"refining {photo.name}")
+        self.steps_bar.update(1)
+
+    def report(self, result: PhotoResult | PhotoFailure) -> None:
+        from brdfgan.inference.pipeline import PhotoFailure
+
+        if isinstance(result, PhotoFailure):
+            self.bar.write(f"error: {result.message}", file=sys.stderr)
+        else:
+            for warning in () if self.quiet else result.warnings:
+                self.bar.write(f"warning: {result.photo}: {warning}", file=sys.stderr)
+            if self.verbose:
+                self.bar.write(_describe_timings(result.photo, result.timings), file=sys.stderr)
+        self.bar.update(1)
+
+    def close(self) -> None:
+        self.steps_bar.close()
+        self.bar.close()
+
+
+def _describe_timings(photo: Path, timings: dict[str, float]) -> str:
+    """``--verbose``'s line: the photo's seconds per stage."""
+    stages = ", ".join(f"{stage} {seconds:.2f} s" for stage, seconds in timings.items())
+    return f"{photo.name}: {stages}"
+
+
+def _batch_exit_code(outcome: BatchResult, photo_count: int, *, out: Path, quiet: bool) -> int:
+    """Print the batch's outputs (stdout) and its summary (stderr); the exit status: a full disk,
+    some photos failed, or 0."""
     for result in outcome.succeeded:  # stdout is the result, also with --quiet (scripts read it)
         print(result.output)
     if outcome.stopped is not None:  # a full disk; its error line was printed as it happened
         print(
-            f"stopped: {len(outcome.succeeded)} of {len(photos)} photo(s) written; free some space and "
+            f"stopped: {len(outcome.succeeded)} of {photo_count} photo(s) written; free some space and "
             "run again",
             file=sys.stderr,
         )
         return DISK_FULL_EXIT_CODE
     if outcome.failed:
-        print(f"{len(outcome.failed)} of {len(photos)} photo(s) failed:", file=sys.stderr)
+        print(f"{len(outcome.failed)} of {photo_count} photo(s) failed:", file=sys.stderr)
         for failure in outcome.failed:
             print(f"  {failure.message}", file=sys.stderr)
         return PARTIAL_FAILURE_EXIT_CODE
-    if not args.quiet:
-        print(f"done: {len(outcome.succeeded)} material(s) in {args.out}", file=sys.stderr)
+    if not quiet:
+        print(f"done: {len(outcome.succeeded)} material(s) in {out}", file=sys.stderr)
     return 0
 
 
@@ -568,8 +674,7 @@ def _predict_views(args: argparse.Namespace, photos: list[Path], predictor: Pred
     for warning in () if args.quiet else result.warnings:  # each names its file
         print(f"warning: {warning}", file=sys.stderr)
     if args.verbose:
-        stages = ", ".join(f"{stage} {seconds:.2f} s" for stage, seconds in result.timings.items())
-        print(f"{result.photo.name}: {stages}", file=sys.stderr)
+        print(_describe_timings(result.photo, result.timings), file=sys.stderr)
     print(result.output)
     if not args.quiet:
         print(f"done: 1 material from {len(photos)} view(s) in {args.out}", file=sys.stderr)

@@ -142,35 +142,45 @@ def fits(value: Any, hint: Any) -> bool | None:
         return False
     if origin is not None:
         return _fits_generic(value, origin, args)
-    if hint is bool:
-        return isinstance(value, bool)
-    if hint is int:
-        return isinstance(value, int) and not isinstance(value, bool)
-    if hint is float:
-        return isinstance(value, int | float) and not isinstance(value, bool)
-    if hint is complex:
-        return isinstance(value, int | float | complex) and not isinstance(value, bool)
-    if hint is str:
-        return isinstance(value, str)
     if inspect.isclass(hint):
-        if issubclass(hint, PurePath) or hint is os.PathLike:
-            return isinstance(value, str)
-        if issubclass(hint, enum.Enum):
-            return value in hint.__members__ or any(value == member.value for member in hint)
-        if isinstance(value, hint):
-            return True
-        if hint in (list, tuple, set, frozenset):
-            return isinstance(value, list)
-        if hint in (dict,):
-            return isinstance(value, dict)
-        # A class only code can make (Tensor, Accelerator, …): no plain value is one — but a
-        # protocol or ABC such as Sequence or Callable may still be satisfied by one.
-        if getattr(hint, "_is_protocol", False):
-            return None
-        if inspect.isabstract(hint) or hint.__module__ in ("collections.abc", "typing", "numbers"):
-            return None
-        return False
+        return _fits_class(value, hint)
     return None
+
+
+# The config's own scalar types and the plain values that fit each: a bool is an int in Python,
+# not in a config.
+_SCALAR_FITS: tuple[tuple[type, Callable[[Any], bool]], ...] = (
+    (bool, lambda value: isinstance(value, bool)),
+    (int, lambda value: isinstance(value, int) and not isinstance(value, bool)),
+    (float, lambda value: isinstance(value, int | float) and not isinstance(value, bool)),
+    (complex, lambda value: isinstance(value, int | float | complex) and not isinstance(value, bool)),
+    (str, lambda value: isinstance(value, str)),
+)
+
+
+def _fits_class(value: Any, hint: type) -> bool | None:
+    """:func:`fits` for a plain class: a scalar type, a class a config value stands for (a path, an
+    enum, a bare container), or one only code can make."""
+    for scalar, check in _SCALAR_FITS:
+        if hint is scalar:
+            return check(value)
+    if issubclass(hint, PurePath) or hint is os.PathLike:
+        return isinstance(value, str)
+    if issubclass(hint, enum.Enum):
+        return value in hint.__members__ or any(value == member.value for member in hint)
+    if isinstance(value, hint):
+        return True
+    if hint in (list, tuple, set, frozenset):
+        return isinstance(value, list)
+    if hint in (dict,):
+        return isinstance(value, dict)
+    # A class only code can make (Tensor, Accelerator, …): no plain value is one — but a
+    # protocol or ABC such as Sequence or Callable may still be satisfied by one.
+    if getattr(hint, "_is_protocol", False):
+        return None
+    if inspect.isabstract(hint) or hint.__module__ in ("collections.abc", "typing", "numbers"):
+        return None
+    return False
 
 
 def _fits_generic(value: Any, origin: Any, args: tuple[Any, ...]) -> bool | None:

@@ -626,27 +626,12 @@ def _scan_members(tar: tarfile.TarFile, path: Path, size: int, decode: bool) -> 
     key: str | None = None
     record: dict[str, Any] = {}
     count = 0
-
-    def finish() -> None:
-        members = FORMAT_MEMBERS[sample_format(record)]
-        mixed = [name for name in record if name not in members]
-        if mixed:
-            raise ShardError(f"{path}: sample {key!r} mixes formats ({', '.join(mixed)} beside {members[0]})")
-        missing = [name for name in members if name not in record]
-        if missing:
-            raise ShardError(f"{path}: sample {key!r} lacks member(s) {', '.join(missing)}")
-        if decode:
-            decode_sample({"__key__": key, "__url__": str(path), **record})
-
     for info in tar:
-        stem, dot, member = info.name.partition(".")
-        if not info.isreg() or not dot or member not in _KNOWN_MEMBERS:
-            raise ShardError(f"{path}: unexpected member {info.name!r}")
-        if info.offset_data + info.size > size:
-            raise ShardError(f"{path}: truncated shard (member {info.name!r} extends past the end of file)")
+        member = _check_member(info, path, size)
+        stem = info.name.partition(".")[0]
         if stem != key:
             if key is not None:
-                finish()
+                _check_sample(path, key, record, decode)
                 count += 1
             if stem in seen:
                 raise ShardError(f"{path}: members of sample {stem!r} are not contiguous")
@@ -655,6 +640,38 @@ def _scan_members(tar: tarfile.TarFile, path: Path, size: int, decode: bool) -> 
         if member in record:
             raise ShardError(f"{path}: duplicate member {info.name!r}")
         record[member] = _read_member(tar, info, path) if decode else b""
+    _check_end_of_archive(tar, path)
+    if key is not None:
+        _check_sample(path, key, record, decode)
+        count += 1
+    return count
+
+
+def _check_member(info: tarfile.TarInfo, path: Path, size: int) -> str:
+    """The member name (after the key) of a shard's tar entry, which must be a known member's
+    regular file lying inside the file."""
+    _, dot, member = info.name.partition(".")
+    if not info.isreg() or not dot or member not in _KNOWN_MEMBERS:
+        raise ShardError(f"{path}: unexpected member {info.name!r}")
+    if info.offset_data + info.size > size:
+        raise ShardError(f"{path}: truncated shard (member {info.name!r} extends past the end of file)")
+    return member
+
+
+def _check_sample(path: Path, key: str, record: dict[str, Any], decode: bool) -> None:
+    """A sample's members are exactly one format's (and decode, with ``decode``)."""
+    members = FORMAT_MEMBERS[sample_format(record)]
+    mixed = [name for name in record if name not in members]
+    if mixed:
+        raise ShardError(f"{path}: sample {key!r} mixes formats ({', '.join(mixed)} beside {members[0]})")
+    missing = [name for name in members if name not in record]
+    if missing:
+        raise ShardError(f"{path}: sample {key!r} lacks member(s) {', '.join(missing)}")
+    if decode:
+        decode_sample({"__key__": key, "__url__": str(path), **record})
+
+
+def _check_end_of_archive(tar: tarfile.TarFile, path: Path) -> None:
     # tarfile stops quietly at a damaged header past the first one and at a file cut between
     # members; both leave no end-of-archive marker (two zero blocks) where iteration stopped.
     assert tar.fileobj is not None
@@ -662,10 +679,6 @@ def _scan_members(tar: tarfile.TarFile, path: Path, size: int, decode: bool) -> 
     trailer = tar.fileobj.read(2 * _TAR_BLOCK)
     if len(trailer) < 2 * _TAR_BLOCK or trailer.count(0) != len(trailer):
         raise ShardError(f"{path}: truncated or corrupt shard (no end-of-archive marker after member data)")
-    if key is not None:
-        finish()
-        count += 1
-    return count
 
 
 def _read_member(tar: tarfile.TarFile, info: tarfile.TarInfo, path: Path) -> bytes:

@@ -387,58 +387,14 @@ def preprocess(
         isinstance(resolution, bool) or not isinstance(resolution, int) or resolution < 1
     ):
         raise ValueError(f"resolution must be a positive integer, got {resolution!r}")
-    linear = photo.linear
-    _check_image(linear)
-    height, width = linear.shape[-2:]
+    _check_image(photo.linear)
     warnings: list[str] = []
-
-    over_centre: float | None = None
-    if crop is None:
-        found = find_hotspot(linear)
-        detected, over_centre = flash_centre(linear, found)
-        if detected != found:
-            warnings.append(
-                f"no distinct flash highlight (the brightest spot, at ({found[0]:.0f}, {found[1]:.0f}), "
-                f"is only {over_centre:.2f}× as bright as the centre): cropped around the image centre; "
-                "pass --crop to choose"
-            )
-        crop = hotspot_crop(height, width, detected)
-        reported_hotspot: tuple[float, float] | None = detected
-        chosen = "flash hotspot" if detected == found else "image centre"
-    else:
-        try:
-            crop.check(height, width)
-        except ValueError as error:
-            raise PhotoError(photo.path, str(error)) from None
-        # The highlight inside the user's crop still drives the clipping check and the stats.
-        hx, hy = find_hotspot(crop.slice(linear))
-        detected = (crop.x + hx, crop.y + hy)
-        reported_hotspot = None
-        chosen = "user"
-    region = crop.slice(linear)
+    placement = _place_crop(photo, crop, warnings)
+    crop = placement.crop
+    region = crop.slice(photo.linear)
     if isinstance(resolution, CropSized):
         resolution = resolution.side(crop.size)
-
-    centre = (crop.x + (crop.size - 1) / 2.0, crop.y + (crop.size - 1) / 2.0)
-    offset = math.hypot(detected[0] - centre[0], detected[1] - centre[1]) / crop.size
-    if offset > OFF_CENTRE_WARNING_FRACTION:
-        warnings.append(
-            f"the flash hotspot at ({detected[0]:.0f}, {detected[1]:.0f}) is {offset:.0%} of the crop side "
-            f"away from the crop centre; the network expects the flash near the centre"
-        )
-
-    stats = _luminance_stats(region)
-    stats.update(hotspot_x=float(detected[0]), hotspot_y=float(detected[1]), hotspot_offset=float(offset))
-    if over_centre is not None and math.isfinite(over_centre):
-        stats["hotspot_over_centre"] = float(over_centre)
-    if clipped_is_saturated and photo.source != "exr":
-        fraction = clipped_fraction(linear, crop, detected)
-        stats["clipped_fraction"] = fraction
-        if fraction > CLIPPED_WARNING_FRACTION:
-            warnings.append(
-                f"flash hotspot is clipped ({fraction:.1%} of pixels saturated): the highlight's shape "
-                f"and the roughness estimate suffer; lower the exposure"
-            )
+    stats = _hotspot_stats(photo, region, placement, warnings, clipped_is_saturated=clipped_is_saturated)
 
     resized = _resize(region.float(), resolution)
     if crop.size < resolution:
@@ -451,7 +407,7 @@ def preprocess(
     exposure_scale = float(scale)
     if exposure_scale == 0.0:
         # read_photo refuses black photos; a black region of a lit one (a user crop) gets here.
-        where = "the given crop" if reported_hotspot is None else "the automatic crop"
+        where = "the given crop" if placement.hotspot is None else "the automatic crop"
         raise PhotoError(
             photo.path,
             f"{where} ({crop.x},{crop.y},{crop.size}) is black: nothing to estimate; pass another --crop",
@@ -461,13 +417,82 @@ def preprocess(
     return Preprocessed(
         photo=ldr.to(torch.float32).contiguous(),
         crop=crop,
-        hotspot=reported_hotspot,
+        hotspot=placement.hotspot,
         exposure_scale=exposure_scale,
         resized_from=crop.size,
         stats=stats,
         warnings=tuple(warnings),
-        chosen=chosen,
+        chosen=placement.chosen,
     )
+
+
+@dataclass(frozen=True)
+class _Placement:
+    """Where :func:`preprocess` crops, and why."""
+
+    crop: Crop
+    detected: tuple[float, float]  # the flash highlight (x, y) in the photo's pixels
+    over_centre: float | None  # the highlight's brightness over the image centre's; None: a user crop
+    chosen: str  # Preprocessed.chosen
+
+    @property
+    def hotspot(self) -> tuple[float, float] | None:
+        """Preprocessed.hotspot: the point the automatic crop is centred on; ``None``: a user crop."""
+        return None if self.chosen == "user" else self.detected
+
+
+def _place_crop(photo: Photo, crop: Crop | None, warnings: list[str]) -> _Placement:
+    """The user's ``crop`` checked against the photo, or a crop around the flash highlight (around
+    the image centre, with a warning, when no highlight stands out)."""
+    linear = photo.linear
+    height, width = linear.shape[-2:]
+    if crop is not None:
+        try:
+            crop.check(height, width)
+        except ValueError as error:
+            raise PhotoError(photo.path, str(error)) from None
+        # The highlight inside the user's crop still drives the clipping check and the stats.
+        hx, hy = find_hotspot(crop.slice(linear))
+        return _Placement(crop, (crop.x + hx, crop.y + hy), None, "user")
+    found = find_hotspot(linear)
+    detected, over_centre = flash_centre(linear, found)
+    if detected != found:
+        warnings.append(
+            f"no distinct flash highlight (the brightest spot, at ({found[0]:.0f}, {found[1]:.0f}), "
+            f"is only {over_centre:.2f}× as bright as the centre): cropped around the image centre; "
+            "pass --crop to choose"
+        )
+    chosen = "flash hotspot" if detected == found else "image centre"
+    return _Placement(hotspot_crop(height, width, detected), detected, over_centre, chosen)
+
+
+def _hotspot_stats(
+    photo: Photo, region: Tensor, placement: _Placement, warnings: list[str], *, clipped_is_saturated: bool
+) -> dict[str, float]:
+    """The crop ``region``'s luminance statistics with where its hotspot lies and (where 1.0 means
+    saturation) how much of it is clipped; a warning when it is far off-centre or clipped."""
+    crop, detected = placement.crop, placement.detected
+    centre = (crop.x + (crop.size - 1) / 2.0, crop.y + (crop.size - 1) / 2.0)
+    offset = math.hypot(detected[0] - centre[0], detected[1] - centre[1]) / crop.size
+    if offset > OFF_CENTRE_WARNING_FRACTION:
+        warnings.append(
+            f"the flash hotspot at ({detected[0]:.0f}, {detected[1]:.0f}) is {offset:.0%} of the crop side "
+            f"away from the crop centre; the network expects the flash near the centre"
+        )
+
+    stats = _luminance_stats(region)
+    stats.update(hotspot_x=float(detected[0]), hotspot_y=float(detected[1]), hotspot_offset=float(offset))
+    if placement.over_centre is not None and math.isfinite(placement.over_centre):
+        stats["hotspot_over_centre"] = float(placement.over_centre)
+    if clipped_is_saturated and photo.source != "exr":
+        fraction = clipped_fraction(photo.linear, crop, detected)
+        stats["clipped_fraction"] = fraction
+        if fraction > CLIPPED_WARNING_FRACTION:
+            warnings.append(
+                f"flash hotspot is clipped ({fraction:.1%} of pixels saturated): the highlight's shape "
+                f"and the roughness estimate suffer; lower the exposure"
+            )
+    return stats
 
 
 def _check_image(linear: Tensor) -> None:

@@ -405,14 +405,7 @@ def fit_views(
         - camera_position, light_position: ``(V, 3)``
         - maps: ``(8, M, M)``; output maps: ``(8, M, M)``
     """
-    dims = check_shape(photos, "V 3 R R", name="photos")
-    check_shape(seen, "V 1 R R", name="seen", dims=dims)
-    check_shape(camera_position, "V 3", name="camera_position", dims=dims)
-    check_shape(light_position, "V 3", name="light_position", dims=dims)
-    check_map_shape(maps)
-    check_shape(maps, "8 M M", name="square maps")
-    if not plane_half_size > 0:
-        raise ValueError(f"plane_half_size must be positive, got {plane_half_size}")
+    _check_fit_inputs(photos, seen, camera_position, light_position, maps, plane_half_size)
     config = config or ViewFitConfig()
     # Lengths in half-sides of the square: the renders then have the level the start gain's
     # black-pixel floor and the photo loss's log floor are set for (a unit flash 20-50 cm from a
@@ -420,7 +413,6 @@ def fit_views(
     # which each view's gain absorbs; the gains reported are those of this unit scene.
     camera_position = camera_position / plane_half_size
     light_position = light_position / plane_half_size
-    plane_half_size = 1.0
     started = time.perf_counter()
     device = maps.device
     prediction = maps.detach().float()
@@ -429,93 +421,168 @@ def fit_views(
     schedule = working_levels(config, min(prediction.shape[-1], photos.shape[-1]))
     views = photos.shape[0]
 
-    with torch.no_grad():
-        # Stage 0 at the finest level: gains on the prediction, residuals, outliers.
-        finest = _level(prediction, photos, seen, schedule[-1][0], config)
-        all_views = _Scene(
-            camera_position.float(), light_position.float(), plane_half_size, config.clip_level
-        )
-        render = render_views(
-            parameters_to_maps(finest.prior),
-            all_views.camera_position,
-            all_views.light_position,
-            plane_half_size,
-        )
-        # initial_log_gain skips black render pixels: zeroing the unseen ones leaves them out.
-        masked_render = render * finest.mask
-        log_gain = torch.cat(
-            [
-                initial_log_gain(finest.photos[v : v + 1], masked_render[v : v + 1], config.clip_level)
-                for v in range(views)
-            ]
-        )
-        coverage = finest.mask.mean(dim=(1, 2, 3))
-        residual_before = view_residuals(
-            render * log_gain.exp(), finest.photos, finest.mask, config.clip_level
-        )
-        # A view that sees nothing has no residual (photo_loss would say 0, the best of all).
-        residual_before = torch.where(coverage > 0, residual_before, math.nan)
-        reasons = _drop_reasons(residual_before, coverage, config)
-    fitted = [v for v in range(views) if reasons[v] is None]
-
+    with torch.no_grad():  # no graph from the caller's positions into the fit's backward passes
+        all_views = _Scene(camera_position.float(), light_position.float(), 1.0, config.clip_level)
+    screening = _screen_views(prediction, photos, seen, all_views, schedule[-1][0], config)
     progress = _Progress(curve=[])
-    out = prediction.clone()  # never the caller's tensor itself
-    kept: Kept = "prediction"
-    loss_start = float(residual_before[fitted].sum()) if fitted else math.nan
-    loss_end = math.nan
-    residual_after: dict[int, float] = {}
-    if fitted:
-        index = torch.tensor(fitted, device=device)
-        scene = _Scene(
-            all_views.camera_position[index],
-            all_views.light_position[index],
-            plane_half_size,
-            config.clip_level,
+    if screening.fitted:
+        outcome = _fit_coarse_to_fine(
+            prediction, photos, seen, all_views, screening, schedule, config, progress, on_step
         )
-        size = schedule[0][0]
-        state = _FitState(
-            delta=torch.zeros(1, 7, size, size, device=device),
-            offsets=torch.zeros(1, 3, 1, 1, device=device),
-            log_gain=log_gain[index],
-        )
-        with torch.enable_grad():
-            for size, steps in schedule:
-                level = _level(prediction, photos[index], seen[index], size, config)
-                state = _fit_level(level, scene, state.at_size(size), steps, config, progress, on_step)
-        with torch.no_grad():
-            correction = state.correction(level.covered)
-            _, residuals = _objective(level, scene, state, config)
-            loss_end = float(residuals.sum())
-            if math.isfinite(loss_end) and loss_end < loss_start * (1.0 - config.min_improvement):
-                kept = "fit"
-                out = _at_prediction_size(prediction, level, correction, seen[index])
-                residual_after = {v: float(r) for v, r in zip(fitted, residuals, strict=True)}
-                log_gain[index] = state.log_gain
-            else:  # the prediction is returned: so are its residuals and gains
-                residual_after = {v: float(residual_before[v]) for v in fitted}
+    else:
+        outcome = _FitOutcome(prediction.clone(), "prediction", math.nan, {}, screening.log_gain)
 
     records = tuple(
         ViewRecord(
             index=v,
-            coverage=float(coverage[v]),
-            gain=_rgb(log_gain[v].exp()),
-            residual_before=float(residual_before[v]),
-            residual_after=residual_after.get(v),
-            dropped=reasons[v],
+            coverage=float(screening.coverage[v]),
+            gain=_rgb(outcome.log_gain[v].exp()),
+            residual_before=float(screening.residual_before[v]),
+            residual_after=outcome.residual_after.get(v),
+            dropped=screening.reasons[v],
         )
         for v in range(views)
     )
     return ViewFitResult(
-        maps=out.to(maps.dtype),
-        kept=kept,
+        maps=outcome.maps.to(maps.dtype),
+        kept=outcome.kept,
         views=records,
         levels=tuple(size for size, _ in schedule),
         loss_curve=tuple(progress.curve),
-        loss_start=loss_start,
-        loss_end=loss_end,
+        loss_start=screening.loss_start,
+        loss_end=outcome.loss_end,
         restores=progress.restores,
         seconds=time.perf_counter() - started,
     )
+
+
+def _check_fit_inputs(
+    photos: Tensor,
+    seen: Tensor,
+    camera_position: Tensor,
+    light_position: Tensor,
+    maps: Tensor,
+    plane_half_size: float,
+) -> None:
+    """:func:`fit_views`'s arguments against its Shape section."""
+    dims = check_shape(photos, "V 3 R R", name="photos")
+    check_shape(seen, "V 1 R R", name="seen", dims=dims)
+    check_shape(camera_position, "V 3", name="camera_position", dims=dims)
+    check_shape(light_position, "V 3", name="light_position", dims=dims)
+    check_map_shape(maps)
+    check_shape(maps, "8 M M", name="square maps")
+    if not plane_half_size > 0:
+        raise ValueError(f"plane_half_size must be positive, got {plane_half_size}")
+
+
+@dataclass(frozen=True)
+class _Screening:
+    """Stage 0, per view: its start log gain ``(V, 3, 1, 1)``, the share of the finest level it
+    sees ``(V,)``, its residual on the prediction ``(V,)`` (NaN where it sees nothing) and the
+    reason it is left out of the fit, or ``None``."""
+
+    log_gain: Tensor
+    coverage: Tensor
+    residual_before: Tensor
+    reasons: list[str | None]
+
+    @property
+    def fitted(self) -> list[int]:
+        """The views stages 1 and 2 fit: those not left out."""
+        return [v for v, reason in enumerate(self.reasons) if reason is None]
+
+    @property
+    def loss_start(self) -> float:
+        """The fitted views' photo loss on the prediction; NaN when none is fitted."""
+        fitted = self.fitted
+        return float(self.residual_before[fitted].sum()) if fitted else math.nan
+
+
+@torch.no_grad()
+def _screen_views(
+    prediction: Tensor, photos: Tensor, seen: Tensor, scene: _Scene, finest: int, config: ViewFitConfig
+) -> _Screening:
+    """Stage 0 at the finest level (``finest``²): gains on the prediction, residuals, outliers."""
+    level = _level(prediction, photos, seen, finest, config)
+    render = render_views(
+        parameters_to_maps(level.prior), scene.camera_position, scene.light_position, scene.plane_half_size
+    )
+    # initial_log_gain skips black render pixels: zeroing the unseen ones leaves them out.
+    masked_render = render * level.mask
+    log_gain = torch.cat(
+        [
+            initial_log_gain(level.photos[v : v + 1], masked_render[v : v + 1], config.clip_level)
+            for v in range(photos.shape[0])
+        ]
+    )
+    coverage = level.mask.mean(dim=(1, 2, 3))
+    residual_before = view_residuals(render * log_gain.exp(), level.photos, level.mask, config.clip_level)
+    # A view that sees nothing has no residual (photo_loss would say 0, the best of all).
+    residual_before = torch.where(coverage > 0, residual_before, math.nan)
+    return _Screening(log_gain, coverage, residual_before, _drop_reasons(residual_before, coverage, config))
+
+
+@dataclass(frozen=True)
+class _FitOutcome:
+    """Stages 1 and 2: the maps returned (the fit, or a copy of the prediction), which one, the
+    fitted views' photo loss at the end (NaN without a fit), their residuals on the maps returned
+    and every view's log gain."""
+
+    maps: Tensor
+    kept: Kept
+    loss_end: float
+    residual_after: dict[int, float]
+    log_gain: Tensor
+
+
+def _fit_coarse_to_fine(
+    prediction: Tensor,
+    photos: Tensor,
+    seen: Tensor,
+    all_views: _Scene,
+    screening: _Screening,
+    schedule: list[tuple[int, int]],
+    config: ViewFitConfig,
+    progress: _Progress,
+    on_step: Callable[[int, float], None] | None,
+) -> _FitOutcome:
+    """Stages 1 and 2 on the views ``screening`` kept (module docstring): the fit is returned when
+    it lowers their photo loss below stage 0's by the share ``config.min_improvement``."""
+    fitted = screening.fitted
+    index = torch.tensor(fitted, device=prediction.device)
+    scene = _Scene(
+        all_views.camera_position[index],
+        all_views.light_position[index],
+        all_views.plane_half_size,
+        config.clip_level,
+    )
+    size = schedule[0][0]
+    state = _FitState(
+        delta=torch.zeros(1, 7, size, size, device=prediction.device),
+        offsets=torch.zeros(1, 3, 1, 1, device=prediction.device),
+        log_gain=screening.log_gain[index],
+    )
+    with torch.enable_grad():
+        for size, steps in schedule:
+            level = _level(prediction, photos[index], seen[index], size, config)
+            state = _fit_level(level, scene, state.at_size(size), steps, config, progress, on_step)
+    with torch.no_grad():
+        correction = state.correction(level.covered)
+        _, residuals = _objective(level, scene, state, config)
+        loss_end = float(residuals.sum())
+        if math.isfinite(loss_end) and loss_end < screening.loss_start * (1.0 - config.min_improvement):
+            log_gain = screening.log_gain.clone()
+            log_gain[index] = state.log_gain
+            return _FitOutcome(
+                _at_prediction_size(prediction, level, correction, seen[index]),
+                "fit",
+                loss_end,
+                {v: float(r) for v, r in zip(fitted, residuals, strict=True)},
+                log_gain,
+            )
+    # The prediction is returned: so are its residuals and gains.
+    residual_before = {v: float(screening.residual_before[v]) for v in fitted}
+    return _FitOutcome(prediction.clone(), "prediction", loss_end, residual_before, screening.log_gain)
 
 
 def _drop_reasons(residuals: Tensor, coverage: Tensor, config: ViewFitConfig) -> list[str | None]:

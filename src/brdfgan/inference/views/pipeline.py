@@ -34,7 +34,7 @@ from brdfgan.core.homography import apply_homography, intrinsics
 from brdfgan.core.render import CameraPose
 from brdfgan.errors import UserError, one_line
 from brdfgan.inference.intake.lens import crop_field_of_view
-from brdfgan.inference.intake.photo import Photo, read_photo
+from brdfgan.inference.intake.photo import Colorspace, Photo, read_photo
 from brdfgan.inference.pipeline import (
     PhotoResult,
     Predictor,
@@ -44,6 +44,7 @@ from brdfgan.inference.pipeline import (
     refine_and_write,
     write_prediction,
 )
+from brdfgan.inference.views.config import ViewFitConfig
 from brdfgan.inference.views.fit import ViewFitResult, fit_views, working_levels
 from brdfgan.inference.views.geometry import (
     PLANE_HALF_SIZE,
@@ -181,65 +182,119 @@ def predict_views(
     Raises:
         UserError: no photo can be read, or the reference cannot be used (its one-line reason).
     """
-    options = predictor.options
     clock = StageClock({})
-    entries: list[dict[str, Any]] = [
-        {"file": str(path), "role": "left_out", "reason": None} for path in paths
-    ]
-    warnings: list[str] = []
-
-    def leave_out(index: int, reason: str) -> None:
-        entries[index]["reason"] = reason
-        warnings.append(f"{paths[index]}: left out: {reason}")
-
-    photos: dict[int, Photo] = {}
+    log = _ViewLog.start(paths)
     with clock("read"):
-        for index, path in enumerate(paths):
-            try:
-                photos[index] = read_photo(path, options.colorspace)
-            except (UserError, OSError) as error:
-                message = one_line(error)
-                prefix = f"{path}: "
-                leave_out(index, message[len(prefix) :] if message.startswith(prefix) else message)
+        photos = _read_views(paths, predictor.options.colorspace, log)
     if not photos:  # the first one's reason, for a line that says what to fix
-        first = warnings[0].replace(": left out: ", ": ", 1)
+        first = log.warnings[0].replace(": left out: ", ": ", 1)
         raise UserError(f"none of the {len(paths)} views can be read ({first})")
     reference_index, *others = sorted(photos)
     reference = predict_reference(photos[reference_index], predictor, clock)
-    entries[reference_index]["role"] = "reference"
+    log.entries[reference_index]["role"] = "reference"
     reference_path = paths[reference_index]
-    warnings[:0] = [f"{reference_path}: {warning}" for warning in reference.warnings]
-
-    registered: list[RegisteredView] = []
+    log.warnings[:0] = [f"{reference_path}: {warning}" for warning in reference.warnings]
     with clock("register"):
-        if others:  # the reference's features and board, found once for all views
-            grey = grey_of(reference.photo)
-            features, board = reference_features(reference, grey), find_board(grey)
-        for index in others:
-            outcome = register_view(index, photos[index], reference, features, board, predictor)
-            if isinstance(outcome, str):
-                leave_out(index, outcome)
-            else:
-                registered.append(outcome)
+        registered = _register_views(others, photos, reference, predictor, log)
     if not registered:
-        warnings.append(
+        log.warnings.append(
             f"{reference_path}: no other view is usable: the material is this photo's single-photo prediction"
         )
-        return refine_and_write(reference, out_dir, predictor, clock, warnings=tuple(warnings))
+        return refine_and_write(reference, out_dir, predictor, clock, warnings=tuple(log.warnings))
 
     if len(registered) == 1:  # measured on synthetic captures: docs/views.md
-        warnings.append(
+        log.warnings.append(
             f"{reference_path}: only two usable photos: a fit to two can come out worse than one "
             "photo (glossy surfaces); 3-5 photos are what it needs"
         )
     camera = reference_camera(reference.flash_frame, reference.side)
+    config = predictor.options.view_fit
+    fitted = _fit_registered(reference, camera, registered, config, clock, on_fit_step)
+    _record_fit(log, reference_index, reference, camera, registered, fitted)
+    records = {
+        "refinement": None,
+        # One entry per input view, in order: role reference/fitted/left_out and why, registration,
+        # camera (world units of the reference's texture square [-1, 1]², flash at the lens), fit.
+        "views": [{key: _finite_or_none(value) for key, value in entry.items()} for entry in log.entries],
+        # The multi-view fit (brdfgan.inference.views.fit) and its settings.
+        "view_fit": _fit_entry(fitted, config.to_json()),
+    }
+    return write_prediction(
+        reference, fitted.maps, out_dir, predictor, clock, records=records, warnings=tuple(log.warnings)
+    )
+
+
+@dataclass(frozen=True)
+class _ViewLog:
+    """What :func:`predict_views` reports about its inputs: one material.json ``views`` entry per
+    input (in order) and the result's warnings, a left-out view's naming its file."""
+
+    paths: Sequence[Path]
+    entries: list[dict[str, Any]]
+    warnings: list[str]
+
+    @classmethod
+    def start(cls, paths: Sequence[Path]) -> _ViewLog:
+        """Every input left out until it is read, registered and fitted."""
+        return cls(paths, [{"file": str(path), "role": "left_out", "reason": None} for path in paths], [])
+
+    def leave_out(self, index: int, reason: str) -> None:
+        self.entries[index]["reason"] = reason
+        self.warnings.append(f"{self.paths[index]}: left out: {reason}")
+
+
+def _read_views(paths: Sequence[Path], colorspace: Colorspace | None, log: _ViewLog) -> dict[int, Photo]:
+    """The photos that can be read, by input position; the others are left out."""
+    photos: dict[int, Photo] = {}
+    for index, path in enumerate(paths):
+        try:
+            photos[index] = read_photo(path, colorspace)
+        except (UserError, OSError) as error:
+            message = one_line(error)
+            prefix = f"{path}: "
+            log.leave_out(index, message[len(prefix) :] if message.startswith(prefix) else message)
+    return photos
+
+
+def _register_views(
+    others: list[int],
+    photos: dict[int, Photo],
+    reference: ReferencePrediction,
+    predictor: Predictor,
+    log: _ViewLog,
+) -> list[RegisteredView]:
+    """The views ``others`` that register to the reference; the others are left out."""
+    if not others:
+        return []
+    # The reference's features and board, found once for all views.
+    grey = grey_of(reference.photo)
+    features, board = reference_features(reference, grey), find_board(grey)
+    registered: list[RegisteredView] = []
+    for index in others:
+        outcome = register_view(index, photos[index], reference, features, board, predictor)
+        if isinstance(outcome, str):
+            log.leave_out(index, outcome)
+        else:
+            registered.append(outcome)
+    return registered
+
+
+def _fit_registered(
+    reference: ReferencePrediction,
+    camera: CameraPose,
+    registered: list[RegisteredView],
+    config: ViewFitConfig,
+    clock: StageClock,
+    on_fit_step: FitProgress | None,
+) -> ViewFitResult:
+    """The reference's maps fitted to the reference (``camera``, seen whole) and the registered
+    views, each with the flash at its lens."""
     cameras = [camera, *(view.camera for view in registered)]
     positions = torch.tensor([list(pose.origin) for pose in cameras], dtype=torch.float32)
-    config = options.view_fit
     total_steps = sum(steps for _, steps in working_levels(config, reference.side))
     progress = None if on_fit_step is None else lambda step, _loss: on_fit_step(step, total_steps)
     with clock("fit"):
-        fitted = fit_views(
+        return fit_views(
             torch.stack([reference.prepared.photo, *(view.image for view in registered)]),
             torch.stack([torch.ones_like(reference.prepared.photo[:1]), *(view.seen for view in registered)]),
             positions,
@@ -250,9 +305,20 @@ def predict_views(
             on_step=progress,
         )
 
-    entries[reference_index].update(_camera_entry(camera, reference.fov_deg, reference.fov_source))
+
+def _record_fit(
+    log: _ViewLog,
+    reference_index: int,
+    reference: ReferencePrediction,
+    camera: CameraPose,
+    registered: list[RegisteredView],
+    fitted: ViewFitResult,
+) -> None:
+    """Each fitted view's registration, camera and fit into its entry; a view the fit dropped
+    is left out (the reference keeps its role)."""
+    log.entries[reference_index].update(_camera_entry(camera, reference.fov_deg, reference.fov_source))
     for view in registered:
-        entries[view.index].update(
+        log.entries[view.index].update(
             role="fitted",
             method=view.registration.method,
             inliers=view.registration.inliers,
@@ -265,7 +331,7 @@ def predict_views(
     for index, record in zip(
         [reference_index, *(view.index for view in registered)], fitted.views, strict=True
     ):
-        entries[index].update(
+        log.entries[index].update(
             coverage=record.coverage,
             gain=list(record.gain),
             residual_before=record.residual_before,
@@ -273,19 +339,8 @@ def predict_views(
         )
         if record.dropped is not None:
             if index != reference_index:
-                entries[index]["role"] = "left_out"
-            leave_out(index, record.dropped)
-    records = {
-        "refinement": None,
-        # One entry per input view, in order: role reference/fitted/left_out and why, registration,
-        # camera (world units of the reference's texture square [-1, 1]², flash at the lens), fit.
-        "views": [{key: _finite_or_none(value) for key, value in entry.items()} for entry in entries],
-        # The multi-view fit (brdfgan.inference.views.fit) and its settings.
-        "view_fit": _fit_entry(fitted, config.to_json()),
-    }
-    return write_prediction(
-        reference, fitted.maps, out_dir, predictor, clock, records=records, warnings=tuple(warnings)
-    )
+                log.entries[index]["role"] = "left_out"
+            log.leave_out(index, record.dropped)
 
 
 def _camera_entry(pose: CameraPose, fov_deg: float, fov_source: str) -> dict[str, Any]:
