@@ -84,9 +84,11 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
     [rendered]="experiment=v5 model.generator.shading=detached $norelief"
     [rendered_relief]="experiment=v5 model.generator.shading=detached"
     [v5_recipe]="experiment=v5"
+    # The normals as a height's differences (integrable), on the rendered row (docs/data.md, "(e)").
+    [rendered_height]="experiment=v5 model.generator.shading=detached $norelief model.generator.normal_head=height"
   )
   local run models=""
-  for run in v4_recipe rendered rendered_relief v5_recipe; do
+  for run in v4_recipe rendered rendered_relief v5_recipe rendered_height; do
     [ -f $OUT/ablation/$run/checkpoints/last.ckpt ] ||
       $PY train.py ${RUNS[$run]} $steps hydra.run.dir=$OUT/ablation/$run
     models="$models${models:+, }$run: $OUT/ablation/$run/checkpoints/last.ckpt"

@@ -11,8 +11,10 @@ import torch
 from brdfgan.core.delit import delit_photo, flat_flash_render
 from brdfgan.core.filtering import binomial_blur
 from brdfgan.core.flash_geometry import centred_flash_frame, crop_flash_frame
+from brdfgan.core.height import height_slope_channels
 from brdfgan.core.render import FlashCapture, render_flash
-from brdfgan.core.svbrdf import linear_to_srgb, srgb_to_linear, validate_maps
+from brdfgan.core.svbrdf import linear_to_srgb, normalize_normal, srgb_to_linear, validate_maps
+from brdfgan.data.materials.base import height_to_normal
 from brdfgan.inference.model.tiling import predict_direct
 from brdfgan.metrics.svbrdf_metrics import period2_amplitudes
 from brdfgan.models.anchored import DEFAULT_ANCHOR_GAIN, METALLIC_BIAS, AnchoredUNet
@@ -37,16 +39,16 @@ def _photo(size: int = 64, seed: int = 0) -> torch.Tensor:
     return 0.05 + 0.8 * torch.rand(2, 3, size, size, generator=generator)
 
 
-def test_an_untrained_network_returns_the_delit_photo() -> None:
+def test_an_untrained_network_returns_the_blurred_delit_photo() -> None:
     torch.manual_seed(0)
     model = AnchoredUNet(width=4, depth=3)
     photo = _photo()
     frame = crop_flash_frame(centred_flash_frame(2, 64, 64, 40.0), 10.0, -6.0)
     maps = model(photo, frame)
     validate_maps(maps)
-    # The gained de-lit photo, 0.7 % of the way to the metal colour's start (grey 0.5).
+    # The gained, blurred de-lit photo, 0.7 % of the way to the metal colour's start (grey 0.5).
     metallic = torch.sigmoid(torch.tensor(METALLIC_BIAS))
-    anchor = (DEFAULT_ANCHOR_GAIN * delit_photo(photo, frame)).clamp(0.0, 1.0)
+    anchor = binomial_blur(DEFAULT_ANCHOR_GAIN * delit_photo(photo, frame)).clamp(0.0, 1.0)
     expected = linear_to_srgb(torch.lerp(anchor, torch.full_like(anchor, 0.5), metallic))
     torch.testing.assert_close(maps[:, :3], expected, atol=1e-5, rtol=1e-5)
     assert (expected - linear_to_srgb(anchor)).abs().max() < 0.01
@@ -56,54 +58,47 @@ def test_an_untrained_network_returns_the_delit_photo() -> None:
     assert (model(photo, centred_flash_frame(2, 64, 64, 40.0))[:, :3] - maps[:, :3]).abs().max() > 1e-3
 
 
-def test_the_blurred_anchor_is_the_binomially_blurred_delit_photo_without_its_checkerboard() -> None:
+def test_a_checkerboard_on_the_photo_does_not_reach_the_base_colour() -> None:
     photo = _photo()
     frame = centred_flash_frame(2, 64, 64, 40.0)
-    maps = AnchoredUNet(width=4, depth=3, anchor_blur=True)(photo, frame)
-    anchor = binomial_blur(DEFAULT_ANCHOR_GAIN * delit_photo(photo, frame)).clamp(0.0, 1.0)
-    expected = torch.lerp(anchor, torch.full_like(anchor, 0.5), torch.sigmoid(torch.tensor(METALLIC_BIAS)))
-    torch.testing.assert_close(maps[:, :3], linear_to_srgb(expected), atol=1e-5, rtol=1e-5)
-    # A checkerboard on the photo does not reach the base colour.
     checker = (-1.0) ** torch.arange(64).view(1, 1, 1, 64) * (-1.0) ** torch.arange(64).view(1, 1, 64, 1)
     patterned = (photo * (1.0 + 0.2 * checker)).clamp(0.0, 1.0)
-    base = AnchoredUNet(width=4, depth=3, anchor_blur=True)(patterned, frame)[:, :3]
-    plain = AnchoredUNet(width=4, depth=3)(patterned, frame)[:, :3]
-    checkerboard = period2_amplitudes(base)[..., 2].abs().sum(), period2_amplitudes(plain)[..., 2].abs().sum()
+    base = AnchoredUNet(width=4, depth=3)(patterned, frame)[:, :3]
+    delit = linear_to_srgb((DEFAULT_ANCHOR_GAIN * delit_photo(patterned, frame)).clamp(0.0, 1.0))
+    checkerboard = period2_amplitudes(base)[..., 2].abs().sum(), period2_amplitudes(delit)[..., 2].abs().sum()
     assert checkerboard[0] < 0.05 * checkerboard[1]
 
 
 def test_a_checkerboard_in_the_corrections_does_not_reach_the_base_colour() -> None:
     # A trained decoder's corrections (log-gain, residual, metal colour) are decoded at full
-    # resolution; with correction_blur a period-2 pattern in them is removed exactly (the binomial
-    # blur's response there is zero), without it the base colour shows it.
+    # resolution; a period-2 pattern in them is removed exactly (the binomial blur's response there
+    # is zero), where a smooth change of them does reach the base colour.
     photo = _photo()
     frame = centred_flash_frame(2, 64, 64, 40.0)
     checker = (-1.0) ** (torch.arange(64).view(1, 1, 1, 64) + torch.arange(64).view(1, 1, 64, 1))
     corrections = torch.zeros(1, 11, 1, 1)
     corrections[:, [*range(6), 8, 9, 10]] = 0.05  # logits before the head gain (10)
 
-    def inject(_module: torch.nn.Module, _inputs: object, output: torch.Tensor) -> torch.Tensor:
-        return output + corrections * checker
-
-    for blur in (True, False):
-        model = AnchoredUNet(width=4, depth=3, anchor_blur=True, correction_blur=blur)
-        torch.manual_seed(3)
-        for parameter in model.material.parameters():  # a metal share and colour that vary
-            parameter.data.normal_(0.0, 0.02)
-        with torch.no_grad():
-            clean = model(photo, frame)
-            handle = model.material.register_forward_hook(inject)
-            patterned = model(photo, frame)
+    model = AnchoredUNet(width=4, depth=3)
+    torch.manual_seed(3)
+    for parameter in model.material.parameters():  # a metal share and colour that vary
+        parameter.data.normal_(0.0, 0.02)
+    outputs = {}
+    with torch.no_grad():
+        clean = model(photo, frame)
+        for name, pattern in (("checker", checker), ("smooth", torch.ones_like(checker))):
+            handle = model.material.register_forward_hook(
+                lambda _module, _inputs, output, pattern=pattern: output + corrections * pattern
+            )
+            outputs[name] = model(photo, frame)
             handle.remove()
-        if blur:
-            torch.testing.assert_close(patterned, clean, atol=1e-5, rtol=1e-5)
-        else:
-            assert (patterned[:, :3] - clean[:, :3]).abs().mean() > 0.003
+    torch.testing.assert_close(outputs["checker"], clean, atol=1e-5, rtol=1e-5)
+    assert (outputs["smooth"][:, :3] - clean[:, :3]).abs().mean() > 0.003
 
 
 def test_the_head_gain_keeps_the_start_and_scales_every_outputs_step() -> None:
     photo = _photo()
-    plain, fast = AnchoredUNet(width=4, depth=3), AnchoredUNet(width=4, depth=3, head_gain=10.0)
+    plain, fast = AnchoredUNet(width=4, depth=3, head_gain=1.0), AnchoredUNet(width=4, depth=3)
     torch.testing.assert_close(fast(photo), plain(photo))  # the same untrained maps
     for model in (plain, fast):
         with torch.no_grad():  # one step's worth of change to each head's bias
@@ -121,9 +116,10 @@ def test_the_head_gain_keeps_the_start_and_scales_every_outputs_step() -> None:
 
 def test_at_the_training_learning_rate_the_head_gain_lets_a_batch_be_fitted() -> None:
     # The one-batch overfit that found the slow heads: Adam at the recipe's 2e-4 on one rendered
-    # photo. In 60 steps the zero-initialised heads at gain 1 barely move; at the config's gain 10
-    # the base colour and the normal slopes fit faster (measured L1: base colour 0.113 -> 0.088,
-    # slopes 0.115 -> 0.070).
+    # photo. In 60 steps the zero-initialised heads at gain 1 barely move; at the default gain 10
+    # the base colour and the normal slopes fit faster (measured L1 after 60 steps, gain 1 / 10:
+    # base colour 0.214 / 0.197 — the blurred anchor cannot fit this random texture's finest
+    # detail —, slopes 0.117 / 0.072).
     truth = random_maps(32, 32, seed=5, batch=(1,))
     photo = render_flash(truth, FlashCapture(fov_deg=50.0)).clamp(0.0, 1.0)
     photo = photo / photo.mean() * 0.2
@@ -131,7 +127,7 @@ def test_at_the_training_learning_rate_the_head_gain_lets_a_batch_be_fitted() ->
     errors = []
     for gain in (1.0, 10.0):
         torch.manual_seed(3)
-        model = AnchoredUNet(width=8, depth=2, head_gain=gain)
+        model = AnchoredUNet(width=8, depth=2, head_gain=gain, global_features=False, highlight_profile=False)
         optimizer = torch.optim.Adam(model.parameters(), lr=2e-4, betas=(0.5, 0.999))
         for _ in range(60):
             optimizer.zero_grad()
@@ -140,15 +136,16 @@ def test_at_the_training_learning_rate_the_head_gain_lets_a_batch_be_fitted() ->
         with torch.no_grad():
             errors.append((model(photo, frame) - truth).abs().mean(dim=(0, 2, 3)))
     slow, fast = errors
-    assert fast[0:3].mean() < 0.85 * slow[0:3].mean()
-    assert fast[3:5].mean() < 0.75 * slow[3:5].mean()
+    assert fast[0:3].mean() < 0.95 * slow[0:3].mean()
+    assert fast[3:5].mean() < 0.7 * slow[3:5].mean()
 
 
 def test_a_metal_takes_the_free_metal_colour_not_the_delit_photo() -> None:
     model = AnchoredUNet(width=4, depth=3)
     with torch.no_grad():
         model.material.head_bias[6] = 30.0  # metallic 1
-        model.material.head_bias[8:11] = torch.logit(torch.tensor([0.9, 0.6, 0.3]))  # a copper-like F0
+        # A copper-like F0 (the head's output is scaled by the head gain).
+        model.material.head_bias[8:11] = torch.logit(torch.tensor([0.9, 0.6, 0.3])) / model.head_gain
     maps = model(_photo())
     assert torch.allclose(maps[:, 7], torch.tensor(1.0))
     expected = linear_to_srgb(torch.tensor([0.9, 0.6, 0.3])).view(1, 3, 1, 1).expand_as(maps[:, :3])
@@ -183,6 +180,35 @@ def test_without_shading_the_surface_decoder_ignores_the_albedo_path() -> None:
     assert model.surface.blocks[0][0].in_channels == 2 * 4 + 4  # no extra shading channels
 
 
+def test_the_height_head_gives_integrable_normals_of_the_generators_convention() -> None:
+    torch.manual_seed(3)
+    model = AnchoredUNet(width=4, depth=3, head_gain=10.0, normal_head="height")
+    with torch.no_grad():
+        for parameter in model.parameters():
+            parameter.add_(0.05 * torch.randn_like(parameter))
+    assert model.surface.head.out_channels == 2  # height, roughness logit
+    normal = model(torch.rand(1, 3, 64, 64))[:, 3:6]
+    slope_x, slope_y = -normal[0, 0] / normal[0, 2], -normal[0, 1] / normal[0, 2]  # ∂h/∂x, ∂h/∂y
+    assert slope_x.abs().mean() > 1e-2  # relief, not a flat map
+    # Central differences commute: the curl of a height's slopes is zero inside (a slope head's
+    # is not).
+    curl = (slope_x[:-2, 1:-1] - slope_x[2:, 1:-1]) / 2 - (slope_y[1:-1, 2:] - slope_y[1:-1, :-2]) / 2
+    assert curl[1:-1, 1:-1].abs().max() < 1e-4 * slope_x.abs().max()
+    slopes = AnchoredUNet(width=4, depth=3, head_gain=10.0)
+    with torch.no_grad():
+        slopes.surface.head.weight.normal_(0, 0.1)
+    normal = slopes(torch.rand(1, 3, 64, 64))[:, 3:6]
+    sx, sy = -normal[0, 0] / normal[0, 2], -normal[0, 1] / normal[0, 2]
+    curl = (sx[:-2, 1:-1] - sx[2:, 1:-1]) / 2 - (sy[1:-1, 2:] - sy[1:-1, :-2]) / 2
+    assert curl.abs().max() > 0.1 * sx.abs().max()
+    # The same slopes as the training data's normals (height_to_normal) away from the borders.
+    height = torch.randn(1, 1, 16, 16)
+    ours = normalize_normal(torch.cat([height_slope_channels(height), torch.ones_like(height)], dim=1))
+    torch.testing.assert_close(ours[0, :, 1:-1, 1:-1], height_to_normal(height[0])[:, 1:-1, 1:-1])
+    with pytest.raises(ValueError, match="normal_head"):
+        AnchoredUNet(normal_head="depth")  # type: ignore[arg-type]
+
+
 def test_sizes_configs_and_weights_round_trip(tmp_path: Path) -> None:
     torch.manual_seed(2)
     model = AnchoredUNet(
@@ -210,17 +236,16 @@ def test_sizes_configs_and_weights_round_trip(tmp_path: Path) -> None:
         "anchored": True,
         "anchor_gain": 1.5,
         "head_gain": 8.0,
-        "anchor_blur": False,
-        "correction_blur": False,
         "global_features": True,
         "highlight_profile": True,
+        "normal_head": "slopes",
     }
     photo = _photo()
     torch.testing.assert_close(loaded(photo), model(photo))
     with pytest.raises(ValueError, match="shading='sometimes'"):
         AnchoredUNet(shading="sometimes")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="needs global_features"):
-        AnchoredUNet(highlight_profile=True)
+        AnchoredUNet(global_features=False)  # the profile (on by default) feeds the track
 
 
 def test_a_training_step_moves_the_maps_towards_the_truth() -> None:
@@ -231,7 +256,7 @@ def test_a_training_step_moves_the_maps_towards_the_truth() -> None:
     photo = render_flash(truth, FlashCapture(fov_deg=50.0)).clamp(0.0, 1.0)
     photo = photo / photo.mean() * 0.2
     frame = centred_flash_frame(1, 32, 32, 50.0)
-    model = AnchoredUNet(width=8, depth=2)
+    model = AnchoredUNet(width=8, depth=2, head_gain=1.0)  # at gain 1 this learning rate is stable
     optimizer = torch.optim.Adam(model.parameters(), lr=3e-3)
     before = (model(photo, frame) - truth).abs().mean(dim=(0, 2, 3))
     for _ in range(100):
@@ -240,11 +265,12 @@ def test_a_training_step_moves_the_maps_towards_the_truth() -> None:
         loss.backward()
         optimizer.step()
     after = (model(photo, frame) - truth).abs().mean(dim=(0, 2, 3)).detach()
-    # Measured: base colour 0.136 -> 0.041, normal slopes 0.157 -> 0.035, roughness (per-texel
-    # noise) 0.227 -> 0.217, metallic (per-texel coin flips; L1 through a sigmoid that starts at
-    # 0.007 is slow, training uses a cross-entropy) 0.507 -> 0.476.
+    # Measured: base colour 0.225 -> 0.187 (per-texel noise, which the blurred anchor and
+    # corrections cannot copy: the texture is 0.225 from its own blur), normal slopes 0.157 ->
+    # 0.062, roughness (per-texel noise) 0.227 -> 0.172, metallic (per-texel coin flips) 0.507 ->
+    # 0.242.
     for channels, factor in (
-        (slice(0, 3), 0.6),
+        (slice(0, 3), 0.9),
         (slice(3, 5), 0.6),
         (slice(6, 7), 0.98),
         (slice(7, 8), 0.95),
@@ -252,6 +278,7 @@ def test_a_training_step_moves_the_maps_towards_the_truth() -> None:
         assert after[channels].mean() < factor * before[channels].mean()
 
 
+@pytest.mark.integration
 @pytest.mark.mitsuba
 def test_model_anchored_trains_and_validates_in_the_platform(tiny_data: Path) -> None:
     import lightning as L
@@ -276,6 +303,7 @@ def test_model_anchored_trains_and_validates_in_the_platform(tiny_data: Path) ->
     assert math.isfinite(float(trainer.callback_metrics["val/loss"]))
 
 
+@pytest.mark.integration
 def test_experiment_anchored_composes_the_model_data_and_v3_losses(tmp_path: Path) -> None:
     import hydra
 
@@ -287,16 +315,19 @@ def test_experiment_anchored_composes_the_model_data_and_v3_losses(tmp_path: Pat
     cfg = compose_train(["experiment=anchored"], tmp_path)
     check_config(cfg, CHECKED_GROUPS)
     assert cfg.model.generator._target_ == "brdfgan.models.anchored.AnchoredUNet"
-    assert "normal_head" not in cfg.model.generator  # the v3 experiment's key would not fit it
+    assert cfg.model.generator.normal_head == "slopes"  # not the v3 experiment's unit_z
     assert cfg.data.data_dir.endswith("procedural_and_scans") and cfg.data.sensor.auto_white_balance
     assert cfg.loss.metallic_loss == "bce" and not cfg.loss.switches.adversarial
-    assert cfg.model.generator.correction_blur and cfg.data.sensor.auto_white_balance_probability == 0.75
-    assert cfg.model.generator.global_features and cfg.model.generator.highlight_profile
+    assert cfg.data.sensor.auto_white_balance_probability == 0.75
+    # The model config carries only what differs from the code's defaults, the shipped model's.
+    generator = hydra.utils.instantiate(cfg.model.generator)
+    assert generator.config() == AnchoredUNet().config()
     loss = hydra.utils.instantiate(cfg.loss)  # the cross-paired rendering loss
     assert isinstance(loss, GANLoss) and loss.rendering_loss is not None
     assert loss.rendering_loss.pairing == "cross"
 
 
+@pytest.mark.integration
 def test_experiment_anchored_fixres_fine_tunes_stage_one_on_whole_photos(tmp_path: Path) -> None:
     from brdfgan.config_check import check_config
     from brdfgan.training.run import CHECKED_GROUPS
@@ -321,7 +352,7 @@ def test_the_global_track_sets_levels_but_never_tilts_the_normals() -> None:
     # the roughness, not the slopes (with them a trained network tilted every validation photo).
     torch.manual_seed(4)
     # Without the shading image, through which a changed base colour would reach the normals.
-    model = AnchoredUNet(width=4, depth=3, shading="none", global_features=True)
+    model = AnchoredUNet(width=4, depth=3, shading="none", head_gain=1.0)
     with torch.no_grad():
         for head in (model.material.head, model.surface.head):
             head.weight.normal_(0.0, 0.1)
@@ -329,7 +360,7 @@ def test_the_global_track_sets_levels_but_never_tilts_the_normals() -> None:
     before = model(photo)
     assert model.global_track is not None
     with torch.no_grad():
-        model.global_track[-1].bias.fill_(2.0)
+        model.global_track[-1].bias.fill_(0.2)  # × the head gain (10)
     after = model(photo)
     torch.testing.assert_close(after[:, 3:6], before[:, 3:6])  # normals untouched
     assert (after[:, 6] - before[:, 6]).abs().min() > 0.01  # roughness moved everywhere

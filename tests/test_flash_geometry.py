@@ -1,5 +1,5 @@
-"""The flash frame and its offset channels (brdfgan.core.flash_geometry), the batches that carry
-them, and the generator option that reads them."""
+"""The flash frame and its offset channels (brdfgan.core.flash_geometry) and the batches that
+carry them."""
 
 from __future__ import annotations
 
@@ -26,8 +26,7 @@ from brdfgan.data.datamodule import collate_samples, flash_frames, random_crop
 from brdfgan.data.shards import Sample
 from brdfgan.inference.intake.lens import DEFAULT_FOV_DEG as LENS_DEFAULT_FOV_DEG
 from brdfgan.models.generator import Generator
-from brdfgan.runs import load_weights, network_from_config, save_weights
-from tests.conftest import compose_train
+from brdfgan.runs import WeightsError, load_weights, save_weights
 
 TINY = {"width": 4, "downsamplings": 2, "residual_blocks": 1}
 
@@ -141,45 +140,27 @@ def test_batches_carry_frames_that_follow_the_train_crop() -> None:
         flash_frames([{"train_crop": [0, 0, 32]}], 32, 32)
 
 
-def test_generator_reads_the_frame_only_with_the_option() -> None:
+def test_the_paper_generator_ignores_the_frame() -> None:
     torch.manual_seed(0)
     photo = torch.rand(2, 3, 32, 32)
-    # Same scale as the default frame, the hotspot moved: only the side of the flash differs.
     elsewhere = centred_flash_frame(2, 32, 32)
     elsewhere[:, :2] = torch.tensor([[0.0, 0.0], [40.0, 5.0]])
     plain = Generator(**TINY).eval()
     with torch.no_grad():
         assert torch.equal(plain(photo), plain(photo, elsewhere))
-    aware = Generator(**TINY, flash_geometry=True).eval()
-    assert aware.down[0].in_channels == 7
-    extra = sum(p.numel() for p in aware.parameters()) - sum(p.numel() for p in plain.parameters())
-    assert extra == 4 * 4 * 49
-    with torch.no_grad():
-        default = aware(photo)
-        assert torch.equal(default, aware(photo, centred_flash_frame(2, 32, 32)))
-        moved = aware(photo, elsewhere)
-        assert (moved - default).abs().amax() > 1e-3, "a moved hotspot must change the maps"
-    with pytest.raises(ValueError, match="batch holds 2"):
-        aware(photo, elsewhere[:1])
 
 
-def test_flash_geometry_config_round_trips(tmp_path: Path) -> None:
-    cfg = compose_train(["experiment=default_model", "model.generator.flash_geometry=true"], tmp_path)
-    built = network_from_config(cfg.model.generator, "config.yaml")
-    assert isinstance(built, Generator) and built.flash_geometry
-    assert "flash_geometry" not in Generator(**TINY).config()
-    g = Generator(**TINY, flash_geometry=True).eval()
-    path = save_weights(
-        tmp_path / "g.safetensors",
-        g,
-        target="brdfgan.models.generator.Generator",
-        config=g.config(),
-        model_id="f",
-    )
-    loaded, meta = load_weights(path)
-    assert (
-        isinstance(loaded, Generator) and loaded.flash_geometry and meta["config"]["flash_geometry"] is True
-    )
-    photo, frame = torch.rand(1, 3, 32, 32), torch.tensor([[3.0, 30.0, 0.04]])
-    with torch.no_grad():
-        assert torch.equal(loaded(photo, frame), g(photo, frame))
+def test_a_stored_config_with_the_retired_flash_option_loads_only_at_its_built_value(tmp_path: Path) -> None:
+    # Generator's flash_geometry (tried, not adopted) is gone; configs stored with it off still load.
+    g = Generator(**TINY).eval()
+    for value in (False, True):
+        target, config = "brdfgan.models.generator.Generator", {**g.config(), "flash_geometry": value}
+        path = save_weights(tmp_path / f"g{value}.safetensors", g, target=target, config=config, model_id="f")
+        if value:
+            with pytest.raises(WeightsError, match="flash_geometry=True is a retired option"):
+                load_weights(path)
+            continue
+        loaded, _ = load_weights(path)
+        photo = torch.rand(1, 3, 32, 32)
+        with torch.no_grad():
+            assert torch.equal(loaded(photo), g(photo))

@@ -19,6 +19,7 @@ from brdfgan.inference.outputs.export import ExportError, ExportOptions, texture
 from brdfgan.inference.outputs.gltf import PNG_SIGNATURE
 from brdfgan.inference.pipeline import PredictOptions, Predictor, output_names, predict_photo
 from brdfgan.io.images import read_image
+from brdfgan.models.anchored import AnchoredUNet
 from brdfgan.models.generator import Generator
 from brdfgan.runs import WeightsError, save_weights
 from tests.conftest import random_maps
@@ -357,10 +358,10 @@ def test_a_flash_aware_model_gets_the_detected_hotspot_and_the_field_of_view(tmp
     from brdfgan.inference.model.tiling import predict_direct
 
     torch.manual_seed(0)
-    generator = Generator(width=4, residual_blocks=1, flash_geometry=True)
-    with torch.no_grad():  # at initialisation the geometry barely moves the maps: make it count
-        generator.down[0].weight[:, 3:] *= 200.0
-    target = "brdfgan.models.generator.Generator"
+    generator = AnchoredUNet(width=4, depth=2)  # reads the flash frame
+    with torch.no_grad():  # untrained, its roughness is 0.5 everywhere: make it read its features
+        generator.surface.head.weight.normal_(0.0, 0.5)
+    target = "brdfgan.models.anchored.AnchoredUNet"
     path = save_weights(tmp_path / "aware.safetensors", generator, target=target,
                         config=generator.config(), model_id="aware", extra={"resolution": 64})  # fmt: skip
     # A user crop with the highlight at its right edge: the frame must say so.

@@ -46,6 +46,7 @@ from brdfgan.inference.model.tiling import (
     stats_photo,
     tile_starts,
 )
+from brdfgan.models.anchored import AnchoredUNet
 from brdfgan.models.deschaintre2018 import Deschaintre2018
 from brdfgan.models.generator import Generator
 
@@ -312,7 +313,8 @@ def test_tiled_matches_untiled(generator: Generator, photo: Tensor, untiled: Ten
 def test_flash_aware_tiles_see_the_whole_photo_geometry(photo: Tensor, frame: Tensor | None) -> None:
     """Each tile gets the whole photo's flash frame moved to its corner, so tiled and untiled agree
     as for a plain generator; the default frame is the whole photo's centre, not each tile's."""
-    aware = tiny_generator(flash_geometry=True)
+    torch.manual_seed(0)
+    aware = AnchoredUNet(width=4, depth=2).eval()  # reads the flash frame (its anchor, its side channels)
     untiled = predict_direct(aware, photo, frame)
     tiled = predict_tiled(aware, photo, TILED, flash=frame)
     error = pixel_error(tiled, untiled)
@@ -474,11 +476,10 @@ def test_image_statistics_are_frozen_in_tiles_like_the_norms() -> None:
     # the global track's feature moments and highlight profile): tiling records them in the
     # statistics pass and every tile replays the whole photo's, so tiled inference reproduces the
     # untiled network.
-    from brdfgan.models.anchored import AnchoredUNet
 
     torch.manual_seed(0)
     # depth 2: a small field; the highlight profile reads the photo and its flash frame.
-    model = AnchoredUNet(width=4, depth=2, global_features=True, highlight_profile=True, head_gain=10.0)
+    model = AnchoredUNet(width=4, depth=2)  # the shipped options: global track, highlight profile
     with torch.no_grad():
         for parameter in model.parameters():
             parameter.add_(0.05 * torch.randn_like(parameter))

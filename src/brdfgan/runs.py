@@ -161,6 +161,22 @@ def network_from_config(node: Any, where: str | os.PathLike[str]) -> nn.Module:
     return build_network(target, arguments, where)
 
 
+def _without_retired_options(
+    cls: type, arguments: Mapping[str, Any], where: str | os.PathLike[str], target: str
+) -> dict[str, Any]:
+    """``arguments`` less the options ``cls`` has retired (its ``RETIRED_OPTIONS``: name → the
+    value the network is now always built with), so that configs stored before an option went
+    still load; a retired option stored with another value cannot be honoured: an error."""
+    retired: Mapping[str, Any] = getattr(cls, "RETIRED_OPTIONS", {})
+    for name, value in arguments.items():
+        if name in retired and value != retired[name]:
+            raise WeightsError(
+                f"{where}: {target} {name}={value!r} is a retired option; this version only builds "
+                f"{name}={retired[name]!r}"
+            )
+    return {name: value for name, value in arguments.items() if name not in retired}
+
+
 def build_network(target: str, arguments: Mapping[str, Any], where: str | os.PathLike[str]) -> nn.Module:
     """Build the allowlisted class ``target`` with ``arguments`` (checked, then sized unallocated)."""
     import importlib
@@ -172,6 +188,7 @@ def build_network(target: str, arguments: Mapping[str, Any], where: str | os.Pat
     module_name, class_name = NETWORK_CLASSES[target]
     cls = getattr(importlib.import_module(module_name), class_name)
     _reject_nested_targets(arguments, where, target)
+    arguments = _without_retired_options(cls, arguments, where, target)
     parameters, hints, _ = signature_of(cls)
     for name, value in arguments.items():
         if name not in parameters:

@@ -38,6 +38,33 @@ def _slopes(normal: Tensor) -> tuple[Tensor, Tensor]:
     return dh_dx, dh_drow
 
 
+def height_slope_channels(height: Tensor) -> Tensor:
+    """The slope channels ``(−∂h/∂x, −∂h/∂y)`` of a height field by central differences, borders
+    replicated (a crop does not tile): ``normalize(s_x, s_y, 1)`` is its normal map, the
+    convention of :func:`~brdfgan.data.materials.base.height_to_normal` (+y up the rows). A
+    network that predicts a height and takes its normals from it gives integrable (curl-free)
+    slopes, as a real surface's are.
+
+    Shape:
+        - height: ``(B, 1, H, W)`` in pixel units
+        - output: ``(B, 2, H, W)``
+
+    Example:
+        A ramp rising along +x by 2 per pixel, and one rising up the rows by 2 per pixel:
+
+        >>> ramp = torch.arange(4.0).mul(2).view(1, 1, 1, 4).expand(1, 1, 4, 4)
+        >>> height_slope_channels(ramp)[0, :, 1, 1].add(0.0).tolist()  # + 0.0: no negative zero
+        [-2.0, 0.0]
+        >>> height_slope_channels(ramp.transpose(-1, -2).flip(-2))[0, :, 1, 1].add(0.0).tolist()
+        [0.0, -2.0]
+    """
+    check_shape(height, "B 1 H W", name="height")
+    padded = F.pad(height, (1, 1, 1, 1), mode="replicate")
+    dh_dx = (padded[..., 1:-1, 2:] - padded[..., 1:-1, :-2]) / 2.0
+    dh_dy = (padded[..., :-2, 1:-1] - padded[..., 2:, 1:-1]) / 2.0  # row − 1 is +Y
+    return torch.cat([-dh_dx, -dh_dy], dim=1)
+
+
 def height_from_normals(normal: Tensor, *, periodic: bool = False) -> Tensor:
     """The height field whose normals are ``normal``, up to a constant (returned with mean 0).
 

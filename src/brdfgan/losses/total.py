@@ -117,6 +117,9 @@ def discriminator_total(
 
 class GANLoss(nn.Module):
     """All loss terms of the paper behind switches; only the switched-on terms are computed.
+    Which terms are on is a recipe's choice (``conf/loss/``); each term's own options default to
+    the shipped model's (``metallic_loss="bce"``, ``rendering_pairing="cross"``), the paper's are
+    set by ``conf/loss/full.yaml``.
 
     A renderer exists only when the rendering term is on, and nothing asks for discriminator
     outputs unless ``switches.needs_discriminator``.
@@ -130,12 +133,12 @@ class GANLoss(nn.Module):
         feature_layers: leading discriminator layers compared by feature matching.
         weight: the generator total's factor (paper: ¼).
         feature_weight: λ of the discriminator total (paper: 0.01).
-        metallic_loss: the parameter loss's metallic term, ``"l1"`` (paper) or ``"bce"`` (see
-            :func:`~brdfgan.losses.parameter.metallic_bce`).
+        metallic_loss: the parameter loss's metallic term, ``"bce"`` (shipped; see
+            :func:`~brdfgan.losses.parameter.metallic_bce`) or ``"l1"`` (the paper).
         normal_tilt_weight: weight of the squared slope error added to the normal term (0, the
             paper: none; see :func:`~brdfgan.losses.parameter.tilt_squared_error`).
-        rendering_pairing: ``"joint"`` (the paper) or ``"cross"``: which maps are rendered
-            together (see :func:`~brdfgan.losses.rendering.cross_paired`).
+        rendering_pairing: ``"cross"`` (shipped) or ``"joint"`` (the paper): which maps are
+            rendered together (see :func:`~brdfgan.losses.rendering.cross_paired`).
     """
 
     def __init__(
@@ -148,9 +151,9 @@ class GANLoss(nn.Module):
         feature_layers: int = FEATURE_LAYERS,
         weight: float = GENERATOR_WEIGHT,
         feature_weight: float = FEATURE_WEIGHT,
-        metallic_loss: MetallicLoss = "l1",
+        metallic_loss: MetallicLoss = "bce",
         normal_tilt_weight: float = 0.0,
-        rendering_pairing: RenderPairing = "joint",
+        rendering_pairing: RenderPairing = "cross",
     ) -> None:
         super().__init__()
         if rendering_pairing not in ("joint", "cross"):

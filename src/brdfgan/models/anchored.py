@@ -1,57 +1,36 @@
-"""A photo-anchored U-Net with two decoders that reads relief from shading (issue 32: the CPU
-default's generator from v4; the paper's :class:`~brdfgan.models.generator.Generator` stays for GPUs).
-
-Designed for a budget of ~1/40 000 of the paper's compute, at which v3 learned each map's level
-but not the photo's content (hue lost, detail blurred, a period-2 checkerboard, flat normals):
+"""The photo-anchored two-decoder U-Net: the CPU default's generator (``brdfgan-default-v4``;
+the paper's :class:`~brdfgan.models.generator.Generator` stays for GPUs). ``AnchoredUNet()``
+with no arguments is the shipped architecture. Design, measurements and ablations:
+``docs/default_model.md`` ("Design").
 
 - **Anchored on the de-lit photo.** The base colour is a correction of
-  :func:`~brdfgan.core.delit.delit_photo` (the photo over the flat-surface flash falloff, hotspot
-  clipped) times a learnt global exposure gain: per pixel and channel a log-gain and a bounded
-  residual, ``b = clamp(g · d · exp(γ) + 0.25 tanh(ρ), 0, 1)`` in linear light, blended toward a
-  free metal colour by the metallic map (a metal's base colour is its specular colour, which the
-  de-lit photo does not hold: after 1 600 steps without the blend the network had not learnt to
-  call a brushed-metal validation scan metal, metallic 0.1 against 1). The output layers start
-  at zero and the metallic at 0.7 %, so an untrained network returns ``g · d`` — the photo's hue,
-  detail and resolution — and training spends its steps on exposure, highlight and
-  environment-light removal. ``anchored=False`` keeps the de-lit photo as an input only (the
-  base colour then comes from a sigmoid, as in v3): the comparison the issue asks for.
-- **Detail and no checkerboard.** Skip connections at every scale (a U-Net: Deschaintre et al.
-  2018's was the best same-budget model here on diffuse albedo) and resize-convolution
-  upsampling (bilinear ×2, then a 3×3 convolution) instead of transposed convolutions.
-- **Two decoders.** One for (base colour, metallic), one for (normal, roughness): with one shared
-  decoder lighting bakes into the diffuse map and normals come out flat (SVBRDF-GAN's author; CAD,
-  SIGGRAPH Asia 2024).
-- **Normals from shading.** The surface decoder also reads the shading image, ``log(photo) −
-  log(flat render)`` of the material decoder's base colour, metallic and a provisional roughness
-  under the photo's flash (:func:`~brdfgan.core.delit.flat_flash_render`; Chord 2025, Li et al.
-  2018's cascade), pooled to every scale, beside the flash-offset channels: relief with the albedo
-  divided out. ``shading``: ``"detached"`` (rendered without gradient into the material decoder;
-  the provisional roughness then keeps its start value, 0.5), ``"gradient"``, or ``"none"`` (not
-  read).
+  :func:`~brdfgan.core.delit.delit_photo` times a learnt exposure gain, binomially blurred
+  (:func:`compose_basecolor`): per pixel and channel a log-gain and a bounded residual, blended
+  toward a free metal colour by the metallic map. The output layers start at zero, so an untrained
+  network returns the blurred, gained de-lit photo: the photo's hue and detail.
+- **A U-Net with resize-convolution upsampling** (no transposed convolutions: no checkerboard),
+  and **two decoders**, (base colour, metallic) and (normal, roughness).
+- **The shading image** (``shading``): the surface decoder may read ``log(photo) − log(flat
+  render)`` of the material decoder's maps (:func:`~brdfgan.core.delit.flat_flash_render`).
+- **A global track** (``global_features``, ``highlight_profile``): per-image moments of every
+  encoder level and the flash highlight's profile, through a small MLP added to every head but the
+  normal's (:mod:`brdfgan.models.image_statistics`, frozen in tiles like the norms' statistics).
 
-- **A global track** (``global_features``): affine-free instance norms remove every feature map's
-  per-image level, so the network could see a whole surface's roughness or metal share only
-  through spatial patterns. The per-image mean and log standard deviation of every encoder level's
-  first convolution (:class:`~brdfgan.models.image_statistics.ImageMoments`) go through a small MLP
-  whose zero-initialised output is added to the heads, all but the normal slopes (a surface's mean
-  tilt is no image-wide level; Deschaintre et al. 2018's reason for their
-  track; tiling replays the whole photo's moments in every tile, as it does the norms' statistics).
-  With ``highlight_profile`` the track also reads the flash highlight's profile around the hotspot
-  (:class:`~brdfgan.models.image_statistics.HighlightProfile`): the lobe's width and height, from
-  which roughness and specular level are read, measured where they are instead of inferred from
-  feature moments.
+Inputs per pixel: ``log`` of the photo and of the anchor, and the four flash side channels
+(:func:`~brdfgan.core.flash_geometry.flash_side_channels`). Normalisation is affine-free
+``InstanceNorm2d``, so whole-photo inference tiles with frozen statistics
+(:mod:`brdfgan.inference.model.tiling`). The normal head is ``normalize(s_x, s_y, 1)`` of two
+slopes, or of a height's differences (``normal_head``).
 
-Inputs per pixel: ``log`` of the photo and of the anchor ``g · d``, and the four flash side
-channels (:func:`~brdfgan.core.flash_geometry.flash_side_channels`). Normalisation is
-``InstanceNorm2d`` (``affine=False``), so whole-photo inference tiles with frozen statistics as
-for the other generators (:mod:`brdfgan.inference.model.tiling`). The normal head is
-``normalize(x, y, 1)`` (slopes; the v3 finding), roughness and metallic sigmoids.
+Ablation-only switches (no shipped recipe sets them; ``docs/default_model.md`` has each one's
+run): ``anchored=False``, ``shading`` other than ``"detached"``, ``global_features=False``,
+``highlight_profile=False``, ``normal_head="height"``.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any, Literal, cast
+from typing import Any, ClassVar, Literal, cast
 
 import torch
 import torch.nn.functional as F
@@ -67,11 +46,14 @@ from brdfgan.core.flash_geometry import (
     check_flash_frame,
     flash_side_channels,
 )
+from brdfgan.core.height import height_slope_channels
 from brdfgan.core.svbrdf import join_maps, linear_to_srgb, normalize_normal
 from brdfgan.models.image_statistics import PROFILE_RINGS, HighlightProfile, HotspotCap, ImageMoments
 
 Shading = Literal["detached", "gradient", "none"]
 SHADINGS: tuple[str, ...] = ("detached", "gradient", "none")
+NormalHead = Literal["slopes", "height"]
+NORMAL_HEADS: tuple[str, ...] = ("slopes", "height")
 # The de-lit photo's exposure gain fitted on the procedural_and_scans train split (the de_lit
 # reference, src/brdfgan/weights/references/de_lit.safetensors): the anchor's starting level.
 DEFAULT_ANCHOR_GAIN = 2.13
@@ -84,13 +66,10 @@ LOG_GAIN_LIMIT = 4.0  # the per-pixel log-gain is clamped to ±this (×0.018 …
 METALLIC_BIAS = -5.0
 # log-gain 3, residual 3, metallic logit 1, provisional roughness logit 1, metal colour logits 3
 MATERIAL_OUTPUTS = 11
-SURFACE_OUTPUTS = 3  # slope x, slope y, roughness logit
 INPUT_CHANNELS = 3 + 3 + FLASH_CHANNELS
 GLOBAL_HIDDEN = 64  # the global track's hidden width
 # The global track feeds every material output and the roughness logit, not the normal slopes: a
-# surface's mean tilt is not an image-wide level (with slopes, a 1 600-step run gave every
-# validation photo a tilt of ~1.6°, normal angle 8.80° against the flat map's 7.95°; without
-# them, the same weights 8.00°).
+# surface's mean tilt is not an image-wide level (docs/default_model.md, "Design").
 GLOBAL_OUTPUTS = MATERIAL_OUTPUTS + 1
 # The base colour's corrections as applied (compose_basecolor): log-gain 3, residual 3 (after its
 # tanh bound), metal colour 3 (after its sigmoid), metallic 1.
@@ -191,20 +170,8 @@ class AnchoredUNet(nn.Module):
             de-lit photo is an input only, the base colour a sigmoid).
         anchor_gain: the de-lit photo's starting exposure gain (a learnt scalar from there).
         head_gain: both decoders' outputs are this times their zero-initialised 1×1 heads (the
-            start is unchanged). Adam moves every weight by about its learning rate per step, so
-            outputs that start at zero and must travel far crawl, and the decoders' changes reach
-            the maps only through those small head weights: with a gain of 1 the metallic stayed
-            at its 0.7 % start for over a thousand steps against the training set's 15 % metal,
-            roughness at 0.5 and the normals flat; a one-batch overfit of 150 steps fell 0.155 →
-            0.096 at gain 1 and → 0.046 with the heads 10× faster (v3's generator: → 0.070).
-        anchor_blur: pass the anchor through :func:`~brdfgan.core.filtering.binomial_blur`: a
-            phone photo's noise, demosaicing and JPEG put ~100× the truth's power at the period-2
-            frequencies into the de-lit photo (the evaluator's checkerboard ratio), which an
-            anchored base colour would copy; the blur removes exactly those frequencies.
-        correction_blur: pass the base colour's corrections (log-gain, residual, metal colour)
-            through the same blur before they are applied: decoded at full resolution, they
-            otherwise grow the period-2 power the anchor's blur removed (checkerboard ratio of
-            the base colour on the validation photos 0.9 after 2 400 steps, 2.3 after 4 800).
+            start is unchanged): Adam moves every weight by about its learning rate per step, so
+            outputs that start at zero and must travel far would crawl.
         global_features: a global track: the per-image mean and log standard deviation of every
             encoder level's first convolution (before its InstanceNorm removes them;
             :class:`~brdfgan.models.image_statistics.ImageMoments`, frozen in tiles like the norms)
@@ -218,12 +185,21 @@ class AnchoredUNet(nn.Module):
             photo's relative log luminance and clipped share per ring of angle from the hotspot),
             the width and height of the specular lobe from which roughness and specular level are
             read; needs ``global_features``.
+        normal_head: ``"slopes"``: the surface decoder's first two outputs are the normal's
+            slopes; ``"height"``: its first output is a height field (pixel units) whose central
+            differences are the slopes (:func:`~brdfgan.core.height.height_slope_channels`), so
+            the normals are integrable and a groove's two walls come from one dark line.
 
     Shape:
         - photo: ``(B, 3, H, W)`` linear LDR in [0, 1]
         - flash: ``(B, 3)`` flash frames (optional: the photo centred on its hotspot, 57.5°)
         - output: ``(B, 8, H, W)`` maps
     """
+
+    # Options since removed, with the one value the network is now built with: a stored config
+    # that names one (the shipped weights' does) loads when it asks for that value
+    # (brdfgan.runs.build_network).
+    RETIRED_OPTIONS: ClassVar[dict[str, Any]] = {"anchor_blur": True, "correction_blur": True}
 
     def __init__(
         self,
@@ -232,11 +208,10 @@ class AnchoredUNet(nn.Module):
         shading: Shading = "detached",
         anchored: bool = True,
         anchor_gain: float = DEFAULT_ANCHOR_GAIN,
-        head_gain: float = 1.0,
-        anchor_blur: bool = False,
-        correction_blur: bool = False,
-        global_features: bool = False,
-        highlight_profile: bool = False,
+        head_gain: float = 10.0,
+        global_features: bool = True,
+        highlight_profile: bool = True,
+        normal_head: NormalHead = "slopes",
     ) -> None:
         super().__init__()
         if width < 1 or depth < 1:
@@ -247,6 +222,8 @@ class AnchoredUNet(nn.Module):
             raise ValueError(f"anchor_gain must be positive, got {anchor_gain}")
         if not head_gain > 0:
             raise ValueError(f"head_gain must be positive, got {head_gain}")
+        if normal_head not in NORMAL_HEADS:
+            raise ValueError(f"normal_head={normal_head!r}: must be one of {', '.join(NORMAL_HEADS)}")
         if highlight_profile and not global_features:
             raise ValueError("highlight_profile feeds the global track: it needs global_features=True")
         self.width, self.depth = int(width), int(depth)
@@ -254,17 +231,17 @@ class AnchoredUNet(nn.Module):
         self.anchored = bool(anchored)
         self.anchor_gain = float(anchor_gain)
         self.head_gain = float(head_gain)
-        self.anchor_blur = bool(anchor_blur)
-        self.correction_blur = bool(correction_blur)
         self.global_features = bool(global_features)
         self.highlight_profile = bool(highlight_profile)
+        self.normal_head: NormalHead = normal_head
+        self.relief_channels = 2 if normal_head == "slopes" else 1
         widths = [width * 2 ** min(level, 3) for level in range(depth + 1)]
         self.encoder = nn.ModuleList(
             _conv_block(INPUT_CHANNELS if level == 0 else widths[level - 1], widths[level])
             for level in range(depth + 1)
         )
         self.material = _Decoder(widths, 0, MATERIAL_OUTPUTS)
-        self.surface = _Decoder(widths, 3 if shading != "none" else 0, SURFACE_OUTPUTS)
+        self.surface = _Decoder(widths, 3 if shading != "none" else 0, self.relief_channels + 1)
         with torch.no_grad():
             self.material.head_bias[6] = METALLIC_BIAS / self.head_gain
         self.log_anchor_gain = nn.Parameter(torch.tensor(math.log(anchor_gain)))
@@ -291,10 +268,9 @@ class AnchoredUNet(nn.Module):
             "anchored": self.anchored,
             "anchor_gain": self.anchor_gain,
             "head_gain": self.head_gain,
-            "anchor_blur": self.anchor_blur,
-            "correction_blur": self.correction_blur,
             "global_features": self.global_features,
             "highlight_profile": self.highlight_profile,
+            "normal_head": self.normal_head,
         }
 
     @property
@@ -316,7 +292,7 @@ class AnchoredUNet(nn.Module):
     def anchor(self, photo: Tensor, flash: Tensor, cap: Tensor | None = None) -> Tensor:
         """The anchor ``g · d`` the base colour corrects: the de-lit photo, its hotspot clipped at
         ``cap`` (default: measured on this photo, as the forward pass does), times the learnt
-        exposure gain, blurred with ``anchor_blur``. Any size: the guided fast path of
+        exposure gain, blurred. Any size: the guided fast path of
         ``brdfgan predict`` composes a full-resolution base colour on it
         (:func:`compose_basecolor`) with the cap of the photo the network read.
 
@@ -332,7 +308,7 @@ class AnchoredUNet(nn.Module):
     def _anchor(self, delit: Tensor, cap: Tensor | None = None) -> Tensor:
         cap = self.hotspot_cap(delit) if cap is None else cap  # the module: tiles replay the photo's
         anchor = self.log_anchor_gain.exp().to(delit.dtype) * clip_hotspot(delit, cap=cap)
-        return binomial_blur(anchor) if self.anchor_blur else anchor
+        return binomial_blur(anchor)
 
     def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
         return self.maps_and_corrections(photo, flash)[0]
@@ -358,71 +334,88 @@ class AnchoredUNet(nn.Module):
         anchor = self._anchor(delit)
         log_photo = (photo + LOG_EPS).log()  # an input, and the shading image's numerator
         x = torch.cat([log_photo, (anchor + LOG_EPS).log(), flash_side_channels(frame, height, width)], dim=1)
-        skips, moments = [], []
-        for level, block in enumerate(self.encoder):
-            x = x if level == 0 else F.avg_pool2d(x, 2)
-            if self.moments is not None:
-                layers = cast(nn.Sequential, block)  # built by _conv_block
-                x = layers[0](x)  # the first convolution: its moments, before the norm removes them
-                moments.append(self.moments[level](x))
-                x = layers[1:](x)
-            else:
-                x = block(x)
-            skips.append(x)
+        skips, moments = self._encode(x)
         levels = None  # per image and output channel: the global track's addition to the heads
         if self.global_track is not None:
             if self.profile is not None:
                 moments.append(self.profile(delit, photo, frame))
             levels = self.global_track(torch.cat(moments, dim=1))[:, :, None, None]
+        basecolor, metallic, provisional, corrections = self._material_maps(skips, levels, anchor)
+        extras = None
+        if self.shading != "none":
+            # Detached: rendered without a graph (the same values; no autograd bookkeeping).
+            with torch.set_grad_enabled(torch.is_grad_enabled() and self.shading == "gradient"):
+                flat = flat_flash_render(basecolor, torch.sigmoid(provisional), metallic, frame)
+                shading = log_photo - (flat + LOG_EPS).log()
+            extras = [
+                shading if level == 0 else F.avg_pool2d(shading, 2**level) for level in range(self.depth)
+            ]
+        normal, roughness = self._surface_maps(skips, extras, levels)
+        return join_maps(linear_to_srgb(basecolor), normal, roughness, metallic), corrections
 
+    def _encode(self, x: Tensor) -> tuple[list[Tensor], list[Tensor]]:
+        """The encoder's features at every level and, with the global track, the moments of each
+        level's first convolution (before its norm removes them)."""
+        skips, moments = [], []
+        for level, block in enumerate(self.encoder):
+            x = x if level == 0 else F.avg_pool2d(x, 2)
+            if self.moments is not None:
+                layers = cast(nn.Sequential, block)  # built by _conv_block
+                x = layers[0](x)
+                moments.append(self.moments[level](x))
+                x = layers[1:](x)
+            else:
+                x = block(x)
+            skips.append(x)
+        return skips, moments
+
+    def _material_maps(
+        self, skips: list[Tensor], levels: Tensor | None, anchor: Tensor
+    ) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
+        """The material decoder's linear base colour, metallic, provisional roughness logit (what
+        the shading image renders with) and, when anchored, the base colour's corrections."""
         material = self.material(skips)
         if levels is not None:
             material = material + levels[:, :MATERIAL_OUTPUTS]
         material = self.head_gain * material
         metallic = torch.sigmoid(material[:, 6:7])
-        corrections: Tensor | None = None
-        if self.anchored:
-            if self.correction_blur:  # the corrections only: metallic, provisional roughness stay sharp
-                blurred = binomial_blur(torch.cat([material[:, 0:6], material[:, 8:11]], dim=1))
-                material = torch.cat([blurred[:, 0:6], material[:, 6:8], blurred[:, 6:9]], dim=1)
-            corrections = torch.cat(
-                [
-                    material[:, 0:3].clamp(-LOG_GAIN_LIMIT, LOG_GAIN_LIMIT),
-                    RESIDUAL_SCALE * torch.tanh(material[:, 3:6]),
-                    torch.sigmoid(material[:, 8:11]),
-                    metallic,
-                ],
-                dim=1,
-            )
-            basecolor = compose_basecolor(anchor, corrections)
-        else:
-            basecolor = torch.sigmoid(material[:, 0:3] + material[:, 3:6])
+        if not self.anchored:
+            return torch.sigmoid(material[:, 0:3] + material[:, 3:6]), metallic, material[:, 7:8], None
+        # The corrections only are blurred: metallic and the provisional roughness stay sharp.
+        blurred = binomial_blur(torch.cat([material[:, 0:6], material[:, 8:11]], dim=1))
+        corrections = torch.cat(
+            [
+                blurred[:, 0:3].clamp(-LOG_GAIN_LIMIT, LOG_GAIN_LIMIT),
+                RESIDUAL_SCALE * torch.tanh(blurred[:, 3:6]),
+                torch.sigmoid(blurred[:, 6:9]),
+                metallic,
+            ],
+            dim=1,
+        )
+        return compose_basecolor(anchor, corrections), metallic, material[:, 7:8], corrections
 
-        extras = None
-        if self.shading != "none":
-            # Detached: rendered without a graph (the same values; no autograd bookkeeping).
-            with torch.set_grad_enabled(torch.is_grad_enabled() and self.shading == "gradient"):
-                provisional = torch.sigmoid(material[:, 7:8])
-                flat = flat_flash_render(basecolor, provisional, metallic, frame)
-                shading = log_photo - (flat + LOG_EPS).log()
-            extras = [
-                shading if level == 0 else F.avg_pool2d(shading, 2**level) for level in range(self.depth)
-            ]
+    def _surface_maps(
+        self, skips: list[Tensor], extras: list[Tensor] | None, levels: Tensor | None
+    ) -> tuple[Tensor, Tensor]:
+        """The surface decoder's unit normals and roughness."""
         surface = self.surface(skips, extras)
+        relief, roughness_logit = surface[:, : self.relief_channels], surface[:, self.relief_channels :]
         if levels is not None:  # the roughness logit only (GLOBAL_OUTPUTS)
-            surface = torch.cat([surface[:, :2], surface[:, 2:] + levels[:, MATERIAL_OUTPUTS:]], dim=1)
-        surface = self.head_gain * surface
-        normal = normalize_normal(torch.cat([surface[:, 0:2], torch.ones_like(surface[:, 2:3])], dim=1))
-        maps = join_maps(linear_to_srgb(basecolor), normal, torch.sigmoid(surface[:, 2:3]), metallic)
-        return maps, corrections
+            roughness_logit = roughness_logit + levels[:, MATERIAL_OUTPUTS:]
+        relief, roughness_logit = self.head_gain * relief, self.head_gain * roughness_logit
+        slopes = relief if self.normal_head == "slopes" else height_slope_channels(relief)
+        normal = normalize_normal(torch.cat([slopes, torch.ones_like(roughness_logit)], dim=1))
+        return normal, torch.sigmoid(roughness_logit)
 
 
 __all__ = [
     "CORRECTION_CHANNELS",
     "DEFAULT_ANCHOR_GAIN",
     "METALLIC_BIAS",
+    "NORMAL_HEADS",
     "SHADINGS",
     "AnchoredUNet",
+    "NormalHead",
     "Shading",
     "compose_basecolor",
 ]

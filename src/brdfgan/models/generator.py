@@ -28,31 +28,18 @@ Choices the paper leaves open (all parameter-free or removing dead parameters):
   starts with an InstanceNorm. InstanceNorm is ``affine=False`` (pix2pixHD's default).
   The paper preset has 45,598,408 parameters (45.6 M as published; 45,609,032 with all biases).
 
-``flash_geometry=True`` (not the paper's) adds four input channels beside the photo: each pixel's
-offset from the flash hotspot split by sign,
-:func:`~brdfgan.core.flash_geometry.flash_side_channels` of the photo's flash frame (split so that
-the InstanceNorm after the first conv cannot remove it). Without them a window of the photo does
-not say on which side of the flash it lies, so the sign of a tilt is ambiguous to the network (the
-module docstring of :mod:`brdfgan.core.flash_geometry`). A photo given without a frame is taken to
-be centred on its hotspot with the default field of view
-(:func:`~brdfgan.core.flash_geometry.centred_flash_frame`),
-what ``brdfgan predict``'s hotspot crop produces.
+The generator takes a flash frame like every generator (``forward(photo, flash)``) and ignores
+it: flash-offset input channels were tried and not adopted (docs/default_model_v3.md); the
+anchored generator reads them.
 """
 
 from __future__ import annotations
 
-from typing import Any, Literal, get_args
+from typing import Any, ClassVar, Literal, get_args
 
-import torch
 from torch import Tensor, nn
 
 from brdfgan.core.checks import check_shape
-from brdfgan.core.flash_geometry import (
-    FLASH_CHANNELS,
-    centred_flash_frame,
-    check_flash_frame,
-    flash_side_channels,
-)
 from brdfgan.core.svbrdf import NUM_CHANNELS
 from brdfgan.models.heads import (
     PHOTO_CHANNELS,
@@ -124,18 +111,20 @@ class Generator(nn.Module):
             parameter count, different state-dict keys.
         normal_head: ``"softplus_z"`` (default, the shipped models) or ``"unit_z"`` (see
             :func:`~brdfgan.models.heads.maps_from_raw`); same parameters.
-        flash_geometry: read the flash frame's two offset channels beside the photo (module
-            docstring); the first conv gets ``4 · width · 49`` more weights.
 
     All arguments are plain ints or strings: ``Generator(**generator.config())`` rebuilds the
     architecture.
 
     Shape:
         - photo: ``(B, in_channels, H, W)``, linear LDR in [0, 1], encoded to ``2x - 1`` inside
-        - flash: ``(B, 3)``, the photos' flash frames (optional; read only with ``flash_geometry``)
+        - flash: ``(B, 3)``, the photos' flash frames (optional; ignored)
         - output: ``(B, 8, H, W)``, a valid map set (sRGB basecolor, unit normals with z > 0,
           roughness and metallic in [0, 1])
     """
+
+    # Options since removed, with the one value the network is now built with (a stored config
+    # may still name it: brdfgan.runs.build_network).
+    RETIRED_OPTIONS: ClassVar[dict[str, Any]] = {"flash_geometry": False}
 
     def __init__(
         self,
@@ -145,7 +134,6 @@ class Generator(nn.Module):
         residual_blocks: int = 9,
         upsampling: Upsampling = "transposed",
         normal_head: NormalHead = "softplus_z",
-        flash_geometry: bool = False,
     ) -> None:
         super().__init__()
         check_choice("model.generator.upsampling", upsampling, UPSAMPLINGS)
@@ -160,12 +148,10 @@ class Generator(nn.Module):
         self.residual_blocks = residual_blocks
         self.upsampling: Upsampling = upsampling
         self.normal_head: NormalHead = check_normal_head(normal_head)
-        self.flash_geometry = bool(flash_geometry)
-        first_channels = in_channels + (FLASH_CHANNELS if self.flash_geometry else 0)
 
         # c7s1-width: the first conv's bias is cancelled by the InstanceNorm after it.
         down: list[nn.Module] = [
-            nn.Conv2d(first_channels, width, 7, padding=3, padding_mode="reflect", bias=False),
+            nn.Conv2d(in_channels, width, 7, padding=3, padding_mode="reflect", bias=False),
             *_norm_relu(width),
         ]
         channels = width
@@ -194,7 +180,7 @@ class Generator(nn.Module):
     def config(self) -> dict[str, Any]:
         """Constructor arguments (plain values), to store next to the weights.
 
-        ``upsampling``, ``normal_head`` and ``flash_geometry`` only when they are not the
+        ``upsampling`` and ``normal_head`` only when they are not the
         defaults, so that the config of a paper generator is what it was before the options
         existed (and a stored config without a key means its default).
         """
@@ -208,8 +194,6 @@ class Generator(nn.Module):
             config["upsampling"] = self.upsampling
         if self.normal_head != "softplus_z":
             config["normal_head"] = self.normal_head
-        if self.flash_geometry:
-            config["flash_geometry"] = True
         return config
 
     @property
@@ -235,12 +219,5 @@ class Generator(nn.Module):
     def forward(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
         self.check_input(photo)
         x = encode_photo(photo)
-        if self.flash_geometry:
-            batch, _, height, width = photo.shape
-            if flash is None:
-                flash = centred_flash_frame(batch, height, width, device=photo.device)
-            check_flash_frame(flash, batch)
-            sides = flash_side_channels(flash.to(device=photo.device, dtype=torch.float32), height, width)
-            x = torch.cat([x, sides.to(x.dtype)], dim=1)
         features = self.residual(self.down(x))
         return maps_from_raw(self.out(self.up(features)), self.normal_head)

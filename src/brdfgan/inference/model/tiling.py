@@ -530,7 +530,7 @@ def predict_direct(generator: nn.Module, photo: Tensor, flash: Tensor | None = N
     """One untiled pass: pad to a size the model accepts, run, crop back.
 
     ``flash`` is the photos' :mod:`flash frame <brdfgan.core.flash_geometry>` (default: centred on
-    each photo, the default field of view); networks without ``flash_geometry`` ignore it.
+    each photo, the default field of view); networks that do not read it (the paper generator) ignore it.
     Padding adds pixels after the last row and column, so the frame needs no shift.
 
     Shape:
