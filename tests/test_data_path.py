@@ -45,6 +45,7 @@ def _prepare(overrides: list[str], root: Path) -> ShardDataModule:
     return module
 
 
+@pytest.mark.integration
 def test_the_projects_own_data_folder_generates_on_first_use(tmp_path: Path, generated: list[Path]) -> None:
     _prepare([], tmp_path)
     store = tmp_path / "elsewhere" / "store"
@@ -52,6 +53,7 @@ def test_the_projects_own_data_folder_generates_on_first_use(tmp_path: Path, gen
     assert generated == [tmp_path / "data" / "tiny", store / "tiny"]
 
 
+@pytest.mark.integration
 def test_a_mistyped_data_dir_is_an_error_naming_it(tmp_path: Path, generated: list[Path]) -> None:
     missing = tmp_path / "nonexistent"
     message = (
@@ -62,6 +64,7 @@ def test_a_mistyped_data_dir_is_an_error_naming_it(tmp_path: Path, generated: li
     assert generated == [] and list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.integration
 def test_generate_true_generates_anywhere(tmp_path: Path, generated: list[Path]) -> None:
     elsewhere = tmp_path / "elsewhere"
     _prepare([f"data.data_dir={elsewhere}", "data.prepare.generate=true"], tmp_path)
@@ -140,6 +143,7 @@ def test_a_complete_dataset_elsewhere_is_read_and_a_partial_one_refused(
     assert (elsewhere / SPEC_FILE).is_file() and not home.exists()
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("script", ["train.py", "evaluate.py"])
 def test_train_and_evaluate_refuse_a_mistyped_data_dir_with_one_line(tmp_path: Path, script: str) -> None:
     missing = tmp_path / "nonexistent"
@@ -156,4 +160,7 @@ def test_train_and_evaluate_refuse_a_mistyped_data_dir_with_one_line(tmp_path: P
     errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and errors[0].startswith(f"error: data.data_dir={missing}: no dataset there")
     assert "Traceback" not in result.stderr
+    # Checked before the model and trainer are built: no seed, banner or tip line before it.
+    printed = [line for line in (result.stdout + result.stderr).splitlines() if line.strip()]
+    assert printed == errors, printed
     assert not missing.exists() and not (tmp_path / "data").exists()

@@ -839,6 +839,7 @@ def ensure_dataset(
     generate_under: str | os.PathLike[str] | None = None,
     progress: bool = True,
     splits: Sequence[str] = SPLITS,
+    check_only: bool = False,
 ) -> Path:
     """Generate the dataset into ``out_dir`` unless it is already complete (used to create the
     embedded default dataset on a fresh clone's first ``train.py``/``evaluate.py``).
@@ -851,6 +852,9 @@ def ensure_dataset(
 
     ``splits`` limits all of this to those splits' shards (a model trained on photos rendered on
     the fly, :mod:`brdfgan.data.rendered`, needs only the validation and test shards).
+    ``check_only``: raise what a call would raise about the path, but generate nothing (a run
+    checks its data path before building anything; generation waits for ``prepare_data``, which
+    Lightning calls on one process per machine).
     """
     unknown = sorted(set(splits) - set(SPLITS))
     if unknown:
@@ -860,6 +864,8 @@ def ensure_dataset(
     if not generate and not (generate_under is not None and _inside(out_dir, generate_under)):
         home = f" (only paths.data_dir={generate_under} fills itself on first use)" if generate_under else ""
         raise DatasetConfigError(f"data.data_dir={out_dir}: {_not_ready(spec, Path(out_dir))}{home}")
+    if check_only:
+        return Path(out_dir)
     log.info("dataset %s is missing or incomplete: generating %s", out_dir, "/".join(splits))
     positions = [k for k, job in enumerate(plan_shards(spec)) if job.split in splits]
     log.info("%s", run_generation(spec, out_dir, shards=positions, progress=progress).describe())

@@ -687,8 +687,10 @@ class RenderedDataModule(ShardDataModule):
 
     def prepare_data(self) -> None:
         self.bank.build()
-        if self._prepare is not None:
-            self._prepare(splits=self._shard_splits())
+        super().prepare_data()
+
+    def _prepare_arguments(self) -> dict[str, Any]:
+        return {"splits": self._shard_splits()}
 
     def _shard_splits(self) -> tuple[str, ...]:
         """The shard splits this run reads: validation when fitting or validating, test when

@@ -55,8 +55,17 @@ def _instantiate_all(group: DictConfig | None) -> list[Any]:
 
 def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.Trainer]:
     """Datamodule, module (with its loss) and trainer of a run config; the loggers carry the
-    run's name, tags and group (:func:`brdfgan.tracking.current_run_identity`)."""
+    run's name, tags and group (:func:`brdfgan.tracking.current_run_identity`).
+
+    The data path is checked first (``check_data``: what ``prepare_data`` would refuse, without
+    generating anything, so no two processes generate side by side), then everything is seeded
+    with ``cfg.seed`` and built: a mistyped path is the run's first and only output line.
+    """
     datamodule = hydra.utils.instantiate(cfg.data, _convert_="all")
+    check_data = getattr(datamodule, "check_data", None)
+    if check_data is not None:
+        check_data()
+    L.seed_everything(cfg.seed, workers=True)
     loss = hydra.utils.instantiate(cfg.loss, _convert_="all")
     module = hydra.utils.instantiate(cfg.model, loss=loss, _convert_="all")
     callbacks = _instantiate_all(cfg.get("callbacks"))
@@ -210,7 +219,6 @@ def train(cfg: DictConfig) -> float | None:
     init_from = cfg.get("init_from")
     if init_from is not None and cfg.ckpt_path is not None:
         raise TrainConfigError("init_from and ckpt_path: set one (init_from starts a new run from weights)")
-    L.seed_everything(cfg.seed, workers=True)
     datamodule, module, trainer = build(cfg)
     if cfg.ckpt_path is not None:
         found = {name: getattr(module, name, None) for name in ("generator", "discriminator")}
