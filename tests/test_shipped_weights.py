@@ -49,6 +49,21 @@ def test_shipped_weights_load_and_are_small() -> None:
         assert key in model.extra, key
 
 
+def test_the_networks_code_defaults_are_the_shipped_model() -> None:
+    # AnchoredUNet() with no arguments builds the shipped network: its stored config, less the
+    # retired options it names at the value now always built, is the constructor's defaults.
+    from brdfgan.models.anchored import AnchoredUNet
+    from brdfgan.runs import load_weights
+
+    generator, meta = load_weights(default_weights_path())
+    stored = dict(meta["config"])
+    for name, value in AnchoredUNet.RETIRED_OPTIONS.items():
+        assert stored.pop(name, value) == value
+    assert isinstance(generator, AnchoredUNet)
+    assert {**AnchoredUNet().config(), **stored} == AnchoredUNet().config()
+    assert generator.config() == AnchoredUNet().config()
+
+
 def test_shipped_weights_give_the_stored_statistics_on_a_fixed_sample() -> None:
     expected = json.loads(EXPECTED.read_text())
     actual = output_statistics()
