@@ -1,8 +1,8 @@
 """Generate a synthetic SVBRDF dataset: ``python generate.py [dataset_spec=paper] [shard=N] [plan=true]``.
 
 Thin entry point: the config (``conf/generate.yaml``) becomes a
-:class:`brdfgan.data.generation.DatasetSpec` (every value checked, naming its key, before
-anything is written); :func:`brdfgan.data.generation.run_generation` does the work. See the
+:class:`brdfgan.data.storage.generation.DatasetSpec` (every value checked, naming its key, before
+anything is written); :func:`brdfgan.data.storage.generation.run_generation` does the work. See the
 config file for multi-process and SLURM use. A bad value, a bad environment file or a full disk
 ends with one ``error:`` line; Ctrl-C or SIGTERM with one line too, keeping complete shards.
 """
@@ -15,7 +15,7 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from brdfgan.config_check import check_config
-from brdfgan.data.generate_config import register_configs
+from brdfgan.data.storage.generate_config import register_configs
 from brdfgan.errors import exit_on_user_error, interrupts_raise, run_hydra_app
 from brdfgan.sweep_folders import register_resolvers
 
@@ -34,8 +34,8 @@ def main(cfg: DictConfig) -> None:
 
 
 def generate(cfg: DictConfig) -> None:
-    from brdfgan.data.contact_sheet import write_contact_sheet
-    from brdfgan.data.generation import (
+    from brdfgan.data.materials.scanned import scanned_material_folders
+    from brdfgan.data.storage.generation import (
         dataset_ready,
         plan_shards,
         run_generation,
@@ -44,7 +44,7 @@ def generate(cfg: DictConfig) -> None:
         split_materials,
         split_scan_sets,
     )
-    from brdfgan.data.scanned import scanned_material_folders
+    from brdfgan.data.tools.contact_sheet import write_contact_sheet
 
     check_config(cfg, ["dataset_spec"])  # types, naming the key; the spec checks ranges
     spec = spec_from_config(cfg.dataset_spec)

@@ -30,8 +30,8 @@ def _measure(resolution: int, spp: int, repeats: int) -> dict[str, dict[str, flo
     from tests.conftest import random_maps
 
     from brdfgan.core.render import FlashCapture
-    from brdfgan.data.lighting import LightingConfig, build_environment_pools, load_environment
-    from brdfgan.mitsuba_render.capture import CaptureRenderer
+    from brdfgan.data.phone.environments import LightingConfig, build_environment_pools, load_environment
+    from brdfgan.mitsuba_render.photos import CaptureRenderer
 
     pools = build_environment_pools(LightingConfig(train_count=4, test_count=2), seed=0)
     environments = [load_environment(spec, ENVIRONMENT_RESOLUTION) for spec in pools.train]
@@ -78,8 +78,8 @@ def _measure(resolution: int, spp: int, repeats: int) -> dict[str, dict[str, flo
 
 
 def _environment_times() -> list[tuple[str, float]]:
-    from brdfgan.data.lighting import load_environment as cached
-    from brdfgan.data.lighting import room_spec, sunsky_spec
+    from brdfgan.data.phone.environments import load_environment as cached
+    from brdfgan.data.phone.environments import room_spec, sunsky_spec
 
     rows = []
     for name, spec in (("sunsky", sunsky_spec(0, 0)), ("room", room_spec(0, 0))):

@@ -1,5 +1,5 @@
 """Data loading benchmark: samples/s that ShardDataModule's train loader delivers, per worker
-count and shard format (``png`` and ``u16z``, :mod:`brdfgan.data.shards`).
+count and shard format (``png`` and ``u16z``, :mod:`brdfgan.data.storage.shards`).
 
 Writes a small temporary dataset per resolution and format, the same samples in each (smooth
 procedural-looking maps with a little noise, photographed with the torch flash renderer and
@@ -27,8 +27,8 @@ import torch
 from brdfgan.core.exposure import auto_expose
 from brdfgan.core.render import render_flash
 from brdfgan.core.svbrdf import join_maps, linear_to_srgb, normalize_normal
-from brdfgan.data.datamodule import ShardDataModule
-from brdfgan.data.shards import (
+from brdfgan.data.loading.datamodule import ShardDataModule
+from brdfgan.data.storage.shards import (
     FORMAT_MEMBERS,
     SHARD_FORMATS,
     Sample,

@@ -230,7 +230,7 @@ def _rendered(folder: Path, side: int) -> tuple[torch.Tensor, torch.Tensor, torc
     from brdfgan.core.exposure import auto_expose
     from brdfgan.core.flash_geometry import centred_flash_frame
     from brdfgan.core.render import FlashCapture, render_flash
-    from brdfgan.data.scanned import read_scanned_material
+    from brdfgan.data.materials.scanned import read_scanned_material
 
     truth = read_scanned_material(folder, side)
     capture = FlashCapture()

@@ -5,7 +5,7 @@ minutes), batches of the v4 recipe (4 photos of 256², 128² windows), and per b
 
 - **draw**: the CPU side (a bank material decoded, cropped, capture and lighting drawn), the scan
   sets already in memory as they are after a run's first minutes;
-- **render**: :func:`~brdfgan.data.rendered.photograph_scenes`, eager and compiled;
+- **render**: :func:`~brdfgan.data.loading.rendered.photograph_scenes`, eager and compiled;
 - **phone + crop**: the sensor and the train crop;
 - **v4 step**: the generator's forward, the supervised loss (parameter + rendering) and backward
   and Adam (``experiment=anchored``'s model and loss, its rendering loss compiled);
@@ -29,7 +29,7 @@ import torch
 
 from benchmarks.bench_train import median_seconds
 from brdfgan.core.render import render_point_lights
-from brdfgan.data.rendered import RenderedStream, photograph_scenes, scene_tensors
+from brdfgan.data.loading.rendered import RenderedStream, photograph_scenes, scene_tensors
 from brdfgan.training.config import register_configs
 
 CONF = Path(__file__).resolve().parents[1] / "conf"

@@ -23,8 +23,8 @@ from hydra import compose, initialize_config_dir
 
 from brdfgan.core.exposure import auto_expose
 from brdfgan.core.render import render_flash
-from brdfgan.data.flash import blackbody_rgb
-from brdfgan.data.sensor import SensorEffects
+from brdfgan.data.phone.flash import blackbody_rgb
+from brdfgan.data.phone.sensor import SensorEffects
 from brdfgan.training.config import register_configs
 
 CONF = Path(__file__).resolve().parents[1] / "conf"

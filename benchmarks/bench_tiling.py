@@ -66,8 +66,8 @@ def photo_maps(photos: list[Path], weights: Path | None) -> Iterator[Item]:
 def shard_maps(root: Path, split: str, weights: Path | None) -> Iterator[Item]:
     """``(key, maps, hotspot)`` per sample of a dataset split, the network run on the stored photo
     with the sample's flash frame (what the evaluator does)."""
-    from brdfgan.data.datamodule import flash_frames
-    from brdfgan.data.shards import iter_shard, list_shards
+    from brdfgan.data.loading.datamodule import flash_frames
+    from brdfgan.data.storage.shards import iter_shard, list_shards
     from brdfgan.inference.model.weights import load_model
     from brdfgan.inference.pipeline import PredictOptions, Predictor
 

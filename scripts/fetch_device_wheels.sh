@@ -17,7 +17,7 @@ DEST=.whl
 # Compiled (cp312 manylinux x86_64). numpy itself is there (2.5 in 2026-11); these were built
 # against the numpy 2 ABI, which later 2.x releases keep.
 BINARY=(
-    "zstandard==0.25.0"   # brdfgan.data.shards: the u16z shard members
+    "zstandard==0.25.0"   # brdfgan.data.storage.shards: the u16z shard members
     "kornia_rs==0.2.0"    # kornia's required native half
     "OpenEXR==3.5.3"      # brdfgan.io.images (imported by the data and training modules)
 )
@@ -25,9 +25,9 @@ BINARY=(
 PURE=(
     "hydra-core==1.3.8"   # train.py
     "omegaconf==2.3.1"    # hydra-core's, and ours
-    "webdataset==1.0.2"   # brdfgan.data.datamodule
+    "webdataset==1.0.2"   # brdfgan.data.loading.datamodule
     "braceexpand==0.1.7"  # webdataset's
-    "kornia==0.9.0"       # brdfgan.data.materials.recolor, brdfgan.data.statistics
+    "kornia==0.9.0"       # brdfgan.data.materials.recolor, brdfgan.data.tools.statistics
 )
 # Published as an sdist only: built here into a py3-none-any wheel (omegaconf and hydra need 4.9.*).
 SDIST=("antlr4-python3-runtime==4.9.3")

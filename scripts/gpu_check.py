@@ -4,7 +4,7 @@ Run ``scripts/gpu_check.sh`` (GPU) or ``scripts/gpu_check.sh --device cpu --tiny
 run of the same path at toy sizes, seconds). Nothing is downloaded and Mitsuba is not needed:
 
 1. Data: a small dataset (10 materials → 32 train, 2 val, 2 test samples at 512²) made by the
-   real generation pipeline (:func:`brdfgan.data.generation.run_generation`: procedural families,
+   real generation pipeline (:func:`brdfgan.data.storage.generation.run_generation`: procedural families,
    crops, the shard writer, manifests) with the photos rendered by the project's torch renderer
    (:func:`brdfgan.core.render.render_flash` + :func:`brdfgan.core.exposure.auto_expose`) instead
    of Mitsuba, in a temporary folder.
@@ -291,13 +291,13 @@ def rendered_overrides(
 
 
 def torch_photographer(spec: Any) -> Callable[..., tuple[torch.Tensor, float]]:
-    """A :data:`~brdfgan.data.generation.PhotographFn` without Mitsuba: the flash-only torch
+    """A :data:`~brdfgan.data.storage.generation.PhotographFn` without Mitsuba: the flash-only torch
     render of the drawn flash and field of view, auto-exposed with the drawn exposure error (no
     environment light; tilt, distance and flash offset are ignored — the capture randomisation
     is off by default anyway)."""
     from brdfgan.core.exposure import auto_expose
     from brdfgan.core.render import FlashCapture, render_flash
-    from brdfgan.data.flash import blackbody_rgb
+    from brdfgan.data.phone.flash import blackbody_rgb
 
     def photograph(
         maps: torch.Tensor, lighting: Any, intensity: float, temperature: float, draw: Any, seed: int
@@ -312,10 +312,10 @@ def torch_photographer(spec: Any) -> Callable[..., tuple[torch.Tensor, float]]:
 def make_data(root: Path, plan: Plan) -> tuple[Path, int]:
     """Generate the check's dataset into ``root`` (10 materials: 8 train × 2 crops × 2 photos = 32
     train samples, one material each for val and test); return it and its train sample count."""
-    from brdfgan.data.augment import CropSampling
-    from brdfgan.data.generation import DatasetSpec, run_generation
-    from brdfgan.data.lighting import LightingConfig
-    from brdfgan.data.shards import read_manifest
+    from brdfgan.data.loading.augment import CropSampling
+    from brdfgan.data.phone.environments import LightingConfig
+    from brdfgan.data.storage.generation import DatasetSpec, run_generation
+    from brdfgan.data.storage.shards import read_manifest
 
     spec = DatasetSpec(
         seed=0,
@@ -337,11 +337,12 @@ def make_data(root: Path, plan: Plan) -> tuple[Path, int]:
 
 
 def first_batch(data_dir: Path, size: int) -> dict[str, Any]:
-    """The first ``size`` train samples as a batch (:func:`~brdfgan.data.datamodule.collate_samples`)."""
+    """The first ``size`` train samples as a batch
+    (:func:`~brdfgan.data.loading.datamodule.collate_samples`)."""
     from itertools import islice
 
-    from brdfgan.data.datamodule import collate_samples
-    from brdfgan.data.shards import iter_shard, list_shards
+    from brdfgan.data.loading.datamodule import collate_samples
+    from brdfgan.data.storage.shards import iter_shard, list_shards
 
     samples = (sample for shard in list_shards(data_dir, "train") for sample in iter_shard(shard))
     return collate_samples(list(islice(samples, size)))

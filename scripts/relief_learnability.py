@@ -8,7 +8,7 @@ slope cosine (pooled over texels: the cosine between predicted and true slope fi
 ``(−n_x/n_z, −n_y/n_z)``; 0 for flat or unrelated normals, 1 for the right relief up to scale).
 The observable angle counts only the texels whose relief the photo shows (the flash's relief
 shading, :func:`brdfgan.metrics.relief_shading`, above the photo's 8-bit rounding,
-:func:`brdfgan.data.relief.observable_mask`). Each change to the data is judged by this run at
+:func:`brdfgan.data.tools.relief.observable_mask`). Each change to the data is judged by this run at
 equal steps (issue 46, item 1d). Writes
 ``OUT.json`` (the curve and the final scores).
 
@@ -31,8 +31,8 @@ import torch
 from torch import Tensor, nn
 
 from brdfgan.core.svbrdf import NORMAL
-from brdfgan.data.relief import observable_mask, srgb8_rounding_log
-from brdfgan.data.rendered import RenderedDataModule
+from brdfgan.data.loading.rendered import RenderedDataModule
+from brdfgan.data.tools.relief import observable_mask, srgb8_rounding_log
 from brdfgan.io.atomic import write_text_atomic
 from brdfgan.losses.parameter import angular_distance
 from brdfgan.metrics import relief_shading as flash_relief_shading

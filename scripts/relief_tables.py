@@ -1,5 +1,5 @@
 """The "before" tables of issue 46, item 1 (a)–(c): the relief of the training data and what a
-photo shows of it (definitions in :mod:`brdfgan.data.relief`; the tables in docs/data.md).
+photo shows of it (definitions in :mod:`brdfgan.data.tools.relief`; the tables in docs/data.md).
 
 (a) **Realism**: per procedural family (a few training materials each, painted at the spec's
 material resolution as the bank paints them, cut into training crops as the bank cuts them) and
@@ -8,7 +8,7 @@ for the training scan sets (crops as the spec's scan sampling cuts them): the fl
 power by octave of spatial frequency.
 
 (b, c) **Observability and the sensor**: training photos drawn as ``data=rendered`` draws them
-(:func:`~brdfgan.data.rendered.draw_scene`: a bank material and crop, the capture, flash and
+(:func:`~brdfgan.data.loading.rendered.draw_scene`: a bank material and crop, the capture, flash and
 environment draws, the torch renderer), delivered by no sensor, the evaluation sensor
 (conf/sensor/phone_eval.yaml), the training sensor (conf/data/procedural_and_scans.yaml) and the
 training sensor without its noise and/or JPEG, plus a phone-calibrated proposal; for each the
@@ -41,8 +41,21 @@ from torch import Tensor
 
 from brdfgan.core.lighting import Environment
 from brdfgan.core.svbrdf import NORMAL
-from brdfgan.data.augment import random_crops
-from brdfgan.data.generation import (
+from brdfgan.data.loading.augment import random_crops
+from brdfgan.data.loading.rendered import (
+    MaterialBank,
+    ReliefSampling,
+    collate_scenes,
+    draw_scene,
+    photograph_scenes,
+    sample_relief,
+    scene_tensors,
+)
+from brdfgan.data.materials.families import resolve_families
+from brdfgan.data.materials.source import PaintedMaterial
+from brdfgan.data.phone.environments import EnvironmentSpec, load_environment
+from brdfgan.data.phone.sensor import SensorEffects
+from brdfgan.data.storage.generation import (
     DatasetSpec,
     derive_seed,
     material_seed,
@@ -51,10 +64,7 @@ from brdfgan.data.generation import (
     single_torch_thread,
     split_materials,
 )
-from brdfgan.data.lighting import EnvironmentSpec, load_environment
-from brdfgan.data.material_source import PaintedMaterial
-from brdfgan.data.materials.families import resolve_families
-from brdfgan.data.relief import (
+from brdfgan.data.tools.relief import (
     FLAT_DEG,
     FLAT_WINDOW,
     FLAT_WINDOW_DEG,
@@ -72,16 +82,6 @@ from brdfgan.data.relief import (
     steep_angle_share,
     tilt_deg,
 )
-from brdfgan.data.rendered import (
-    MaterialBank,
-    ReliefSampling,
-    collate_scenes,
-    draw_scene,
-    photograph_scenes,
-    sample_relief,
-    scene_tensors,
-)
-from brdfgan.data.sensor import SensorEffects
 from brdfgan.training.config import register_configs
 
 CONF = Path(__file__).resolve().parents[1] / "conf"

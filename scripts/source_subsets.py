@@ -26,8 +26,8 @@ import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
-from brdfgan.data.material_source import is_scanned
-from brdfgan.data.shards import Sample, iter_shard, list_shards, shard_path, write_shard
+from brdfgan.data.materials.source import is_scanned
+from brdfgan.data.storage.shards import Sample, iter_shard, list_shards, shard_path, write_shard
 
 SAMPLES_PER_SHARD = 64
 

@@ -14,7 +14,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from brdfgan.evaluation.captures import (
+from brdfgan.evaluation.real_captures import (
     capture_models,
     fit_capture_maps,
     predict_capture_maps,

@@ -33,8 +33,8 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
-from brdfgan.data.shards import iter_shard, list_shards
-from brdfgan.evaluation.captures import (
+from brdfgan.data.storage.shards import iter_shard, list_shards
+from brdfgan.evaluation.real_captures import (
     Capture,
     capture_models,
     fit_capture_maps,

@@ -17,8 +17,8 @@ from brdfgan.core.lighting import (
 )
 from brdfgan.core.render import FlashCapture
 from brdfgan.core.svbrdf import CHANNELS, flat_maps, normalize_normal
-from brdfgan.data.capture import CaptureDraw, max_distance_factor
-from brdfgan.data.lighting import load_environment, room_spec, sunsky_spec
+from brdfgan.data.phone.conditions import CaptureDraw, max_distance_factor
+from brdfgan.data.phone.environments import load_environment, room_spec, sunsky_spec
 from brdfgan.mitsuba_render.environment import ENVMAP_TO_WORLD
 from tests.conftest import random_maps
 
@@ -33,7 +33,7 @@ NO_FLASH = (0.0, 0.0, 0.0)
 
 @pytest.fixture(scope="module")
 def renderer():  # type: ignore[no-untyped-def]
-    from brdfgan.mitsuba_render.capture import CaptureRenderer
+    from brdfgan.mitsuba_render.photos import CaptureRenderer
 
     return CaptureRenderer(RES, SPP, CAPTURE, ENV_RES)
 
@@ -170,7 +170,7 @@ def test_sun_and_environment_of_equal_irradiance_light_alike(renderer) -> None: 
 
 
 def test_flash_only_agrees_with_render_flash_mitsuba() -> None:
-    from brdfgan.mitsuba_render.capture import CaptureRenderer
+    from brdfgan.mitsuba_render.photos import CaptureRenderer
     from brdfgan.mitsuba_render.scene import render_flash_mitsuba
 
     maps = random_maps(RES, RES, seed=7)
@@ -183,7 +183,7 @@ def test_flash_only_agrees_with_render_flash_mitsuba() -> None:
 
 
 def test_traverse_update_equals_a_fresh_load() -> None:
-    from brdfgan.mitsuba_render.capture import CaptureRenderer
+    from brdfgan.mitsuba_render.photos import CaptureRenderer
 
     reused = CaptureRenderer(RES, SPP, CAPTURE, 16)
     fresh = CaptureRenderer(RES, SPP, CAPTURE, 16, reuse_scene=False)
@@ -228,7 +228,7 @@ def test_traverse_update_equals_a_fresh_load() -> None:
 
 
 def test_render_capture_auto_exposes() -> None:
-    from brdfgan.mitsuba_render.capture import CaptureRenderer, render_capture
+    from brdfgan.mitsuba_render.photos import CaptureRenderer, render_capture
 
     renderer = CaptureRenderer(RES, SPP, CAPTURE, 16)
     environment = normalize_environment(load_environment(room_spec(1, 0), 16), 0.5)
@@ -240,7 +240,7 @@ def test_render_capture_auto_exposes() -> None:
 
 
 def test_bad_inputs_are_rejected(renderer) -> None:  # type: ignore[no-untyped-def]
-    from brdfgan.mitsuba_render.capture import CaptureRenderer
+    from brdfgan.mitsuba_render.photos import CaptureRenderer
 
     with pytest.raises(ValueError, match="perfect square"):
         CaptureRenderer(RES, 50)

@@ -1,4 +1,4 @@
-"""Capture randomisation (brdfgan.data.capture): sampling, geometry, Mitsuba rendering, metadata."""
+"""Capture randomisation (brdfgan.data.phone.conditions): sampling, geometry, Mitsuba rendering, metadata."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from brdfgan.core.render import (
     view_footprint,
 )
 from brdfgan.core.svbrdf import flat_maps
-from brdfgan.data.capture import (
+from brdfgan.data.phone.conditions import (
     CaptureDraw,
     CaptureSampling,
     flash_hotspot_px,
@@ -31,8 +31,8 @@ from brdfgan.data.capture import (
     max_distance_factor,
     tilted_camera,
 )
-from brdfgan.data.generation import DatasetConfigError, material_samples, spec_from_config
-from brdfgan.data.lighting import build_environment_pools
+from brdfgan.data.phone.environments import build_environment_pools
+from brdfgan.data.storage.generation import DatasetConfigError, material_samples, spec_from_config
 from brdfgan.errors import UserError
 from tests.conftest import random_maps, relative_l1
 from tests.test_generation import TorchPhotographer, tiny_spec
@@ -260,7 +260,7 @@ RES = 32
 
 def _old_capture_photo(maps: torch.Tensor, spp: int, seed: int) -> torch.Tensor:
     """Today's (pre-randomisation) capture scene, its camera and flash written out literally."""
-    from brdfgan.mitsuba_render.capture import capture_scene_dict
+    from brdfgan.mitsuba_render.photos import capture_scene_dict
     from brdfgan.mitsuba_render.variant import mitsuba
 
     mi = mitsuba()
@@ -278,7 +278,7 @@ def _old_capture_photo(maps: torch.Tensor, spp: int, seed: int) -> torch.Tensor:
 @pytest.mark.integration
 @pytest.mark.mitsuba
 def test_the_default_draw_renders_todays_photo_bit_for_bit() -> None:
-    from brdfgan.mitsuba_render.capture import CaptureRenderer, render_capture
+    from brdfgan.mitsuba_render.photos import CaptureRenderer, render_capture
 
     maps = random_maps(RES, RES, seed=3)
     old = _old_capture_photo(maps, 16, seed=5)
@@ -320,7 +320,7 @@ def _torch_photo(maps: torch.Tensor, draw: CaptureDraw, supersample: int = 4) ->
 
 @pytest.fixture(scope="module")
 def renderer():  # type: ignore[no-untyped-def]
-    from brdfgan.mitsuba_render.capture import CaptureRenderer
+    from brdfgan.mitsuba_render.photos import CaptureRenderer
 
     return CaptureRenderer(RES, 64, FlashCapture(), 16)
 
@@ -365,7 +365,7 @@ def _highlight_centroid(image: torch.Tensor) -> tuple[float, float]:
 @pytest.mark.integration
 @pytest.mark.mitsuba
 def test_the_highlight_lands_on_hotspot_px() -> None:
-    from brdfgan.mitsuba_render.capture import CaptureRenderer
+    from brdfgan.mitsuba_render.photos import CaptureRenderer
 
     res = 64
     renderer = CaptureRenderer(res, 16, FlashCapture(), 16)

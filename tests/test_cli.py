@@ -9,7 +9,7 @@ import torch
 
 from brdfgan import __version__
 from brdfgan.cli import build_parser, main
-from brdfgan.data.shards import Sample, shard_path, write_shard
+from brdfgan.data.storage.shards import Sample, shard_path, write_shard
 from brdfgan.errors import (
     DISK_FULL_EXIT_CODE,
     INTERRUPTED_EXIT_CODE,

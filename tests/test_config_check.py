@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
         ),
         (
             "data.batch_size=two",
-            "data.batch_size='two': expected int (brdfgan.data.datamodule.ShardDataModule)",
+            "data.batch_size='two': expected int (brdfgan.data.loading.datamodule.ShardDataModule)",
         ),
         ("model.generator.width=abc", "model.generator.width='abc': expected int (brdfgan.models.generator."),
         ("model.generator.width=1e6", "model.generator.width=1000000.0: expected int"),
@@ -42,7 +42,10 @@ ROOT = Path(__file__).resolve().parents[1]
         ),
         ("trainer.precision=33", "trainer.precision=33: expected 64 | 32 | 16"),
         ("data.prepare.spec.spp=lots", "data.prepare.spec.spp='lots': expected int"),
-        ("+data.batchsize=3", "data.batchsize: not a parameter of brdfgan.data.datamodule.ShardDataModule"),
+        (
+            "+data.batchsize=3",
+            "data.batchsize: not a parameter of brdfgan.data.loading.datamodule.ShardDataModule",
+        ),
     ],
 )
 def test_a_wrong_value_names_the_key_before_anything_is_built(

@@ -11,8 +11,15 @@ import lightning as L
 import pytest
 import torch
 
-from brdfgan.data.datamodule import ShardDataModule, ShardWarning, SkipStats, collate_samples
-from brdfgan.data.shards import SAMPLE_MEMBERS, Sample, ShardError, encode_sample, shard_path, write_shard
+from brdfgan.data.loading.datamodule import ShardDataModule, ShardWarning, SkipStats, collate_samples
+from brdfgan.data.storage.shards import (
+    SAMPLE_MEMBERS,
+    Sample,
+    ShardError,
+    encode_sample,
+    shard_path,
+    write_shard,
+)
 from tests.conftest import random_maps
 
 SIZE = 8

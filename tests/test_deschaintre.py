@@ -20,8 +20,9 @@ from brdfgan.core.svbrdf import (
     srgb_to_linear,
     validate_maps,
 )
-from brdfgan.data.datamodule import ShardDataModule
-from brdfgan.data.deschaintre_dataset import (
+from brdfgan.data.loading.datamodule import ShardDataModule
+from brdfgan.data.storage.shards import iter_shard, list_shards, read_manifest
+from brdfgan.data.tools.deschaintre_dataset import (
     DeschaintreDatasetError,
     DeschaintreFormatError,
     albedos_to_basecolor_metallic,
@@ -31,7 +32,6 @@ from brdfgan.data.deschaintre_dataset import (
     read_deschaintre_sample,
     write_deschaintre_sample,
 )
-from brdfgan.data.shards import iter_shard, list_shards, read_manifest
 from brdfgan.io.images import write_image
 from brdfgan.models.deschaintre2018 import Deschaintre2018
 from brdfgan.training.run import build

@@ -1,4 +1,4 @@
-"""Real multi-view captures as an evaluation input (brdfgan.evaluation.captures, ``eval-captures``),
+"""Real multi-view captures as an evaluation input (brdfgan.evaluation.real_captures, ``eval-captures``),
 on synthetic captures rendered with our own renderer in both of MaterialGAN's layouts."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from brdfgan.core.delit import flat_flash_falloff
 from brdfgan.core.render import PointLights, plane_positions, render_point_lights
 from brdfgan.core.svbrdf import flat_maps, linear_to_srgb, srgb_to_linear
 from brdfgan.errors import USER_ERROR_EXIT_CODE
-from brdfgan.evaluation.captures import (
+from brdfgan.evaluation.real_captures import (
     CaptureError,
     CaptureModel,
     capture_flash_frame,

@@ -3,7 +3,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from brdfgan.data.flash import FlashSampling, blackbody_rgb, planckian_xy
+from brdfgan.data.phone.flash import FlashSampling, blackbody_rgb, planckian_xy
 
 
 def test_planckian_locus_golden_values() -> None:

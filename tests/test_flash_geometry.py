@@ -22,8 +22,8 @@ from brdfgan.core.flash_geometry import (
     resize_flash_frame,
 )
 from brdfgan.core.render import FlashCapture, texel_centres
-from brdfgan.data.datamodule import collate_samples, flash_frames, random_crop
-from brdfgan.data.shards import Sample
+from brdfgan.data.loading.datamodule import collate_samples, flash_frames, random_crop
+from brdfgan.data.storage.shards import Sample
 from brdfgan.inference.intake.lens import DEFAULT_FOV_DEG as LENS_DEFAULT_FOV_DEG
 from brdfgan.models.generator import Generator
 from brdfgan.runs import WeightsError, load_weights, save_weights

@@ -19,10 +19,11 @@ import torch
 
 from brdfgan.core.exposure import auto_expose
 from brdfgan.core.render import FlashCapture, render_flash
-from brdfgan.data.augment import CropSampling
-from brdfgan.data.capture import CaptureDraw
-from brdfgan.data.flash import blackbody_rgb
-from brdfgan.data.generation import (
+from brdfgan.data.loading.augment import CropSampling
+from brdfgan.data.phone.conditions import CaptureDraw
+from brdfgan.data.phone.environments import LightingConfig, LightingDraw, LightingError
+from brdfgan.data.phone.flash import blackbody_rgb
+from brdfgan.data.storage.generation import (
     SPLITS,
     DatasetConfigError,
     DatasetSpec,
@@ -34,8 +35,7 @@ from brdfgan.data.generation import (
     run_generation,
     split_materials,
 )
-from brdfgan.data.lighting import LightingConfig, LightingDraw, LightingError
-from brdfgan.data.shards import (
+from brdfgan.data.storage.shards import (
     Sample,
     digest_path,
     iter_shard,
@@ -241,7 +241,7 @@ def test_a_png_corrupted_in_place_is_found_rewritten_and_reported(
         (tmp_path / "train" / "manifest.json").unlink()
 
     counting = TorchPhotographer(spec)
-    with caplog.at_level(logging.WARNING, logger="brdfgan.data.generation"):
+    with caplog.at_level(logging.WARNING, logger="brdfgan.data.storage.generation"):
         summary = run_generation(spec, tmp_path, progress=False, photographer=lambda _: counting)
     assert summary.repaired == [shard] and summary.written == [shard]
     assert counting.calls == plan_shards(spec)[1].sample_count(spec)  # only that shard is redone
@@ -330,7 +330,7 @@ def test_unwritable_output_is_a_clear_error(tmp_path: Path) -> None:
 @pytest.mark.integration
 @pytest.mark.mitsuba
 def test_end_to_end_mitsuba_generation_feeds_the_datamodule(tmp_path: Path) -> None:
-    from brdfgan.data.datamodule import ShardDataModule
+    from brdfgan.data.loading.datamodule import ShardDataModule
 
     spec = tiny_spec(materials=3, crops_per_material=1, val_fraction=0.0, materials_per_shard=1)
     data_dir = tmp_path / "data"
@@ -394,7 +394,7 @@ def test_cli_plan_lists_every_shard(tmp_path: Path) -> None:
 
 def test_contact_sheet_shows_every_panel_of_random_samples(tmp_path: Path) -> None:
     from brdfgan.cli import main
-    from brdfgan.data.contact_sheet import COLUMNS, pick_samples
+    from brdfgan.data.tools.contact_sheet import COLUMNS, pick_samples
     from brdfgan.figures import HEADER_HEIGHT
     from brdfgan.io.images import read_image
 
@@ -420,7 +420,7 @@ def test_contact_sheet_shows_every_panel_of_random_samples(tmp_path: Path) -> No
     small = read_image(tmp_path / "s.png")
     assert small.shape[:2] == (HEADER_HEIGHT + 3 * 16, len(COLUMNS) * 16)
     assert main(["contact-sheet", str(tmp_path), "--tile", "4"]) == 2
-    from brdfgan.data.contact_sheet import row_label
+    from brdfgan.data.tools.contact_sheet import row_label
 
     mixed = Sample(
         picked[0].key,

@@ -76,7 +76,9 @@ def test_rendered_overrides_compose_to_v5_on_a_bank_without_mitsuba(tmp_path: Pa
     )  # fmt: skip
     cfg = compose_train(overrides, tmp_path)
     check_config(cfg, CHECKED_GROUPS)
-    assert cfg.data._target_ == "brdfgan.data.rendered.RenderedDataModule" and cfg.data.prepare is None
+    assert (
+        cfg.data._target_ == "brdfgan.data.loading.rendered.RenderedDataModule" and cfg.data.prepare is None
+    )
     spec = cfg.data.bank.spec
     assert (spec.resolution, spec.material_resolution, spec.lighting.sunsky_fraction) == (512, 512, 0)
     assert spec.scans.folder is None  # the device has no scans: procedural families only

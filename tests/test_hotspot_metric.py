@@ -18,8 +18,8 @@ from torch import Tensor, nn
 from brdfgan.config_check import ConfigValueError
 from brdfgan.core.flash_geometry import hotspot_disk
 from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, ROUGHNESS, flat_maps
-from brdfgan.data.datamodule import random_crop
-from brdfgan.data.shards import Sample
+from brdfgan.data.loading.datamodule import random_crop
+from brdfgan.data.storage.shards import Sample
 from brdfgan.errors import UserError
 from brdfgan.evaluation.evaluator import evaluate_models, markdown_table, write_results
 from brdfgan.metrics import (

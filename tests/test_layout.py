@@ -53,3 +53,28 @@ def test_imports_stay_inside_their_layer(subpackage: str, forbidden: tuple[str, 
 def test_no_command_line_modules_outside_the_console(subpackage: str) -> None:
     mains = [str(p.relative_to(PACKAGE)) for p in _files(subpackage) if "__main__" in p.read_text()]
     assert not mains, f"run these through `brdfgan <command>` instead: {mains}"
+
+
+DATA_ROOMS = {"materials", "phone", "storage", "loading", "tools"}
+# Per-command roles, one per command package (training/, evaluation/, inference/…), named alike on
+# purpose; every other module name is unique in the package.
+ROLE_NAMES = {"__init__.py", "config.py", "run.py", "pipeline.py"}
+
+
+def test_data_modules_live_in_a_room_by_concern() -> None:
+    data = PACKAGE / "data"
+    loose = sorted(p.name for p in data.glob("*.py") if p.name != "__init__.py")
+    assert not loose, f"data/ modules belong in one of {sorted(DATA_ROOMS)}: {loose}"
+    rooms = {p.name for p in data.iterdir() if p.is_dir() and p.name != "__pycache__"}
+    assert rooms == DATA_ROOMS
+    for room in rooms:
+        assert (data / room / "__init__.py").read_text().startswith('"""'), f"data/{room} says what it holds"
+
+
+def test_module_names_do_not_collide() -> None:
+    seen: dict[str, list[str]] = {}
+    for path in PACKAGE.rglob("*.py"):
+        if path.name not in ROLE_NAMES:
+            seen.setdefault(path.name, []).append(str(path.relative_to(PACKAGE)))
+    collisions = {name: paths for name, paths in seen.items() if len(paths) > 1}
+    assert not collisions, collisions

@@ -24,7 +24,7 @@ from brdfgan.core.lighting import (
     upper_hemisphere_irradiance,
     upper_hemisphere_irradiance_rgb,
 )
-from brdfgan.data.lighting import (
+from brdfgan.data.phone.environments import (
     LightingConfig,
     LightingDraw,
     LightingError,
@@ -349,7 +349,7 @@ def test_sunsky_scalar_variant_fallback_agrees() -> None:
     code = (
         "import json\n"
         "from brdfgan.mitsuba_render.variant import select_variant; select_variant('scalar_rgb')\n"
-        "from brdfgan.data.lighting import load_environment, sunsky_spec\n"
+        "from brdfgan.data.phone.environments import load_environment, sunsky_spec\n"
         "e = load_environment(sunsky_spec(0, 0), 8)\n"
         "print(json.dumps([float(e.radiance.sum()), list(e.sun.irradiance)]))\n"
     )

@@ -310,7 +310,7 @@ def flash_photo(truth: Tensor, frame: Tensor, peak: float = 0.8) -> Tensor:
 
 
 def test_observable_angle_golden_values_and_invariants() -> None:
-    from brdfgan.data.relief import observable_angle
+    from brdfgan.data.tools.relief import observable_angle
 
     truth, frame = bumpy_truth(batch=3, seed=6), frames(3)
     photo = flash_photo(truth, frame)

@@ -167,7 +167,7 @@ def test_basecolor_hsv_round_trips_and_matches_kornia() -> None:
     maps, hsv = coloured_maps()
     torch.testing.assert_close(basecolor_hsv(maps), hsv)
     clipped = maps.clone()
-    clipped[:, 0] += 0.5  # out of range: clamped first, like brdfgan.data.statistics
+    clipped[:, 0] += 0.5  # out of range: clamped first, like brdfgan.data.tools.statistics
     expected = kornia.color.rgb_to_hsv(clipped[:, 0:3].clamp(0.0, 1.0))
     torch.testing.assert_close(basecolor_hsv(clipped), expected)
     with pytest.raises(InvalidMapsError):

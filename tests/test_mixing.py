@@ -8,7 +8,6 @@ import pytest
 import torch
 
 from brdfgan.core.svbrdf import split_maps, srgb_to_linear, validate_maps
-from brdfgan.data.material_source import paint_procedural
 from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR, metal_basecolor
 from brdfgan.data.materials.base import MaterialLayers
 from brdfgan.data.materials.families import FAMILIES
@@ -21,7 +20,8 @@ from brdfgan.data.materials.mixing import (
     mixture_mask,
 )
 from brdfgan.data.materials.recolor import RecolorConfig, RecolorDraw, draw_recolor, recolor_basecolor
-from brdfgan.data.spec_checks import DatasetConfigError
+from brdfgan.data.materials.source import paint_procedural
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 
 SIZE = 64
 

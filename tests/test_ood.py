@@ -11,12 +11,12 @@ import pytest
 import torch
 
 from brdfgan.core.svbrdf import encode_normal, split_maps
-from brdfgan.data.generation import DatasetSpec, run_generation, split_materials
 from brdfgan.data.materials.mixing import MixingConfig
 from brdfgan.data.materials.recolor import RecolorConfig
-from brdfgan.data.scanned import read_scanned_material
-from brdfgan.data.shards import iter_shard, list_shards
-from brdfgan.data.spec_checks import DatasetConfigError
+from brdfgan.data.materials.scanned import read_scanned_material
+from brdfgan.data.storage.generation import DatasetSpec, run_generation, split_materials
+from brdfgan.data.storage.shards import iter_shard, list_shards
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 from brdfgan.io.images import write_image
 from tests.conftest import random_maps
 from tests.test_generation import tiny_spec, torch_photographer
@@ -117,8 +117,8 @@ def test_ood_config_composes_with_its_folder_from_the_environment(scanned_root: 
 @pytest.mark.integration
 def test_eval_sensor_gives_val_and_test_predicts_intake(tiny_data: Path) -> None:
     from brdfgan.core.exposure import auto_expose
-    from brdfgan.data.datamodule import ShardDataModule
-    from brdfgan.data.sensor import SensorEffects, decode_srgb8, encode_srgb8
+    from brdfgan.data.loading.datamodule import ShardDataModule
+    from brdfgan.data.phone.sensor import SensorEffects, decode_srgb8, encode_srgb8
 
     intake = SensorEffects(
         enabled=True, vignetting_probability=0.0, white_balance_probability=0.0, noise_probability=0.0,

@@ -1,5 +1,5 @@
 """Maps resampled into the photo's pixels (brdfgan.core.render.maps_in_view,
-brdfgan.data.capture.maps_as_photographed): the warp follows the camera, is the identity for the
+brdfgan.data.phone.conditions.maps_as_photographed): the warp follows the camera, is the identity for the
 nominal camera, and lines the maps up with what Mitsuba photographs."""
 
 from __future__ import annotations
@@ -17,8 +17,13 @@ from brdfgan.core.render import (
     view_plane_points,
 )
 from brdfgan.core.svbrdf import BASECOLOR, NORMAL, flat_maps, validate_maps
-from brdfgan.data.capture import CaptureDraw, maps_as_photographed, max_distance_factor, recorded_camera
-from brdfgan.data.shards import Sample
+from brdfgan.data.phone.conditions import (
+    CaptureDraw,
+    maps_as_photographed,
+    max_distance_factor,
+    recorded_camera,
+)
+from brdfgan.data.storage.shards import Sample
 from tests.conftest import random_maps
 
 TILTED = CaptureDraw(
@@ -78,7 +83,7 @@ def test_samples_without_a_recorded_camera_are_untouched() -> None:
 def test_mitsuba_photographs_the_aligned_maps_pixel_for_pixel() -> None:
     """A high-frequency base colour photographed by Mitsuba through a tilted, closer camera: the
     aligned maps match the photo's detail; the texture-space maps are off by pixels."""
-    from brdfgan.mitsuba_render.capture import CaptureRenderer
+    from brdfgan.mitsuba_render.photos import CaptureRenderer
 
     res = 64
     maps = random_maps(res, res, seed=5)

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from brdfgan.core.svbrdf import linear_to_srgb, validate_maps
-from brdfgan.data.shards import Sample, shard_path, write_shard
+from brdfgan.data.storage.shards import Sample, shard_path, write_shard
 from brdfgan.errors import UserError
 from brdfgan.evaluation.evaluator import fixed_samples
 from brdfgan.models.reference import ConstantMaps, PhotoAsBasecolor, mean_maps, reference_models

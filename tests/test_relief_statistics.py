@@ -1,4 +1,4 @@
-"""Relief statistics and what a photo shows of the relief (brdfgan.data.relief): golden values,
+"""Relief statistics and what a photo shows of the relief (brdfgan.data.tools.relief): golden values,
 invariants and input checks. Fast, no Mitsuba."""
 
 from __future__ import annotations
@@ -10,13 +10,15 @@ import pytest
 import torch
 from torch import Tensor
 
-import brdfgan.data.relief as relief
+import brdfgan.data.tools.relief as relief
 from brdfgan.core.exposure import log_luminance
 from brdfgan.core.render import nominal_camera, view_grid
 from brdfgan.core.svbrdf import NORMAL, flat_maps
+from brdfgan.data.loading.rendered import photograph_scenes
 from brdfgan.data.materials.base import height_to_normal
 from brdfgan.data.materials.noise import fbm
-from brdfgan.data.relief import (
+from brdfgan.data.phone.sensor import SensorEffects
+from brdfgan.data.tools.relief import (
     delivered_noise_log,
     flat_share,
     flat_window_share,
@@ -29,8 +31,6 @@ from brdfgan.data.relief import (
     steep_angle_share,
     tilt_deg,
 )
-from brdfgan.data.rendered import photograph_scenes
-from brdfgan.data.sensor import SensorEffects
 
 SIZE = 64
 

@@ -1,4 +1,4 @@
-"""Training photos rendered on the fly (brdfgan.data.rendered): the environment as distant lights,
+"""Training photos rendered on the fly (brdfgan.data.loading.rendered): the environment as distant lights,
 the torch photo against Mitsuba's, the material bank, the stream's determinism, the DataModule."""
 
 from __future__ import annotations
@@ -16,20 +16,8 @@ from torch import Tensor
 
 from brdfgan.core.lighting import Environment, SunLight, environment_lights, upper_hemisphere_irradiance_rgb
 from brdfgan.core.svbrdf import NORMAL, flat_maps, normalize_normal, validate_maps
-from brdfgan.data.augment import random_crops
-from brdfgan.data.capture import CaptureDraw, CaptureSampling
-from brdfgan.data.flash import blackbody_rgb
-from brdfgan.data.generation import DatasetSpec, MitsubaPhotographer, material_seed, paint_material
-from brdfgan.data.lighting import (
-    LightingConfig,
-    LightingDraw,
-    balance_environment,
-    flash_centre_irradiance,
-    load_environment,
-    room_spec,
-    sunsky_spec,
-)
-from brdfgan.data.rendered import (
+from brdfgan.data.loading.augment import random_crops
+from brdfgan.data.loading.rendered import (
     MaterialBank,
     ReliefSampling,
     RenderedDataModule,
@@ -40,7 +28,19 @@ from brdfgan.data.rendered import (
     sample_relief,
     scene_tensors,
 )
-from brdfgan.data.shards import decode_maps
+from brdfgan.data.phone.conditions import CaptureDraw, CaptureSampling
+from brdfgan.data.phone.environments import (
+    LightingConfig,
+    LightingDraw,
+    balance_environment,
+    flash_centre_irradiance,
+    load_environment,
+    room_spec,
+    sunsky_spec,
+)
+from brdfgan.data.phone.flash import blackbody_rgb
+from brdfgan.data.storage.generation import DatasetSpec, MitsubaPhotographer, material_seed, paint_material
+from brdfgan.data.storage.shards import decode_maps
 from tests.conftest import compose_train, random_maps, run_python
 
 RES = 64
@@ -276,7 +276,7 @@ def test_plain_albedo_fades_the_base_colour_toward_its_mean_and_nothing_else(ban
 
 
 def test_relief_sampling_leaves_every_other_draw_of_the_photo_as_it_was(bank: MaterialBank) -> None:
-    from brdfgan.data.rendered import draw_scene
+    from brdfgan.data.loading.rendered import draw_scene
 
     plain = draw_scene(bank, "k", 5, 4)
     bumped = draw_scene(bank, "k", 5, 4, ReliefSampling(swap_probability=1.0, bump_probability=1.0))
@@ -288,7 +288,7 @@ def test_relief_sampling_leaves_every_other_draw_of_the_photo_as_it_was(bank: Ma
 
 
 def test_relief_sampling_names_a_bad_key() -> None:
-    from brdfgan.data.spec_checks import DatasetConfigError
+    from brdfgan.data.storage.spec_checks import DatasetConfigError
 
     with pytest.raises(DatasetConfigError, match=r"data\.relief\.swap_probability"):
         ReliefSampling(swap_probability=1.5)

@@ -10,7 +10,7 @@ import pytest
 import torch
 from omegaconf import DictConfig
 
-from brdfgan.data.datamodule import _round_robin_share
+from brdfgan.data.loading.datamodule import _round_robin_share
 from brdfgan.training.run import TrainConfigError, build, train
 from tests.conftest import compose_train
 

@@ -71,8 +71,8 @@ def _evil_nodes(tmp_path: Path) -> dict[str, tuple[dict[str, Any], str]]:
             f"{GENERATOR}: nested _target_",
         ),
         "not a network": (
-            {"_target_": "brdfgan.data.datamodule.ShardDataModule", "data_dir": str(tmp_path)},
-            "brdfgan.data.datamodule.ShardDataModule",
+            {"_target_": "brdfgan.data.loading.datamodule.ShardDataModule", "data_dir": str(tmp_path)},
+            "brdfgan.data.loading.datamodule.ShardDataModule",
         ),
     }
 

@@ -1,4 +1,4 @@
-"""brdfgan.data.scanned: material sets in the brdfgan, ambientCG, Poly Haven and MatSynth layouts.
+"""brdfgan.data.materials.scanned: material sets in the brdfgan, ambientCG, Poly Haven and MatSynth layouts.
 
 Every set here is written with Pillow (not our own writer), so the reader is checked against files
 as a library ships them: the values expected are the files' own pixel values.
@@ -15,7 +15,7 @@ import pytest
 import torch
 from PIL import Image
 
-from brdfgan.data.scanned import (
+from brdfgan.data.materials.scanned import (
     ARM_CHANNELS,
     ScanSet,
     detect_material_set,
@@ -24,7 +24,7 @@ from brdfgan.data.scanned import (
     read_scanned_material,
     scanned_material_folders,
 )
-from brdfgan.data.spec_checks import DatasetConfigError
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 
 SCANS = Path(__file__).resolve().parents[2] / "shared" / "scans"
 SIDE = 16

@@ -7,18 +7,18 @@ from pathlib import Path
 
 import pytest
 
-from brdfgan.data.augment import CropSampling
-from brdfgan.data.generation import (
+from brdfgan.data.loading.augment import CropSampling
+from brdfgan.data.materials.recolor import RecolorConfig
+from brdfgan.data.materials.source import ScanSampling
+from brdfgan.data.storage.generation import (
     DatasetSpec,
     run_generation,
     scan_materials,
     split_materials,
     split_scan_sets,
 )
-from brdfgan.data.material_source import ScanSampling
-from brdfgan.data.materials.recolor import RecolorConfig
-from brdfgan.data.shards import iter_shard, list_shards
-from brdfgan.data.spec_checks import DatasetConfigError
+from brdfgan.data.storage.shards import iter_shard, list_shards
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 from tests.conftest import random_maps
 from tests.test_generation import tiny_spec, torch_photographer
 from tests.test_ood import _write_scanned_set
@@ -120,7 +120,7 @@ def test_held_out_sets_can_be_named(scan_root: Path) -> None:
 
 def test_a_contact_sheet_of_the_scans_alone(scan_root: Path, tmp_path: Path) -> None:
     from brdfgan.cli import main
-    from brdfgan.data.contact_sheet import pick_samples
+    from brdfgan.data.tools.contact_sheet import pick_samples
 
     spec = tiny_spec(materials=16, scans=_scans(scan_root, fraction=0.5))
     run_generation(spec, tmp_path / "data", progress=False, photographer=torch_photographer)

@@ -1,4 +1,4 @@
-"""The simulated phone capture (brdfgan.data.sensor) and its use in the DataModule."""
+"""The simulated phone capture (brdfgan.data.phone.sensor) and its use in the DataModule."""
 
 from __future__ import annotations
 
@@ -16,9 +16,9 @@ from PIL import Image
 from brdfgan.core.exposure import auto_expose
 from brdfgan.core.sampling import log_uniform
 from brdfgan.core.svbrdf import linear_to_srgb, srgb_to_linear
-from brdfgan.data.datamodule import ShardDataModule
-from brdfgan.data.flash import blackbody_rgb
-from brdfgan.data.sensor import (
+from brdfgan.data.loading.datamodule import ShardDataModule
+from brdfgan.data.phone.flash import blackbody_rgb
+from brdfgan.data.phone.sensor import (
     SensorEffects,
     auto_white_balance_gains,
     decode_srgb8,
@@ -36,8 +36,8 @@ from brdfgan.data.sensor import (
     vignetting_falloff,
     white_balance,
 )
-from brdfgan.data.shards import Sample, shard_path, write_shard
-from brdfgan.data.spec_checks import DatasetConfigError
+from brdfgan.data.storage.shards import Sample, shard_path, write_shard
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 from brdfgan.errors import UserError
 from brdfgan.inference.intake.photo import read_photo
 from brdfgan.inference.intake.preprocess import Crop, preprocess

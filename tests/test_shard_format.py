@@ -19,8 +19,8 @@ import zstandard
 from hydra import compose, initialize_config_dir
 
 from brdfgan.core.svbrdf import encode_normal, split_maps
-from brdfgan.data.datamodule import ShardDataModule
-from brdfgan.data.generation import (
+from brdfgan.data.loading.datamodule import ShardDataModule
+from brdfgan.data.storage.generation import (
     SPEC_FILE,
     DatasetConfigError,
     DatasetSpec,
@@ -28,7 +28,7 @@ from brdfgan.data.generation import (
     run_generation,
     spec_from_config,
 )
-from brdfgan.data.shards import (
+from brdfgan.data.storage.shards import (
     FORMAT_MEMBERS,
     Sample,
     ShardError,
@@ -60,7 +60,7 @@ def record(sample: Sample, shard_format: str) -> dict[str, object]:
 
 
 def read_u16z(data: bytes) -> np.ndarray:
-    """An independent reader of the layout in brdfgan.data.shards' docstring."""
+    """An independent reader of the layout in brdfgan.data.storage.shards' docstring."""
     magic, version, value_bytes, channels, height, width = struct.unpack_from("<4sBBHII", data)
     assert (magic, version, value_bytes) == (b"U16Z", 1, 2)
     shuffled = np.frombuffer(zstandard.ZstdDecompressor().decompress(data[16:]), np.uint8)
@@ -266,7 +266,7 @@ def test_generation_writes_and_records_the_format_and_an_old_dataset_keeps_its_o
     assert dataset_ready(u16z_spec, old)
     shard_path(old, "train", 0).unlink()
     shutil.rmtree(new)
-    with caplog.at_level(logging.WARNING, logger="brdfgan.data.generation"):
+    with caplog.at_level(logging.WARNING, logger="brdfgan.data.storage.generation"):
         summary = run_generation(u16z_spec, old, progress=False, photographer=torch_photographer)
     assert summary.written == [shard_path(old, "train", 0)]
     assert shard_hashes(old) == clean

@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from brdfgan.core.svbrdf import NORMAL, validate_maps
-from brdfgan.data.shards import (
+from brdfgan.data.storage.shards import (
     SAMPLE_MEMBERS,
     Sample,
     ShardError,

@@ -1,4 +1,4 @@
-"""Distribution statistics of map sets (brdfgan.data.statistics, `brdfgan dataset-stats`)."""
+"""Distribution statistics of map sets (brdfgan.data.tools.statistics, `brdfgan dataset-stats`)."""
 
 from __future__ import annotations
 
@@ -10,11 +10,11 @@ import pytest
 import torch
 
 from brdfgan.cli import main
-from brdfgan.data.capture import CaptureSampling
-from brdfgan.data.generation import run_generation
-from brdfgan.data.material_source import ScanSampling
-from brdfgan.data.shards import Sample, shard_path, write_shard
-from brdfgan.data.statistics import (
+from brdfgan.data.materials.source import ScanSampling
+from brdfgan.data.phone.conditions import CaptureSampling
+from brdfgan.data.storage.generation import run_generation
+from brdfgan.data.storage.shards import Sample, shard_path, write_shard
+from brdfgan.data.tools.statistics import (
     CAPTURE_QUANTITIES,
     MapStatistics,
     dataset_report,
@@ -271,7 +271,7 @@ def test_source_subsets_splits_a_split_into_its_scanned_and_procedural_photos(
 ) -> None:
     from scripts import source_subsets
 
-    from brdfgan.data.shards import iter_shard, list_shards
+    from brdfgan.data.storage.shards import iter_shard, list_shards
 
     monkeypatch.setattr("sys.argv", ["source_subsets", str(mixed_dataset), "--split", "train"])
     source_subsets.main()
@@ -296,7 +296,7 @@ def test_source_subsets_writes_a_dataset_with_a_chosen_share_of_scans(
 ) -> None:
     from scripts import source_subsets
 
-    from brdfgan.data.shards import iter_shard, list_shards
+    from brdfgan.data.storage.shards import iter_shard, list_shards
 
     monkeypatch.setattr(
         "sys.argv", ["source_subsets", str(mixed_dataset), "--split", "train", "--scan-share", "0.6"]

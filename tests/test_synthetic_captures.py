@@ -20,8 +20,8 @@ from brdfgan.core.exposure import luminance
 from brdfgan.core.homography import apply_homography
 from brdfgan.core.render import project_to_image
 from brdfgan.core.svbrdf import join_maps
-from brdfgan.data.sensor import SensorEffects, encode_srgb8
-from brdfgan.evaluation.captures import (
+from brdfgan.data.phone.sensor import SensorEffects, encode_srgb8
+from brdfgan.evaluation.real_captures import (
     Capture,
     fit_capture_maps,
     fit_gain,

@@ -143,26 +143,23 @@ def _same(a: nn.Module | list[torch.Tensor], b: nn.Module, atol: float = 0.0) ->
 
 @pytest.mark.integration
 def test_warm_start_takes_the_weights_and_nothing_else(tmp_path: Path) -> None:
-    torch.manual_seed(1)
-    _, gan, _ = build(compose_train(["loss=full"], tmp_path))
+    # build() seeds every run with its config's seed: different seeds, different initial weights.
+    _, gan, _ = build(compose_train(["loss=full", "seed=1"], tmp_path))
     checkpoint = _state_dict_file(gan, tmp_path / "gan.ckpt")
-    content_loss = ["loss=supervised"]
+    content_loss = ["loss=supervised", "seed=2"]
     # A GAN checkpoint into a run without a discriminator: the generator only.
-    torch.manual_seed(2)
     _, content_only, _ = build(compose_train(content_loss, tmp_path))
     assert not _same(gan.generator, content_only.generator)
     assert warm_start(content_only, checkpoint) == ["generator"]
     assert _same(gan.generator, content_only.generator)
     # Both networks when both sides have one.
-    torch.manual_seed(3)
-    _, other_gan, _ = build(compose_train(["loss=full"], tmp_path))
+    _, other_gan, _ = build(compose_train(["loss=full", "seed=3"], tmp_path))
     assert warm_start(other_gan, checkpoint) == ["generator", "discriminator"]
     assert _same(gan.discriminator, other_gan.discriminator)
     # A safetensors weights file (fp16) holds the generator; the discriminator stays as it was.
     safetensors = tmp_path / "g.safetensors"
     save_file({k: v.half().contiguous() for k, v in gan.generator.state_dict().items()}, str(safetensors))
-    torch.manual_seed(4)
-    _, from_weights, _ = build(compose_train(["loss=no_adv"], tmp_path))
+    _, from_weights, _ = build(compose_train(["loss=no_adv", "seed=4"], tmp_path))
     discriminator = [p.clone() for p in from_weights.discriminator.state_dict().values()]
     assert warm_start(from_weights, safetensors) == ["generator"]
     assert _same(discriminator, from_weights.discriminator)

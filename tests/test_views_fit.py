@@ -15,7 +15,7 @@ from torch import Tensor
 from brdfgan.core.render import texel_centres
 from brdfgan.core.svbrdf import join_maps, normalize_normal, resize_maps, split_maps
 from brdfgan.errors import UserError
-from brdfgan.evaluation.captures import fit_gain, srgb_rmse
+from brdfgan.evaluation.real_captures import fit_gain, srgb_rmse
 from brdfgan.inference.refine import photo_loss
 from brdfgan.inference.views import fit as fit_module
 from brdfgan.inference.views.config import ViewFitConfig

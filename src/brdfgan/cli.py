@@ -693,7 +693,7 @@ def export_weights_command(args: argparse.Namespace) -> int:
 
 
 def contact_sheet_command(args: argparse.Namespace) -> int:
-    from brdfgan.data.contact_sheet import write_contact_sheet
+    from brdfgan.data.tools.contact_sheet import write_contact_sheet
 
     if args.tile is not None and args.tile < 8:
         raise UserError(f"--tile={args.tile}: must be at least 8 pixels")
@@ -712,7 +712,7 @@ def contact_sheet_command(args: argparse.Namespace) -> int:
 
 
 def convert_deschaintre_command(args: argparse.Namespace) -> int:
-    from brdfgan.data.deschaintre_dataset import DEFAULT_SAMPLES_PER_SHARD, convert_deschaintre_folder
+    from brdfgan.data.tools.deschaintre_dataset import DEFAULT_SAMPLES_PER_SHARD, convert_deschaintre_folder
 
     per_shard = DEFAULT_SAMPLES_PER_SHARD if args.samples_per_shard is None else args.samples_per_shard
     summary = convert_deschaintre_folder(
@@ -748,14 +748,14 @@ def references_command(args: argparse.Namespace) -> int:
 
 
 def dataset_stats_command(args: argparse.Namespace) -> int:
-    from brdfgan.data.statistics import dataset_report
+    from brdfgan.data.tools.statistics import dataset_report
 
     print(dataset_report(args.data_dir, args.split, args.scanned), end="")
     return 0
 
 
 def eval_captures_command(args: argparse.Namespace) -> int:
-    from brdfgan.evaluation.captures import (
+    from brdfgan.evaluation.real_captures import (
         capture_models,
         check_fit_views,
         evaluate_captures,

@@ -11,7 +11,7 @@ from typing import Any
 
 from torch import nn
 
-from brdfgan.data.datamodule import ShardDataModule
+from brdfgan.data.loading.datamodule import ShardDataModule
 from brdfgan.errors import UserError
 from brdfgan.models.reference import fit_delit_reference, mean_maps, reference_models
 from brdfgan.runs import save_weights

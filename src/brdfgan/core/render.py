@@ -86,7 +86,7 @@ class CameraPose:
     """A pinhole camera in world units: its position ``origin``, the point it aims at, the
     world direction that is up in the image (orthogonal to the view direction) and the
     horizontal field of view. :func:`nominal_camera` builds the capture camera of today's
-    photos; :mod:`brdfgan.data.capture` draws randomised ones."""
+    photos; :mod:`brdfgan.data.phone.conditions` draws randomised ones."""
 
     origin: Vector3
     target: Vector3 = (0.0, 0.0, 0.0)
@@ -477,8 +477,8 @@ class PointLightRenderer(nn.Module):
         plane_half_size: half the side of the sample square.
         compile: run the renderer through ``torch.compile``. Eager mode materialises every
             intermediate of the ~40 elementwise steps at full size; the compiled kernel fuses
-            them (measured here: ~4–5× faster forward+backward on CPU at 256², after a one-off
-            compile of ~30 s), so training turns it on and short scripts leave it off.
+            them, several times faster after a one-off compile (docs/benchmarks.md#renderer-speed),
+            so training turns it on and short scripts leave it off.
 
     Shape: as :func:`render_point_lights`.
     """

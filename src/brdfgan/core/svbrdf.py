@@ -176,7 +176,7 @@ def srgb_decoding_table(levels: int = 255) -> Tensor:
     This is how an 8-bit (``levels=255``) or 16-bit (``65535``) sRGB file is linearised: the code
     ``c`` stands for ``srgb_to_linear(c / levels)``, evaluated in float64 and stored as float32.
     ``brdfgan predict`` decodes JPEG/PNG photos with it and the training sensor simulation
-    (:mod:`brdfgan.data.sensor`) decodes its simulated JPEGs with it, so both see the same values.
+    (:mod:`brdfgan.data.phone.sensor`) decodes its simulated JPEGs with it, so both see the same values.
 
     Shape:
         - output: ``(levels + 1,)`` float32; index it with the codes (as int64)

@@ -25,9 +25,9 @@ from torchmetrics import MetricCollection
 
 from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
-from brdfgan.data.capture import sample_as_photographed
-from brdfgan.data.datamodule import flash_frames
-from brdfgan.data.shards import Sample, iter_shard, list_shards
+from brdfgan.data.loading.datamodule import flash_frames
+from brdfgan.data.phone.conditions import sample_as_photographed
+from brdfgan.data.storage.shards import Sample, iter_shard, list_shards
 from brdfgan.errors import UserError
 from brdfgan.figures import with_column_header
 from brdfgan.inference.model.tiling import model_placement
@@ -189,7 +189,7 @@ def fixed_samples(
     """The first ``count`` samples of a split in shard and key order, or the samples named by
     ``keys`` (in that order) — a list fixed before training, not cherry-picked afterwards. With
     ``align_maps`` their maps are resampled into the photos' pixels, as the DataModule reads them
-    (:func:`~brdfgan.data.capture.sample_as_photographed`)."""
+    (:func:`~brdfgan.data.phone.conditions.sample_as_photographed`)."""
     wanted = list(keys) if keys else None
     found: dict[str, Sample] = {}
     samples: list[Sample] = []

@@ -3,11 +3,11 @@
 The ground truth of the multi-view path (``brdfgan predict --views``, ``brdfgan eval-captures
 --fit-views``; docs/views.md). For a map set it draws handheld cameras (:func:`handheld_cameras`),
 renders each photo with Mitsuba (:func:`~brdfgan.mitsuba_render.handheld.render_handheld`), delivers
-it through a phone (:class:`~brdfgan.data.sensor.SensorEffects`, the same draws for every view: one
+it through a phone (:class:`~brdfgan.data.phone.sensor.SensorEffects`, the same draws for every view: one
 phone, its exposure and white balance locked as a capture protocol asks) and writes one folder:
 
 - ``NN.png``, ``parameters.json``: the capture as ``brdfgan eval-captures`` reads it
-  (:mod:`brdfgan.evaluation.captures`): each photo rectified onto the sample square by its true
+  (:mod:`brdfgan.evaluation.real_captures`): each photo rectified onto the sample square by its true
   homography, the calibrated camera and flash positions in cm, the flash power at the photos'
   exposure.
 - ``handheld/NN.png``: the photos themselves, as ``brdfgan predict --views`` takes them (8-bit
@@ -41,8 +41,8 @@ from brdfgan.core.exposure import luminance
 from brdfgan.core.homography import apply_homography, pose_homography, texel_to_plane
 from brdfgan.core.render import CameraPose, Vector3, camera_frame, capture_camera_height, project_to_image
 from brdfgan.core.svbrdf import validate_maps
-from brdfgan.data.capture import tilted_camera
-from brdfgan.data.sensor import SensorEffects, encode_srgb8
+from brdfgan.data.phone.conditions import tilted_camera
+from brdfgan.data.phone.sensor import SensorEffects, encode_srgb8
 from brdfgan.inference.outputs.export import staged_directory
 from brdfgan.inference.views.register import MATERIALGAN_BOARD, MarkerBoard
 from brdfgan.inference.views.warp import warp_to_reference

@@ -112,9 +112,9 @@ def tilt_squared_error(pred: Tensor, target: Tensor, dim: int = -3) -> Tensor:
     Why beside the angular distance: an angle is an L1-type error, minimised by the conditional
     *median*; where the photo leaves a tilt uncertain — and a quarter of the training texels are
     flat — that median is exactly flat, so the network's normals collapse to flat first and learn
-    slowly after (measured: 600 normal-only steps on the v4 data, the predicted slopes' cosine with
-    the truth on validation was 0.000 under the angle and 0.101 under this squared error). Squared
-    error targets the conditional mean, whose gradient grows with the miss. n_z is clamped to
+    slowly after (the normal-only runs: ``docs/default_model_v3.md``, "The maps were not where the
+    photos showed them"). Squared error targets the conditional mean, whose gradient grows with the
+    miss. n_z is clamped to
     :data:`TILT_Z_MIN` so grazing normals stay finite.
 
     Shape:

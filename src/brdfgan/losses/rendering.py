@@ -7,10 +7,9 @@ The configurations come from :func:`~brdfgan.core.sampling.sample_rendering_loss
 Pairing: the paper renders the predicted maps together (``joint``). ``cross`` renders each of the
 two map groups the anchored network predicts with separate decoders — (base colour, metallic) and
 (normal, roughness) — beside the *true* other group, half of the configurations each
-(:func:`cross_paired`). Why: under the joint render one map's error is paid back by another's
-(measured on the v4 recipe: metals' roughness predicted at about half the truth even on training
-photos, while with the other maps true the rendering loss is lowest at the true roughness), and
-that compensation did not carry over to held-out scans.
+(:func:`cross_paired`). Why: under the joint render one map's error is paid back by another's (a
+too-bright metal colour by a glossier lobe), and that compensation did not carry over to held-out
+scans; the probe and the runs: ``docs/default_model.md`` ("The cross-paired rendering loss").
 """
 
 from __future__ import annotations
@@ -201,9 +200,9 @@ class RenderingLoss(nn.Module):
         compile: run the shading of both map sets, the log transform and the L1
             (:func:`shaded_image_loss`) through ``torch.compile``, which fuses its ~150
             elementwise steps forward and backward into a few loops. It compiles once per input
-            shape (training crops have one) — ~10–40 s on CPU, logged — and then runs several
-            times faster than eager (``make bench``). Off: the eager factored renderer, for
-            varying shapes and short runs.
+            shape (training crops have one; the time is logged) and then runs several times
+            faster than eager (docs/benchmarks.md#renderer-speed). Off: the eager factored
+            renderer, for varying shapes and short runs.
 
     Shape:
         - pred, target: ``(B, 8, H, W)``

@@ -1,86 +1,12 @@
 """Evaluation metrics for predicted SVBRDF maps (paper §6.2), as DDP-correct torchmetrics.
 
 Every metric keeps only **sums and counts** (float64 sums, int64 counts, registered with
-``dist_reduce_fx="sum"``) and takes the square root or the ratio in ``compute``. The value over a
-dataset is therefore exact whatever the batch split or the number of processes — never a mean of
-per-batch means, which would weight a short last batch like a full one.
-
-Definitions (``pred`` and ``true`` in the 8-channel layout of :mod:`brdfgan.core.svbrdf`):
-
-- **Per-map RMSE** (:class:`MapRMSE`): ``sqrt(Σ (p − t)² / N)`` over every pixel *and channel* of
-  the dataset, per map:
-
-  ========= ========================================================================
-  basecolor the stored sRGB-encoded base colour (as a texture file holds it)
-  diffuse   derived albedo ``d = b (1 − m)`` (paper §3), ``b`` the linear base colour
-  specular  derived F0 ``s = 0.04 (1 − m) + b m`` (paper §3)
-  normal    unit-vector components in [-1, 1], 3 channels; both fields renormalised
-            first (like the renderer does). Per pixel ``|p − t|² = 2 − 2 cos θ``, so
-            two normals 90° apart give ``sqrt(2/3)``. An RMSE of the file encoding
-            ``(n + 1)/2`` would be exactly half of this value.
-  roughness perceptual roughness as stored
-  metallic  as stored
-  ========= ========================================================================
-
-  The derived albedos are compared in the colour space :data:`ALBEDO_SPACE` (default: linear,
-  the space in which the paper (docs/conventions.md#derived-albedos) defines them and the renderer
-  uses them; ``"srgb"`` compares them sRGB-encoded, like the albedo files of Deschaintre et al. 2018).
-
-- **Downscaled RMSE** (``MapRMSE(downscale_to=256)``, the paper's "downscaled to 256²"): each
-  compared image above is first computed at full resolution *in the encoding in which it is
-  compared*, then both prediction and ground truth are area-averaged to the target size (like
-  resizing the map files); averaged normals are renormalised. Inputs whose shorter side is already
-  ``<= downscale_to`` are skipped (nothing is accumulated), so a 256² test set reports no
-  duplicate of its full-resolution numbers.
-
-- **Normal angular error** (:class:`NormalAngularError`): mean over all pixels of the angle in
-  degrees between the renormalised normals, ``atan2(|p × t|, p · t)`` — equal to ``acos(p · t)``
-  for unit vectors but accurate for small angles, and unbiased (the training loss
-  :func:`~brdfgan.losses.parameter.angular_distance` clamps the cosine, which scores identical
-  normals 0.08° instead of 0).
-
-- **Re-rendering error** (:class:`RerenderError`): ``sqrt(mean((log(1 + R(p)) − log(1 + R(t)))²))``
-  over all pixels, colour channels and configurations, ``R`` the point-light renderer of the
-  rendering loss under a fixed set of light/view configurations drawn once from the seed.
-
-- **Hotspot error ratio** (:class:`HotspotError`): per map, the RMSE (as above, full resolution)
-  over the pixels within a disk around each sample's flash highlight divided by the RMSE over the
-  other pixels. A model whose maps carry a mark where the highlight was in the photo scores > 1;
-  an error spread evenly scores 1. Highlight positions come from the batch metadata
-  (:func:`hotspot_centres`).
-
-- **Base-colour saturation ratio** (:class:`SaturationRatio`, :func:`saturation_ratio`):
-  ``Σ S(p) / Σ S(t)`` over every texel of the dataset, ``S`` the HSV saturation of the stored sRGB
-  base colour (:func:`basecolor_hsv`). 1 = the right colourfulness, < 1 = greyed (0: a grey
-  prediction), > 1 = oversaturated.
-
-- **Base-colour hue error** (:class:`HueError`, :func:`hue_error_deg`): the circular HSV hue
-  difference in degrees (0–180) per texel, averaged over the dataset with the weights
-  ``min(S(p), S(t))`` (hue is undefined for greys).
-
-- **Checkerboard ratio** (:class:`CheckerboardRatio`, :func:`checkerboard_ratio`): per map (stored
-  base colour, renormalised normal, roughness, metallic), the geometric mean over the samples of
-  ``P(p) / P(t)``, ``P`` the **period-2 power** (:func:`period2_power`): the squared amplitudes of
-  the ``(−1)^i``, ``(−1)^j`` and ``(−1)^(i+j)`` patterns (the DFT bins (H/2, 0), (0, W/2),
-  (H/2, W/2)) under a periodic Hann window, summed over the map's channels, plus the expected power
-  of 8-bit quantisation (:func:`period2_floor`); ``/pooled``: ``Σ P(p) / Σ P(t)`` over the
-  dataset. 1 = the truth's level of period-2 structure, ≫ 1 = the checkerboard of transposed
-  convolutions, < 1 = smoother than the truth; two flat maps score 1. Full rationale above
-  :data:`CHECKERBOARD_QUANTISATION`.
-
-- **False metal** (:class:`FalseMetal`, :func:`false_metal`): the mean predicted metallic over
-  every texel of the dataset whose true metallic is below :data:`DIELECTRIC_THRESHOLD` (0.1):
-  how much metal a model reads into dielectrics. 0 = none, 1 = every dielectric called a metal;
-  NaN when the dataset holds no dielectric texel.
-
-- **Relief leak** (:class:`ReliefLeak`, :func:`relief_leak`): per sample, the Pearson correlation
-  over its texels between the base colour's error ``log Y(p) − log Y(t)`` (``Y`` the luminance of
-  the linear base colour) and the true **relief shading** ``log Y(R_n(t)) − log Y(R_flat(t))``
-  (:func:`relief_shading`: the sample's flash photo of the true maps over the same photo with flat
-  normals, under its flash frame), averaged over the samples that have relief;
-  ``relief_leak/slope``: the mean regression slope of that error on the shading. +1 (slope 1) =
-  the base colour carries the relief shading, 0 = its error has nothing to do with the relief.
-  Full definition and rationale above :data:`RELIEF_LOG_FLOOR`.
+``dist_reduce_fx="sum"``) and takes the square root or the ratio in ``compute``, so the value over
+a dataset is exact whatever the batch split or the number of processes — never a mean of
+per-batch means, which would weight a short last batch like a full one. ``pred`` and ``true`` are
+in the 8-channel layout of :mod:`brdfgan.core.svbrdf`; :class:`SVBRDFMetrics` gathers them all.
+Each metric's definition, and what its values mean: docs/training.md#the-metrics; the rationale of
+the less obvious ones sits above :data:`CHECKERBOARD_QUANTISATION` and :data:`RELIEF_LOG_FLOOR`.
 """
 
 from __future__ import annotations
@@ -128,7 +54,7 @@ from brdfgan.core.svbrdf import (
 
 AlbedoSpace = Literal["linear", "srgb"]
 
-# The one switch for the colour space of the derived-albedo RMSE (see the module docstring).
+# The one switch for the colour space of the derived-albedo RMSE (docs/training.md#the-metrics).
 ALBEDO_SPACE: AlbedoSpace = "linear"
 
 # Compared maps and their channel counts, in reporting order.
@@ -204,7 +130,7 @@ def area_downscale(image: Tensor, size: tuple[int, int], *, is_normal: bool = Fa
 
 
 class MapRMSE(Metric):
-    """Per-map RMSE over a whole dataset (definitions in the module docstring).
+    """Per-map RMSE over a whole dataset (definitions: docs/training.md#the-metrics).
 
     Args:
         downscale_to: when set, area-downscale prediction and ground truth so their shorter side
@@ -278,8 +204,9 @@ class MapRMSE(Metric):
 class NormalAngularError(Metric):
     """Mean angle in degrees between predicted and true normals over all pixels of a dataset.
 
-    Angle per pixel: ``atan2(|p × t|, p · t)`` of the renormalised normals (see the module
-    docstring). The median is not provided: it needs every value, which does not reduce as sums.
+    Angle per pixel: ``atan2(|p × t|, p · t)`` of the renormalised normals, accurate for small
+    angles (docs/training.md#the-metrics). The median is not provided: it needs every value,
+    which does not reduce as sums.
 
     Shape:
         - pred, true: ``(B, 8, H, W)`` or ``(8, H, W)``
@@ -324,7 +251,7 @@ def _normal_angle_deg(pred: Tensor, true: Tensor) -> Tensor:
 #
 # Why HSV of the stored sRGB base colour: it is the colour space in which the training data varies
 # colour (brdfgan.data.materials.recolor rotates the HSV hue and scales the HSV saturation) and in
-# which brdfgan.data.statistics reports a dataset's colourfulness, so the metrics read on the same
+# which brdfgan.data.tools.statistics reports a dataset's colourfulness, so the metrics read on the same
 # scale as those. HSV saturation ``(max − min) / max`` does not depend on brightness (a dark and a
 # light teal are equally saturated); its weak point, the hue and saturation of near-black texels,
 # matters little here: dielectric base colours are at least ~0.15 sRGB-encoded (0.02 linear,
@@ -349,7 +276,7 @@ def _normal_angle_deg(pred: Tensor, true: Tensor) -> Tensor:
 def basecolor_hsv(maps: Tensor) -> Tensor:
     """HSV of the stored (sRGB-encoded) base colour, clamped to [0, 1] first — the definition of a
     base colour's hue and saturation behind :func:`saturation_ratio` and :func:`hue_error_deg`
-    (``kornia.color.rgb_to_hsv``, as :mod:`brdfgan.data.statistics` and the recolour augmentation).
+    (``kornia.color.rgb_to_hsv``, as :mod:`brdfgan.data.tools.statistics` and the recolour augmentation).
 
     Shape:
         - maps: ``(*, 8, H, W)``
@@ -518,15 +445,12 @@ class HueError(Metric):
 # - ``checkerboard/<map>/pooled``: ``Σ (P(pred) + f) / Σ (P(true) + f)``, the literal "energy at
 #   the period-2 frequencies relative to the truth's" over the dataset (a ratio of sums like the
 #   saturation ratio; it weighs each sample by its true period-2 power). A few truths with strong
-#   fine detail dominate it: on data/procedural_and_scans/val the 5 of 48 samples with the most
-#   true period-2 power hold 59–80 % of it (woven fabric scans for the normals), and there the
-#   prediction is blurred (r < 1), so it understates an artefact on the rest — the shipped model's
-#   normals read 2.6 pooled, 24 as a geometric mean (per-sample median 73).
+#   fine detail dominate it, and where the prediction is blurred (r < 1) it understates an
+#   artefact on the rest: read the geometric mean first (docs/training.md#the-metrics has a case).
 #
 # Both are sums over the samples (float64, exact whatever the batch split or the processes) and
 # finite once a sample was seen: the floor keeps every r in (0, ∞). It is power, not the coherence
-# of a pattern: texel noise counts too (the photo-as-base-colour reference reads 6–10 on the base
-# colour from the photo's noise; the shipped model 10³–10⁴ on base colour, roughness, metallic).
+# of a pattern: texel noise counts too (docs/training.md#the-metrics: what a noisy photo reads).
 #
 # Floor. Both powers get the expected period-2 power of the maps' 8-bit quantisation error
 # (:func:`period2_floor`: independent uniform noise of variance step²/12 per texel, steps in
@@ -540,10 +464,9 @@ class HueError(Metric):
 # per map, it is 0/0 for the flat maps that are common here (metallic of dielectrics), and it scores
 # a prediction by its own content rather than against the truth. The ratio to the truth's own
 # period-2 power is what the issue asks for; a blurred prediction with a checkerboard still shows
-# it whenever the checkerboard's power exceeds the truth's period-2 power (the shipped transposed-
-# convolution model's is orders of magnitude above it). For reference, Nyquist bins over the mean
-# of the ring 0.375–0.5 cycles/texel (FFT, same window) on that split: truths median 0–0.3
-# (max 0.7–3.9), the shipped model median 33 (normal) to 4,600 (metallic).
+# it whenever the checkerboard's power exceeds the truth's period-2 power (a transposed-
+# convolution model's is orders of magnitude above it). Both measures on one split:
+# docs/training.md#the-metrics.
 #
 # Odd sizes: the last row and/or column is ignored. Images with fewer than 4 rows or columns
 # (after that) have no usable window; the metric skips them (NaN when nothing was accumulated).
@@ -818,7 +741,7 @@ def hotspot_centres(meta: Sequence[Mapping[str, Any]], height: int, width: int) 
     - without it (older datasets: flash at the lens, camera centred over the sample): the centre
       of the stored photo, ``meta["photo_size"] / 2`` when recorded (a train crop records it),
       else the batch image's;
-    - ``meta["train_crop"] = [x0, y0, size]`` (:func:`brdfgan.data.datamodule.random_crop`)
+    - ``meta["train_crop"] = [x0, y0, size]`` (:func:`brdfgan.data.loading.datamodule.random_crop`)
       shifts the position by ``(-x0, -y0)``. A crop with neither ``hotspot_px`` nor
       ``photo_size`` is an error: the stored photo's centre is not known.
 
@@ -1208,7 +1131,7 @@ class ReliefLeak(Metric):
     ``compute``. Computed in float64.
 
     ``update(pred, true, flash=None)``: ``flash`` holds the flash frame of each sample's photo
-    (``batch["flash"]``, :func:`brdfgan.data.datamodule.flash_frames`), the geometry of its relief
+    (``batch["flash"]``, :func:`brdfgan.data.loading.datamodule.flash_frames`), the geometry of its relief
     shading; ``None`` assumes photos centred on their hotspot with the default field of view
     (:func:`~brdfgan.core.flash_geometry.centred_flash_frame`).
 
@@ -1321,7 +1244,7 @@ class ObservableNormalAngle(Metric):
     """The normal angle over the texels whose relief the photo shows (:func:`observable_mask` of the
     true :func:`relief_shading` against the photo's 8-bit rounding), beside the flat map's over the
     same texels. Both are ``Σ θ·mask / N`` over all N texels (the part of the angle a photo can
-    show, as :func:`brdfgan.data.relief.observable_angle`), so their ratio is the model's gain
+    show, as :func:`brdfgan.data.tools.relief.observable_angle`), so their ratio is the model's gain
     over a flat map where the relief is visible.
 
     ``update(pred, true, photo=None, flash=None)``: ``photo`` the linear photos the model read

@@ -78,8 +78,8 @@ class HighlightProfile(ImageStatistic):
     Why: roughness and specular level are read from the width and height of the highlight, a
     feature at one place in the photo. A network of affine-free instance norms and a few
     downsamplings sees it only from pixels within its receptive field and passes an image-wide
-    level only through feature moments (measured: v4's first final runs gave the validation set's
-    brushed metal roughness 0.01 against the truth's 0.08). The de-lit photo has the flat-surface
+    level only through feature moments, which pass it on poorly (the runs with and without it:
+    ``docs/default_model.md``, "Design" and "The highlight profile"). The de-lit photo has the flat-surface
     falloff divided out, so a matte surface's profile is ~0 in every ring and a glossy one rises
     towards the hotspot over a width that grows with roughness. Empty rings (a crop or tile that
     does not reach them) read 0 with their flag 0.

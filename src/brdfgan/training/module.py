@@ -11,7 +11,7 @@ there is no discriminator at all — no forward, no step, no optimizer state, no
 
 Resuming is exact: a checkpoint stores every source of randomness the step draws from (the
 rendering loss's own generator; Python's, NumPy's and torch's global generators), and the data
-stream continues at the batch it had reached (:class:`~brdfgan.data.datamodule.ShardDataModule`),
+stream continues at the batch it had reached (:class:`~brdfgan.data.loading.datamodule.ShardDataModule`),
 so an interrupted and resumed run ends with the same weights, bit for bit, as a straight one.
 """
 
@@ -68,7 +68,7 @@ class SVBRDFGAN(L.LightningModule):
         metrics: a factory of the evaluator's metric collection (:mod:`brdfgan.metrics`), so
             validation and test report the same numbers as ``evaluate.py``.
         channels_last: keep the networks' weights and activations in the NHWC memory format
-            (faster convolutions on CUDA tensor cores; measured on CPU by ``make bench``).
+            (faster convolutions on CUDA tensor cores; slower on CPU: docs/benchmarks.md#renderer-speed).
 
     The phases of a training step are labelled for ``torch.profiler`` (``brdfgan/…``; see
     ``benchmarks/bench_train.py``); the labels cost nothing when no profiler runs.

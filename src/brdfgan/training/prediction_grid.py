@@ -19,7 +19,7 @@ import lightning as L
 from lightning.pytorch.callbacks import Callback
 from torch import nn
 
-from brdfgan.data.shards import Sample
+from brdfgan.data.storage.shards import Sample
 from brdfgan.evaluation.evaluator import comparison_grid, fixed_samples
 from brdfgan.io.images import write_image
 from brdfgan.tracking import log_image

@@ -1,7 +1,7 @@
 """Physically plausible base colours: measured metal F0 colours and the dielectric albedo range.
 
 One home for the colour facts every family, the material mixer and the recolour augmentation
-rely on (docs/conventions.md#maps: base colour is stored sRGB-encoded, shaded linear):
+rely on (docs/conventions.md#maps-and-encodings: base colour is stored sRGB-encoded, shaded linear):
 
 - **Metals** take their base colour from the measured normal-incidence reflectance F0 of the
   metal. :data:`METAL_F0_LINEAR` lists linear-RGB F0 values of common metals as tabulated for

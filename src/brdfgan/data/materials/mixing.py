@@ -28,7 +28,7 @@ from torch import Tensor
 
 from brdfgan.data.materials.base import MaterialLayers
 from brdfgan.data.materials.noise import fbm, random_per_cell, worley
-from brdfgan.data.spec_checks import DatasetConfigError, in_range, ordered
+from brdfgan.data.storage.spec_checks import DatasetConfigError, in_range, ordered
 
 MASK_KINDS = ("noise", "cracks", "patches")
 

@@ -22,7 +22,7 @@ from torch import Tensor
 from brdfgan.core.sampling import log_uniform
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialLayers
-from brdfgan.data.spec_checks import in_range, ordered
+from brdfgan.data.storage.spec_checks import in_range, ordered
 
 
 @dataclass(frozen=True)

@@ -389,7 +389,7 @@ def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
 
     # A lookup table decodes every code exactly once and avoids the several full-size float
     # temporaries of srgb_to_linear on a 24 MP photo. The sRGB table is the one the training
-    # sensor simulation (brdfgan.data.sensor) decodes its JPEGs with: both see the same values.
+    # sensor simulation (brdfgan.data.phone.sensor) decodes its JPEGs with: both see the same values.
     if colorspace == "srgb":
         table = srgb_decoding_table(levels)
     else:

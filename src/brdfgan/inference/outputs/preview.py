@@ -21,18 +21,12 @@ Lighting:
 
 Memory stays bounded for big maps: the maps are area-downscaled to the tile size *before* rendering.
 
-Speed (``python -m benchmarks.bench_preview``): a still preview at 256² shades 4 + 64 lights over
-65 536 texels in eager torch, where every elementwise step is one pass over memory and, with two
-threads, one fork-join, which stalls whenever another job holds a core (a 256² preview took 11 s on a
-shared machine). :func:`render_preview_tiles` decodes the maps once
-(:func:`~brdfgan.core.render.shading_inputs`) and shades all lights, point and sky, as configurations
-of a few :func:`~brdfgan.core.render.shade_point_lights` calls (:data:`RENDER_CHUNK` lights each):
-about 530 full-size elementwise steps per preview instead of about 1 630, the same lights, the same
-images to float32 rounding. Fewer sky lights would be cheaper but measurably noisier
-(:data:`PREVIEW_SKY_SAMPLES`); rendering at half size and upsampling loses the maps' detail;
-``torch.compile`` of the renderer makes the rendering ~2.4× faster on an idle machine but costs
-~16 s once per process (cold cache) and needs a C++ compiler, which a one-photo ``brdfgan predict``
-never earns back.
+Speed: in eager torch every elementwise step is one pass over memory and a thread fork-join, so
+:func:`render_preview_tiles` decodes the maps once (:func:`~brdfgan.core.render.shading_inputs`)
+and shades all lights, point and sky, as configurations of a few
+:func:`~brdfgan.core.render.shade_point_lights` calls (:data:`RENDER_CHUNK` lights each): far fewer
+steps for the same images to float32 rounding. The timings, and the alternatives not taken (fewer
+sky lights, half-size rendering, ``torch.compile``): docs/benchmarks.md#predict-time-and-memory.
 """
 
 from __future__ import annotations
@@ -74,14 +68,13 @@ ANIMATION_ELEVATION_DEG = 30.0
 SEPARATOR = 4  # px between tiles
 SEPARATOR_COLOR = (48, 48, 48)
 LABEL_HEIGHT = 18  # px strip above each tile for its label
-# Sky lights of the environment tile. Measured at 256² (benchmarks/bench_preview.py: RMSE of the 8-bit
-# tile against 4× the lights): 32 lights are up to 1.6× as far off as 64 (normal-mapped glossy maps),
-# 16 up to 2×, so the count stays and the speed comes from RENDER_CHUNK.
+# Sky lights of the environment tile: fewer are visibly noisier on normal-mapped glossy maps
+# (bench_preview's sampling error: docs/benchmarks.md#predict-time-and-memory), so the count stays
+# and the speed comes from RENDER_CHUNK.
 PREVIEW_SKY_SAMPLES = 64
 # Lights shaded per renderer call (as configurations): fewer, bigger calls mean fewer elementwise
-# steps, each a pass over memory and a thread fork-join. A light costs ~12 MiB of intermediates at
-# 256², so 17 (4 point + 64 sky lights: 4 calls) peaks at ~0.2 GiB; 34 halves the steps again but
-# was slower on an idle machine (cache) and needs ~0.3 GiB.
+# steps, each a pass over memory and a thread fork-join; 17 splits 4 point + 64 sky lights into 4
+# calls at a modest peak memory, where twice that was slower (docs/benchmarks.md#predict-time-and-memory).
 RENDER_CHUNK = 17
 
 

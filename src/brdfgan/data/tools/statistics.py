@@ -16,8 +16,8 @@ material counts under its own family; scanned sets are counted together, with th
 distinct sets).
 
 **Captures.** A second table, one row per split (and its procedural and scanned parts), from
-each sample's metadata (:meth:`brdfgan.data.capture.CaptureDraw.to_json`, the flash draw, the
-crop transform, the recolour and mix records of :mod:`brdfgan.data.material_source`): field of
+each sample's metadata (:meth:`brdfgan.data.phone.conditions.CaptureDraw.to_json`, the flash draw, the
+crop transform, the recolour and mix records of :mod:`brdfgan.data.materials.source`): field of
 view (°), flash offset (a fraction of the camera distance), tilt (°), exposure error (EV), flash
 colour temperature (K) and crop scale, each as min / 10th / 50th / 90th percentile / max, and the
 shares of mirrored, recoloured and mixed samples. A quantity no sample records (a dataset made
@@ -38,9 +38,9 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.svbrdf import split_maps
-from brdfgan.data.material_source import SCANNED_PREFIX, is_scanned
-from brdfgan.data.scanned import read_scanned_material, scanned_material_folders
-from brdfgan.data.shards import iter_shard, list_shards
+from brdfgan.data.materials.scanned import read_scanned_material, scanned_material_folders
+from brdfgan.data.materials.source import SCANNED_PREFIX, is_scanned
+from brdfgan.data.storage.shards import iter_shard, list_shards
 from brdfgan.errors import UserError
 from brdfgan.metrics.svbrdf_metrics import basecolor_hsv
 

@@ -2,85 +2,12 @@
 
 The community's protocol for real photos without ground-truth maps (MaterialGAN, Guo et al. 2020;
 Look-Ahead, Zhou & Kalantari 2022): several rectified flash photos of one planar sample with
-calibrated camera and flash positions; predict the maps from one photo, re-render them at the
-other views' calibrated camera and flash, and compare with those photos (sRGB RMSE).
-
-**The capture folder.** One folder per material, views ``00.png, 01.png, …`` (``.jpg`` also read),
-each a rectified photo of the *whole* sample square (square, same size for every view), and the
-calibration in one of two layouts:
-
-- ``parameters.json`` (svbrdf-diff-renderer, MaterialGAN's later code): ``image_size`` (the
-  sample's side), ``camera_pos`` and ``light_pos`` (one ``[x, y, z]`` per view), ``light_pow``
-  (a number or RGB), optional ``idx`` (the views used, default all; the first is the input view)
-  and ``images_dir`` (where the views are when not beside the file:
-  ``<images_dir>/reference/<resolution>/NN.png``, 256 preferred, else the largest). ``light_pos``
-  missing means a collocated flash (= ``camera_pos``).
-- the older MaterialGAN text files: ``camera_pos.txt`` (one ``x, y, z`` line per view, commas or
-  spaces), ``image_size.txt`` (one number), ``light_power.txt`` (one number or three) and an
-  optional ``light_pos.txt`` like ``camera_pos.txt`` (MaterialGAN writes it as a copy of
-  ``camera_pos.txt``: its flash is at the lens), else the flash is at the camera.
-
-When a folder holds both, ``parameters.json`` is read. A command-line folder that is no capture
-itself (no ``parameters.json``, ``camera_pos.txt`` or ``00.png``) is a folder of captures: each
-sub-folder that is one is evaluated (one level, sorted by name).
-
-**Facts of the format this module relies on** (read in the public code, tflsguoyu/materialgan:
-``src/render.py``, ``src/optim.py``, ``tools/generate_inputs.py``, ``data/in/real_cards-blue``;
-tflsguoyu/svbrdf-diff-renderer: ``src/microfacet.py``, ``src/svbrdf.py``, ``src/capture.py``,
-``data/card_blue/parameters.json``):
-
-- Units are centimetres (``"_comment": "in cm uint"``); the sample square is centred at the
-  origin in z = 0, z up; texel (row i, column j) of an ``R``-pixel view lies at
-  ``x = ((j + ½)/R − ½)·size``, ``y = −((i + ½)/R − ½)·size`` — row 0 is +y, as in
-  :mod:`brdfgan.core.render` (``plane_half_size = size / 2``).
-- ``image_size`` is the side of the rectified square (their capture writes the marker board's
-  side × crop / full resolution, e.g. 6.848 cm), cameras 15–20 cm above it in their data.
-- Their renderer: ``radiance = light_pow · f · max(n·l, 0) / |light − p|²`` — ``light_pow`` is
-  a radiant intensity (per steradian, with distances in cm), the cosine term is applied, no
-  other constant (our :func:`~brdfgan.core.render.render_point_lights` is the same formula).
-  Their ``f``: Lambert ``albedo/π`` (× (1 − specular) in the later code) + GGX with the
-  Schlick-GGX Smith term (k = α/2), α = roughness²; ours is Burley + exact Smith, so even their
-  own maps would not reproduce their renders exactly at the calibrated power. Their
-  ``light_pow`` is 1500 (RGB) in every capture seen.
-- Their renders are stored as ``clip(radiance, ε, 1)^(1/2.2)`` (gamma 2.2); real captures are
-  phone photos warped by a homography without linearisation (sRGB as the phone wrote them),
-  which their fitting compares with those gamma-2.2 renders. Views are decoded here with the
-  sRGB curve, right for real captures; for gamma-2.2 *renders* the two curves differ by
-  < 0.009 in linear value (up to 0.034 in encoded value near black).
-- ``light_pos.txt`` and ``light_pos`` are copies of the camera positions in their data (a
-  collocated flash); ``light_power.txt`` is one line ``1500.0000,1500.0000,1500.0000``.
-
-**The evaluation** (:func:`evaluate_captures`), per capture and model:
-
-1. The input view (the first) is read like ``brdfgan predict`` reads a photo (sRGB decoded),
-   taken whole (no hotspot crop), resized linearly to the model's resolution and auto-exposed
-   (:func:`~brdfgan.inference.intake.preprocess.preprocess` with the whole square as the crop).
-2. Its :mod:`flash frame <brdfgan.core.flash_geometry>` comes from the calibration
-   (:func:`capture_flash_frame`): the hotspot is the foot of the flash on the plane, and
-   ``s = (size / R) / light_z`` — the frame's offsets are then exactly ``(p − light)_xy / light_z``,
-   the definition of the frame for a flash at the lens (where ``light_z`` is the camera's
-   height), and the flat-surface falloff of :mod:`brdfgan.core.delit` stays exact for a flash
-   beside or above the lens.
-3. The model predicts the maps (with ``refine``: :func:`~brdfgan.inference.refine.refine_maps`
-   against the input, as ``brdfgan predict --refine``), resized back to the capture's resolution.
-   With ``fit_views`` = K > 1 (``--fit-views K``; default 1, the single-photo protocol), the maps
-   are then fitted to the first K views (:func:`~brdfgan.inference.views.fit.fit_views`, the fit
-   of ``brdfgan predict --views``: each view whole, seen everywhere, at its calibrated camera and
-   flash, its own RGB gain — so the fit leaves the maps' overall tint as predicted), and the fitted
-   maps are scored; views 1 … K−1 are ``fitted``, the others
-   ``relit``. A capture needs more than K views (one left to relight); every capture is checked
-   before any model runs (:func:`check_fit_views`). Each model's row is named ``<model>+fit<K>``.
-4. Every view is re-rendered at its camera and flash (:func:`~brdfgan.core.render.render_point_lights`,
-   radiance × ``light_pow``) and compared with its photo: both clipped to [0, 1], sRGB-encoded,
-   RMSE over pixels and channels. Twice: with the calibrated power as is, and with **one gain**
-   fitted on the input view (linear least squares of its re-render to photo 0 over the pixels not
-   saturated in the photo) applied to every view — the headline, as it removes the unknown
-   exposure (phones do not record one) and the models' albedo scale.
-
-A capture's score is the mean over its relit views (all but the input and the fitted ones); a
-model's, the mean of its captures' scores (each material weighs the same). The input and fitted
-views' own errors are in the CSV (``role`` = ``input``, ``fitted``) but in no mean: a model is
-judged on views it did not see.
+calibrated camera and flash positions; predict the maps from one photo
+(:func:`evaluate_captures`), re-render them at the other views' calibrated camera and flash, and
+compare with those photos (sRGB RMSE, also after one gain fitted on the input view). The capture
+folder's two layouts (``parameters.json``, MaterialGAN's text files), the facts of the format
+this module relies on (units, axes, the light's power, the stored gamma) and the evaluation's
+steps: ``docs/ood.md`` ("The capture folder format", "The evaluation, step by step").
 """
 
 from __future__ import annotations

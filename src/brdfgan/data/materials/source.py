@@ -22,12 +22,12 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.svbrdf import BASECOLOR, METALLIC
-from brdfgan.data.augment import CropSampling
+from brdfgan.data.loading.augment import CropSampling
 from brdfgan.data.materials.base import MaterialFamily, layers_to_maps
 from brdfgan.data.materials.mixing import MixingConfig, draw_mix, mix_layers, mixture_mask
 from brdfgan.data.materials.recolor import RecolorConfig, draw_recolor, recolor_basecolor, recolor_layers
-from brdfgan.data.scanned import read_scanned_material
-from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, ordered
+from brdfgan.data.materials.scanned import read_scanned_material
+from brdfgan.data.storage.spec_checks import DatasetConfigError, in_range, integer, ordered
 
 SCANS_KEY = "dataset_spec.scans"
 SCANNED_PREFIX = "scanned/"  # the family of a scanned set: scanned/<folder name>
@@ -40,10 +40,10 @@ def is_scanned(family: str) -> bool:
 
 @dataclass(frozen=True)
 class ScanSampling:
-    """Real scanned sets (:mod:`brdfgan.data.scanned`) as a share of every split's materials.
+    """Real scanned sets (:mod:`brdfgan.data.materials.scanned`) as a share of every split's materials.
 
     Attributes:
-        folder: a folder of scanned sets in any layout :mod:`brdfgan.data.scanned` reads;
+        folder: a folder of scanned sets in any layout :mod:`brdfgan.data.materials.scanned` reads;
             ``None``: procedural materials only.
         fraction: the share of each split's material indices painted from a scan (each index
             decides with a draw of its own, so the procedural materials stay what they were).

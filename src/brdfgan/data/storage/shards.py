@@ -1,76 +1,12 @@
-"""The on-disk dataset format: WebDataset tar shards of (flash photo, ground-truth maps, metadata).
+"""The on-disk dataset format: WebDataset tar shards of (flash photo, ground-truth maps, metadata),
+with a ``manifest.json`` per split and each shard's SHA-256 beside it. The layout, the two sample
+formats (``u16z``, ``png``) and the ``.u16z`` byte layout: docs/data.md#the-shard-format.
 
-Layout::
-
-    dataset_dir/
-        train/
-            manifest.json            written by the generator (content is the caller's)
-            train-000000.tar
-            train-000000.tar.sha256  the shard's SHA-256, recorded when it was completed
-            train-000001.tar
-            ...
-        test/
-            test-000000.tar
-            ...
-
-A shard is a plain (uncompressed) tar in WebDataset layout: the members of one sample are
-``<key>.<member>`` and lie next to each other, always in the order of :data:`FORMAT_MEMBERS`
-for the sample's format. Two sample formats store the same 16-bit values (every channel rounded
-to the nearest of 65536 levels, normals as ``(n + 1) / 2``), so a sample decodes to bit-identical
-tensors from either; readers tell them apart per sample by the member names, and a generated
-dataset records its format as ``shard_format`` in ``dataset.json`` and in every manifest's
-``spec`` (absent: ``png``, the only format before ``u16z``).
-
-``u16z`` (the default of new datasets; decoding 5–10× faster than PNG at 256²–512²):
-
-============== ======================================================================
-member         content
-============== ======================================================================
-input.u16z     the flash photo, **linear** LDR in [0, 1]: 3 planes R, G, B
-maps.u16z      the 8 map planes in the channel order of :mod:`brdfgan.core.svbrdf`: base
-               color R, G, B (sRGB-encoded), normal X, Y, Z encoded as ``(n + 1) / 2``,
-               roughness, metallic
-meta.json      JSON metadata (family, parameters, seed, environment, flash, exposure…)
-============== ======================================================================
-
-``png`` (datasets made before ``u16z``, and :func:`write_shard`'s default):
-
-============== ======================================================================
-member         content
-============== ======================================================================
-input.png      the flash photo, **linear** LDR in [0, 1], 16-bit RGB
-basecolor.png  base color, sRGB-encoded values as stored in the maps, 16-bit RGB
-normal.png     tangent-space normal encoded as ``(n + 1) / 2``, 16-bit RGB
-roughness.png  perceptual roughness, 16-bit grayscale
-metallic.png   metallic, 16-bit grayscale
-meta.json      JSON metadata, as above
-============== ======================================================================
-
-Byte layout of a ``.u16z`` member (all integers little-endian)::
-
-    offset  size  field
-    0       4     magic b"U16Z"
-    4       1     version, 1
-    5       1     bytes per value, 2 (dtype uint16, values v / 65535 in [0, 1])
-    6       2     channels C (uint16): 3 for input.u16z, 8 for maps.u16z
-    8       4     height H (uint32)
-    12      4     width W (uint32)
-    16      ...   one Zstandard frame (level 1, with content size and XXH64 checksum) of the
-                  2·C·H·W byte-shuffled value bytes: the low bytes of all C·H·W values in
-                  (channel, row, column) order, then their high bytes
-
-The byte shuffle puts the smooth high bytes together, which Zstandard compresses well (at 512²
-a sample is about the size of its PNGs) while decoding several times faster than PNG's zlib.
-
-Writing is byte-deterministic: the same samples give the same file, byte for byte, with the same
-OpenCV/zlib (PNG) or zstandard (u16z) versions (fixed compression levels, sorted compact JSON,
-tar headers with zero times and owners). A shard is written to a hidden temporary file next to
-its target and moved into place with :func:`os.replace`, so a reader (or ``glob("*.tar")``) never
-sees a partial shard. Its SHA-256 is then recorded beside it (:func:`write_digest`,
-``sha256sum``'s format, so ``sha256sum -c *.sha256`` checks a split by hand): the tar headers
-:func:`verify_shard` reads cannot reveal a member corrupted in place, a checksum can. One small
-file per shard, rather than one shared file, because shards are made by concurrent processes and
-machines.
+Both formats store the same 16-bit values, so a sample decodes to bit-identical tensors from
+either; readers tell them apart per sample by the member names (:data:`FORMAT_MEMBERS`). Writing
+is byte-deterministic and atomic (a temporary file moved into place), so a reader never sees a
+partial shard; the recorded SHA-256 (:func:`write_digest`) catches a member corrupted in place,
+which the tar headers :func:`verify_shard` reads cannot.
 """
 
 from __future__ import annotations
@@ -148,19 +84,17 @@ _KNOWN_MEMBERS = frozenset(name for names in FORMAT_MEMBERS.values() for name in
 MANIFEST_NAME = "manifest.json"
 DIGEST_SUFFIX = ".sha256"
 _HEX_DIGEST = re.compile(r"[0-9a-f]{64}")
-# zlib level 1: noisy 16-bit renders barely compress further (< 2 % smaller at level 9, measured
-# at 512²) while encoding takes up to 2× longer; decoding costs the same for every level ≥ 1.
+# zlib level 1: noisy 16-bit renders barely compress further at higher levels, which encode slower
+# and decode no faster (docs/data.md#the-shard-format has the measurements).
 PNG_COMPRESSION = 1
-# Run-length matching only (Z_RLE) after the Paeth row filter on every row, instead of zlib's
-# default matching after libpng trying every filter per row: on 16 samples of the v3 recipe
-# (five 256² 16-bit images each) 23.8 instead of 56.2 ms per sample, 0.857 instead of 0.846 MB
-# (the filter does the work; long matches are rare in noisy renders). Lossless either way.
+# Run-length matching only (Z_RLE) after the Paeth row filter on every row: the filter does the
+# work, long matches are rare in noisy renders, and encoding is about twice as fast as zlib's
+# default matching after libpng's per-row filter search (docs/data.md#the-shard-format). Lossless.
 PNG_STRATEGY = cv2.IMWRITE_PNG_STRATEGY_RLE
 PNG_FILTER = cv2.IMWRITE_PNG_FILTER_PAETH
-# u16z: measured on the benchmark's 512² samples (11 planes, 5.8 MB raw), one thread: level 1 of
-# the shuffled bytes is 4.25 MB and decodes in ~5 ms; zlib level 1 of the same bytes is 4.0 MB but
-# takes ~50 ms; Zstandard level -1 (or lz4) ~2 ms but 4.7 MB, level 3 is 3 % smaller for 35 % more
-# decode time. Readers do not depend on the level (a Zstandard frame describes itself).
+# Zstandard level 1 of the shuffled bytes: the fast-decoding end of the size/speed trade-off
+# (docs/data.md#the-shard-format compares zlib, lz4 and other levels). Readers do not depend on
+# the level (a Zstandard frame describes itself).
 U16Z_LEVEL = 1
 _U16Z_MAGIC = b"U16Z"
 _U16Z_VERSION = 1
@@ -246,8 +180,9 @@ def encode_sample(sample: Sample, shard_format: str = "png") -> dict[str, bytes]
     """Encode a sample into its member files, keyed by the names of ``FORMAT_MEMBERS[shard_format]``.
 
     Every channel is rounded to the nearest of 65536 levels, the same in every format, and stored
-    as 16-bit PNGs (``png``) or byte-shuffled Zstandard planes (``u16z``, the module docstring has
-    the layout); the JSON has sorted keys and no whitespace so that equal metadata gives equal bytes.
+    as 16-bit PNGs (``png``) or byte-shuffled Zstandard planes (``u16z``, layout in
+    docs/data.md#the-shard-format); the JSON has sorted keys and no whitespace so that equal
+    metadata gives equal bytes.
 
     Shape:
         - sample.photo: ``(3, H, W)``; sample.maps: ``(8, H, W)``
@@ -435,7 +370,7 @@ def _decode_png(data: bytes, channels: int, where: str) -> np.ndarray:
 
 
 def _encode_u16z(planes: np.ndarray) -> bytes:
-    """``(C, H, W)`` uint16 planes as a ``.u16z`` member (layout in the module docstring)."""
+    """``(C, H, W)`` uint16 planes as a ``.u16z`` member (layout: docs/data.md#the-shard-format)."""
     channels, height, width = planes.shape
     value_bytes = np.ascontiguousarray(planes, dtype="<u2").view(np.uint8).reshape(-1, 2)
     shuffled = np.ascontiguousarray(value_bytes.T)  # row 0: every low byte, row 1: every high byte
@@ -466,8 +401,9 @@ def _decode_u16z(data: bytes, channels: int, where: str) -> np.ndarray:
     except zstandard.ZstdError as error:
         raise ShardError(f"{where}: corrupt u16z ({error})") from error
     halves = np.frombuffer(shuffled, dtype=np.uint8).reshape(2, 1, -1)
-    # cv2.merge interleaves the low and high byte rows back into values, ~30× faster than a
-    # NumPy transpose copy; little-endian pairs viewed as uint16 on a little-endian host.
+    # cv2.merge interleaves the low and high byte rows back into values, far faster than a NumPy
+    # transpose copy (docs/data.md#the-shard-format); little-endian pairs viewed as uint16 on a
+    # little-endian host.
     values = cv2.merge([halves[0], halves[1]]).view("<u2").reshape(channels, height, width)
     return values.astype(np.uint16, copy=False)
 
@@ -598,7 +534,7 @@ def verify_shard(path: str | os.PathLike[str], *, decode: bool = False) -> int:
 
 def iter_shard(path: str | os.PathLike[str]) -> Iterator[Sample]:
     """The decoded samples of one shard, in file order (for tools: contact sheets, converters,
-    tests; training streams through :mod:`brdfgan.data.datamodule`).
+    tests; training streams through :mod:`brdfgan.data.loading.datamodule`).
 
     Raises:
         ShardError: naming the file, when it is unreadable or a sample is malformed.

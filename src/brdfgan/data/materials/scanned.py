@@ -45,7 +45,7 @@ no normal), several candidate files for one map, a corrupt file, mismatched or n
 
 The sets feed datasets through :func:`read_scanned_material`, resized (linear-light base colour,
 renormalised normals) to the dataset's ``material_resolution``; a dataset of scanned materials
-is test only (:func:`brdfgan.data.generation.split_materials`).
+is test only (:func:`brdfgan.data.storage.generation.split_materials`).
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ from typing import Literal
 from torch import Tensor
 
 from brdfgan.core.svbrdf import NORMAL, resize_maps
-from brdfgan.data.spec_checks import DatasetConfigError
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 from brdfgan.io.maps import MapIOError, read_map_files
 
 log = logging.getLogger(__name__)

@@ -10,17 +10,17 @@ The protocol, and where each step lives:
    small datasets stay balanced) with every parameter drawn from its clipped normal, painted at
    ``material_resolution`` (paper: 2048²) — :mod:`brdfgan.data.materials`.
 3. ``crops_per_material`` random crops, rotated and scaled to ``resolution`` (paper: 7 at 512²) —
-   :mod:`brdfgan.data.augment`.
+   :mod:`brdfgan.data.loading.augment`.
 4. Every crop is photographed ``train_renders`` times in ``train`` (paper: 3) and
    ``eval_renders`` times in ``val``/``test`` (paper: 1): a random environment of the split's
    pool (``test`` uses the disjoint test pool; ``val`` holds out materials, not lighting, so it
    uses the training pool), randomly rotated, balanced against a random flash, through a capture
    geometry and exposure error drawn per photo (off by default: today's fixed camera) — rendered
-   with Mitsuba and auto-exposed to linear LDR — :mod:`brdfgan.data.lighting`,
-   :mod:`brdfgan.data.capture`, :mod:`brdfgan.mitsuba_render.capture`, :mod:`brdfgan.core.exposure`.
+   with Mitsuba and auto-exposed to linear LDR — :mod:`brdfgan.data.phone.environments`,
+   :mod:`brdfgan.data.phone.conditions`, :mod:`brdfgan.mitsuba_render.photos`, :mod:`brdfgan.core.exposure`.
 5. Materials are grouped ``materials_per_shard`` at a time into WebDataset shards
    ``<split>/<split>-NNNNNN.tar``, their samples stored in ``shard_format`` —
-   :mod:`brdfgan.data.shards`. A shard is the unit of work
+   :mod:`brdfgan.data.storage.shards`. A shard is the unit of work
    and a pure function of (spec, split, shard index): re-running skips complete shards, so a
    killed run resumes without duplicates, and any subset of shards can run in another process or
    on another machine (``generate.py shard=…``). Each shard's SHA-256 is recorded the moment it
@@ -50,13 +50,18 @@ from typing import Any
 import torch
 from torch import Tensor
 
+import brdfgan
 from brdfgan import __version__
 from brdfgan.core.render import FlashCapture
 from brdfgan.core.svbrdf import InvalidMapsError, validate_maps
-from brdfgan.data.augment import CropSampling, random_crops
-from brdfgan.data.capture import CaptureDraw, CaptureSampling
-from brdfgan.data.flash import FlashSampling, blackbody_rgb
-from brdfgan.data.lighting import (
+from brdfgan.data.loading.augment import CropSampling, random_crops
+from brdfgan.data.materials.families import resolve_families
+from brdfgan.data.materials.mixing import MixingConfig
+from brdfgan.data.materials.recolor import RecolorConfig
+from brdfgan.data.materials.scanned import scanned_material_folders
+from brdfgan.data.materials.source import PaintedMaterial, ScanSampling, paint_procedural, paint_scanned
+from brdfgan.data.phone.conditions import CaptureDraw, CaptureSampling
+from brdfgan.data.phone.environments import (
     EnvironmentPools,
     LightingConfig,
     LightingDraw,
@@ -65,12 +70,8 @@ from brdfgan.data.lighting import (
     flash_centre_irradiance,
     realize_lighting,
 )
-from brdfgan.data.material_source import PaintedMaterial, ScanSampling, paint_procedural, paint_scanned
-from brdfgan.data.materials.families import resolve_families
-from brdfgan.data.materials.mixing import MixingConfig
-from brdfgan.data.materials.recolor import RecolorConfig
-from brdfgan.data.scanned import scanned_material_folders
-from brdfgan.data.shards import (
+from brdfgan.data.phone.flash import FlashSampling, blackbody_rgb
+from brdfgan.data.storage.shards import (
     LEGACY_SHARD_FORMAT,
     SHARD_FORMATS,
     Sample,
@@ -86,7 +87,7 @@ from brdfgan.data.shards import (
     write_manifest,
     write_shard,
 )
-from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer
+from brdfgan.data.storage.spec_checks import DatasetConfigError, in_range, integer
 from brdfgan.errors import DiskFullError, is_disk_full
 from brdfgan.io.atomic import write_text_atomic
 
@@ -120,12 +121,12 @@ class DatasetSpec:
     capture: CaptureSampling = field(default_factory=CaptureSampling)
     mixing: MixingConfig = field(default_factory=MixingConfig)
     recolor: RecolorConfig = field(default_factory=RecolorConfig)
-    # A folder of scanned material sets (brdfgan.data.scanned) instead of the procedural
+    # A folder of scanned material sets (brdfgan.data.materials.scanned) instead of the procedural
     # families: such a dataset is test only, so real scans never become training data.
     scanned: str | None = None
     # Scanned sets as a share of every split's materials, beside the families (split by set).
     scans: ScanSampling = field(default_factory=ScanSampling)
-    # How samples are stored (brdfgan.data.shards): "u16z" or "png", the same 16-bit values either
+    # How samples are stored (brdfgan.data.storage.shards): "u16z" or "png", the same 16-bit values either
     # way. "png" here because a spec without the key (every dataset.json made before it) describes
     # PNG shards; conf/dataset_spec/default.yaml makes new datasets "u16z". Not part of a dataset's
     # identity: an existing dataset is finished and repaired in the format it records.
@@ -281,7 +282,7 @@ def split_materials(spec: DatasetSpec) -> dict[str, tuple[int, ...]]:
 
 
 def split_scan_sets(spec: DatasetSpec) -> dict[str, tuple[int, ...]]:
-    """Indices of the scanned sets (in :func:`~brdfgan.data.scanned.scanned_material_folders`'
+    """Indices of the scanned sets (in :func:`~brdfgan.data.materials.scanned.scanned_material_folders`'
     order) per split, each sorted: the sets ``test_sets`` and ``val_sets`` name, or as many as
     they say from a seeded permutation, held out; the rest ``train``. Empty without scans."""
     if not spec.scans.enabled:
@@ -360,12 +361,12 @@ class MitsubaPhotographer:
     capture puts it), a Mitsuba render through the drawn camera, auto exposure to linear LDR
     off by the drawn exposure error.
 
-    Keeps one :class:`~brdfgan.mitsuba_render.capture.CaptureRenderer` (scene reuse) and adds up
+    Keeps one :class:`~brdfgan.mitsuba_render.photos.CaptureRenderer` (scene reuse) and adds up
     the time spent inside ``mi.render`` (``mitsuba_seconds``) for the benchmark.
     """
 
     def __init__(self, spec: DatasetSpec) -> None:
-        from brdfgan.mitsuba_render.capture import CaptureRenderer
+        from brdfgan.mitsuba_render.photos import CaptureRenderer
 
         self.capture = FlashCapture()  # the sample size; each photo brings its own camera
         self.environment_resolution = spec.lighting.resolution
@@ -381,7 +382,7 @@ class MitsubaPhotographer:
         capture: CaptureDraw,
         seed: int,
     ) -> tuple[Tensor, float]:
-        from brdfgan.mitsuba_render.capture import render_capture
+        from brdfgan.mitsuba_render.photos import render_capture
 
         r, g, b = blackbody_rgb(temperature_k)
         flash = (flash_intensity * r, flash_intensity * g, flash_intensity * b)
@@ -463,7 +464,7 @@ def material_samples(
 def paint_material(
     spec: DatasetSpec, split: str, material_index: int, generator: torch.Generator
 ) -> PaintedMaterial:
-    """The maps of material ``material_index`` of ``split`` (:mod:`brdfgan.data.material_source`):
+    """The maps of material ``material_index`` of ``split`` (:mod:`brdfgan.data.materials.source`):
     a scanned set (a test-only scanned dataset's, or one of the split's sets where
     :func:`scan_materials` says so), or a family draw from ``generator`` (mixed with a partner
     of the same split and recoloured as the spec says)."""
@@ -519,7 +520,7 @@ class GenerationSummary:
 def code_version() -> dict[str, str]:
     """Package version and, from a source checkout, the git commit (recorded in manifests)."""
     version = {"brdfgan": __version__, "torch": torch.__version__}
-    checkout = Path(__file__).resolve().parents[3]
+    checkout = Path(brdfgan.__file__).resolve().parents[2]  # <checkout>/src/brdfgan/__init__.py
     if (checkout / ".git").exists():  # a directory, or a file in a worktree or submodule
         # git itself resolves worktrees, packed refs and detached heads.
         try:
@@ -676,9 +677,9 @@ def single_torch_thread() -> Iterator[None]:
 
     Generation paints and crops with torch between Mitsuba renders, and Mitsuba runs its own
     thread pool over every core: two torch threads beside it only fought it for the cores
-    (measured on the 2-core machine: 10.3 s instead of 16.6 s for the same 16 photos of the v3
-    recipe, Mitsuba's share unchanged). One thread also makes the bytes of a shard independent of
-    the machine's core count, which a parallel float reduction's order would otherwise change.
+    (docs/benchmarks.md#dataset-generation-and-loading). One thread also makes the bytes of a
+    shard independent of the machine's core count, which a parallel float reduction's order would
+    otherwise change.
     Scale out with processes instead (``generate.py -m shard=…``).
     """
     threads = torch.get_num_threads()
@@ -851,7 +852,7 @@ def ensure_dataset(
     it, raised before anything is written. A complete dataset is used wherever it is.
 
     ``splits`` limits all of this to those splits' shards (a model trained on photos rendered on
-    the fly, :mod:`brdfgan.data.rendered`, needs only the validation and test shards).
+    the fly, :mod:`brdfgan.data.loading.rendered`, needs only the validation and test shards).
     ``check_only``: raise what a call would raise about the path, but generate nothing (a run
     checks its data path before building anything; generation waits for ``prepare_data``, which
     Lightning calls on one process per machine).

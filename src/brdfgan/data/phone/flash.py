@@ -13,7 +13,7 @@ import torch
 
 from brdfgan.core.exposure import luminance_value
 from brdfgan.core.sampling import log_uniform
-from brdfgan.data.spec_checks import in_range, ordered
+from brdfgan.data.storage.spec_checks import in_range, ordered
 
 MIN_TEMPERATURE_K = 1667.0
 MAX_TEMPERATURE_K = 25000.0

@@ -1,81 +1,14 @@
 """Phone sensor and file effects on a training photo, so training sees what ``brdfgan predict`` sees.
 
-Training photos are perfect linear LDR renders; a real input is a phone JPEG that
-:func:`~brdfgan.inference.intake.photo.read_photo` linearises and
-:func:`~brdfgan.inference.intake.preprocess.preprocess` auto-exposes. :class:`SensorEffects`
-turns a rendered photo into what that path would give for a phone's file of it, in this order::
-
-    linear LDR photo (the render: the scene under the flash's colour)
-      ─ vignetting            radial cos⁴-like falloff, random corner darkening     (optics)
-      ─ auto white balance    the flash's colour divided out (optional)             (ISP)
-      ─ white-balance error   random gains on red and blue, green fixed             (ISP)
-      ─ shot and read noise   Gaussian with variance a·x + b, a and b log-uniform   (sensor)
-      ├ RAW capture (raw_probability):
-      │ ─ clip to [0, 1], 16-bit linear quantisation             (rawpy's output in read_photo)
-      └ JPEG (otherwise):
-        ─ clip to [0, 1], sRGB encoding (float: the display-referred values)        (ISP)
-        ─ local contrast      large-radius unsharp mask of the luma ("clarity")     (ISP, LTM)
-        ─ tone curve          S-shaped contrast curve around 0.5, random strength   (ISP)
-        ─ saturation boost    chroma scaled around the luma, random factor          (ISP, YUV)
-        ─ sharpening          small-radius unsharp mask of the luma                 (ISP, YUV)
-        ─ clip, 8-bit quantisation                                                  (the file)
-        ─ JPEG at a random quality, decoded to 8 bits again (Pillow's libjpeg)
-        ─ linearisation with predict's table (srgb_decoding_table)                  (read_photo)
-      ─ auto exposure, as preprocess applies it                                     (preprocess)
-
-Every effect has a probability (0 switches it off); the file steps (clip, sRGB, 8 bits,
-linearisation) always run, and the final auto exposure has its own flag. ``enabled=False`` (or
-no ``SensorEffects`` at all) leaves the photo untouched, bit for bit.
-
-Where the phone processing sits. A phone's ISP balances, demosaics and colour-corrects the raw
-signal, then renders it for display: local tone mapping, a global tone curve (the sRGB curve and
-an S-curve on top of it, one look-up table), colour in YUV (saturation), and edge enhancement on
-the luma last, right before the JPEG encoder. Here the display-referred signal is the
-sRGB-encoded float image, so the four "look" effects act on it, in that order, between the
-sRGB curve and the 8-bit quantisation; the network then sees the processed file linearised with
-the plain sRGB table, exactly as ``brdfgan predict`` linearises a phone JPEG (it cannot undo a
-tone curve it does not know). A RAW capture (a DNG that ``read_photo`` demosaics linearly, with
-the camera's white balance) has none of them: noise and white balance, then 16-bit linear.
-
-Auto white balance. The renders are lit by a black-body flash of 4000–6500 K
-(:func:`~brdfgan.data.flash.blackbody_rgb`, ``meta["flash"]["temperature_k"]``), and the render
-keeps its orange-to-neutral cast; a phone's AWB removes it. With ``auto_white_balance`` the photo
-is divided by the flash's colour with the gains scaled so the smallest is 1
-(:func:`auto_white_balance_gains`), as LibRaw/dcraw scale a camera's multipliers: a pixel
-clipped in every channel then stays clipped, i.e. white, instead of turning cyan (gains scaled to
-green = 1 would be 0.65 on red at 4000 K). A neutral surface ends at the level of the render's
-strongest channel (×1.04 in luminance at 6500 K, ×1.4 at 4000 K); the final auto exposure
-re-exposes it, as preprocess does. The noise is then that of the raw signal seen through the
-gains (variance g·a·x + g²·b per channel: blue noisier under a warm flash). The residual error a
-phone's AWB leaves is the white-balance error step; its default of ±10 % on red and blue (a few
-degrees of angular error, the order of good AWB algorithms' errors; at most ≈ 500 K along the
-Planckian locus near 5000 K) is kept for it.
-Only the flash is divided out: the environment light in the render keeps its colour relative
-to the flash, as it does in a phone photo with flash.
-
-Why Pillow and not kornia for the JPEG step: ``kornia.enhance.jpeg_codec_differentiable`` (and
-``kornia.augmentation.RandomJPEG``, built on it) approximates the codec differentiably; on a
-256² image it differs from libjpeg by ~7 codes on average (noise image, quality 80) and took
-~22 ms against Pillow's ~3 ms on this CPU. No gradient flows through the data pipeline, and
-Pillow is what ``read_photo`` decodes JPEGs with, so the simulated file is a real JPEG and its
-decoding is bit-identical to predict's. The sRGB curve has one home too
-(:mod:`brdfgan.core.svbrdf`), so ``kornia.color`` is not used either.
-
-Ranges (defaults). Noise: the "unprocessing" model of Brooks et al. 2019 (shot variance per unit
-signal a ∈ [1e-4, 1.2e-2], log-uniform; their read variance b follows log b ≈ 2.18 log a + 1.2,
-which spans ≈ [1e-8, 2e-4] over that range; here b is drawn log-uniform over that span,
-independently of a). JPEG: quality 70–95, what phone cameras and apps write. Vignetting: up to
-30 % darker corners (what remains after a phone's lens-shading correction). White balance: red and
-blue gains log-uniform within ±10 %.
-
-Limits. Everything happens at the network's resolution, as if the phone's file were the network
-input. A real photo is cropped and downscaled by ``preprocess`` first (a 12 MP photo's central
-square to 256² averages ~140 pixels into one), which removes most of its noise, JPEG blocks and
-quantisation; these effects are therefore stronger here than on a large phone photo, and match a
-photo taken or saved at about the network's size. This holds for the sharpening too: a phone
-sharpens at full resolution, and a 1-pixel unsharp mask here acts on what is a ~12-pixel scale of
-a 12 MP photo. Phone denoising is not modelled, nor the large-scale range compression of a
-phone's local tone mapping (only its detail boost, the local contrast step).
+:class:`SensorEffects` turns a rendered linear LDR photo into what predict's intake
+(:func:`~brdfgan.inference.intake.photo.read_photo`, then
+:func:`~brdfgan.inference.intake.preprocess.preprocess`) gives for a phone's file of it:
+vignetting, auto white balance and its residual error, shot and read noise, then either a RAW
+capture (16-bit linear) or the phone's look, 8 bits and a real JPEG, linearised and auto-exposed
+exactly as predict does (Pillow's libjpeg and :func:`~brdfgan.core.svbrdf.srgb_decoding_table`:
+bit-identical to the intake). Every effect has a probability (0 switches it off); ``enabled=False``
+(or no ``SensorEffects`` at all) leaves the photo untouched, bit for bit. The order, the ranges and
+the reasons for them, and the limits: docs/data.md#photos-as-phones-deliver-them.
 """
 
 from __future__ import annotations
@@ -97,8 +30,8 @@ from brdfgan.core.exposure import LUMINANCE_WEIGHTS, auto_expose
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.sampling import log_uniform
 from brdfgan.core.svbrdf import linear_to_srgb, srgb_decoding_table
-from brdfgan.data.flash import blackbody_rgb
-from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, ordered
+from brdfgan.data.phone.flash import blackbody_rgb
+from brdfgan.data.storage.spec_checks import DatasetConfigError, in_range, integer, ordered
 
 __all__ = [
     "SensorEffects",
@@ -368,9 +301,9 @@ def _phone_uniforms(generator: torch.Generator) -> list[float]:
 
 @dataclass(frozen=True)
 class SensorEffects:
-    """Random sensor and file effects; see the module docstring for the pipeline and the ranges.
+    """Random sensor and file effects (pipeline and ranges: docs/data.md#photos-as-phones-deliver-them).
 
-    Configured as ``data.sensor`` (``_target_: brdfgan.data.sensor.SensorEffects``); every value
+    Configured as ``data.sensor`` (``_target_: brdfgan.data.phone.sensor.SensorEffects``); every value
     is checked on construction and a bad one raises a one-line error naming
     ``data.sensor.<key>``. Each ``*_probability`` is the chance that the effect is applied to a
     photo (0: never, 1: always). Ranges are ``[min, max]``; equal bounds make a constant.
@@ -581,7 +514,8 @@ class SensorEffects:
         self, linear: Tensor, u: list[float], phone: list[float], record: dict[str, Any]
     ) -> Tensor:
         """The 8-bit codes of the phone's JPEG of ``linear``: the processing on the sRGB-encoded
-        values, quantisation and the JPEG step (see the module docstring), recorded in ``record``."""
+        values, quantisation and the JPEG step (in the order of docs/data.md#photos-as-phones-deliver-them),
+        recorded in ``record``."""
         display = linear_to_srgb(linear.clamp(0.0, 1.0).to(torch.float32))
         if phone[1] < self.local_contrast_probability:
             amount = self.local_contrast_min + phone[2] * (self.local_contrast_max - self.local_contrast_min)

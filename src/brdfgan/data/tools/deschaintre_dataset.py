@@ -5,7 +5,7 @@ Their dataset stores each sample as one PNG of five square tiles side by side::
     input | normal | diffuse | roughness | specular
 
 (256² tiles in the test sets, 288² in the training set that their code crops to 256²). This
-module turns such files into our samples (:class:`~brdfgan.data.shards.Sample`, our 8-channel map
+module turns such files into our samples (:class:`~brdfgan.data.storage.shards.Sample`, our 8-channel map
 layout) and a folder of them into sharded splits with a manifest, so ``evaluate.py`` can run on that
 public data. Encodings assumed, tile by tile (each choice is documented where it is made):
 
@@ -67,7 +67,14 @@ from brdfgan.core.svbrdf import (
     split_maps,
     srgb_to_linear,
 )
-from brdfgan.data.shards import Sample, ShardInfo, list_shards, shard_path, write_manifest, write_shard
+from brdfgan.data.storage.shards import (
+    Sample,
+    ShardInfo,
+    list_shards,
+    shard_path,
+    write_manifest,
+    write_shard,
+)
 from brdfgan.errors import UserError
 from brdfgan.io.images import ImageIOError, read_image, write_image
 
@@ -333,7 +340,7 @@ def convert_deschaintre_folder(
     overwrite: bool = False,
 ) -> ConversionSummary:
     """Convert every ``*.png`` of ``src_dir`` (sorted by name) into ``out_dir/<split>/`` shards
-    and a manifest, the layout :class:`~brdfgan.data.datamodule.ShardDataModule` reads.
+    and a manifest, the layout :class:`~brdfgan.data.loading.datamodule.ShardDataModule` reads.
 
     Shards hold ``samples_per_shard`` samples each (the last one fewer); keys are
     ``<index>_<file name>``. An existing split with shards is refused unless ``overwrite``, which
@@ -380,7 +387,7 @@ def convert_deschaintre_folder(
     if not shards:
         raise DeschaintreDatasetError(f"{src}: none of the {len(files)} .png files is a valid sample")
 
-    from brdfgan.data.generation import code_version  # heavy imports, needed only here
+    from brdfgan.data.storage.generation import code_version  # heavy imports, needed only here
 
     count = sum(info.count for info in shards)
     manifest = {

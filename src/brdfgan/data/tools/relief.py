@@ -30,7 +30,7 @@ from brdfgan.core.checks import check_shape
 from brdfgan.core.exposure import auto_exposure_scale, log_luminance
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.svbrdf import NORMAL
-from brdfgan.data.rendered import render_scenes
+from brdfgan.data.loading.rendered import render_scenes
 from brdfgan.losses.parameter import TILT_Z_MIN
 from brdfgan.metrics import observable_mask, srgb8_rounding_log  # their home: the evaluator grades with them
 
@@ -279,7 +279,7 @@ def scene_relief_shading(
     exposure_ev: Tensor,
 ) -> Tensor:
     """What the relief does to a training photo: ``log Y(P_n) − log Y(P_flat)``, ``P_n`` the photo
-    of the scene as :func:`~brdfgan.data.rendered.photograph_scenes` takes it (the flash at its
+    of the scene as :func:`~brdfgan.data.loading.rendered.photograph_scenes` takes it (the flash at its
     offset and the environment's distant lights, :func:`~brdfgan.core.render.render_point_lights`,
     resampled into the photo's pixels, auto-exposed off by the drawn error and clipped to [0, 1])
     and ``P_flat`` the same photo of the maps with flat normals **at ``P_n``'s exposure**; ``Y`` the

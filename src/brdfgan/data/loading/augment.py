@@ -39,7 +39,7 @@ from brdfgan.core.svbrdf import (
     normalize_normal,
     srgb_to_linear,
 )
-from brdfgan.data.spec_checks import in_range, ordered
+from brdfgan.data.storage.spec_checks import in_range, ordered
 
 
 @dataclass(frozen=True)

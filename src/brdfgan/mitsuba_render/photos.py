@@ -3,9 +3,9 @@
 Scene: the textured plane of :func:`brdfgan.mitsuba_render.scene.plane_scene_dict` (principled +
 normalmap, nearest-filtered raw bitmaps, rows flipped), a camera (the nominal one of
 :class:`~brdfgan.core.render.FlashCapture` or any :class:`~brdfgan.core.render.CameraPose`, as
-:mod:`brdfgan.data.capture` draws them), a point-light flash (at the lens or next to it), an ``envmap``
-emitter holding an equirect array of :mod:`brdfgan.core.lighting` (its +Y-up frame turned to our
-+Z-up by :data:`~brdfgan.mitsuba_render.environment.ENVMAP_TO_WORLD`) and, for sun/sky
+:mod:`brdfgan.data.phone.conditions` draws them), a point-light flash (at the lens or next to
+it), an ``envmap`` emitter holding an equirect array of :mod:`brdfgan.core.lighting` (its +Y-up
+frame turned to our +Z-up by :data:`~brdfgan.mitsuba_render.environment.ENVMAP_TO_WORLD`) and, for sun/sky
 environments, the sun as a ``directional`` emitter.
 
 Integrator: ``direct``. Per pixel sample it takes one emitter sample (envmap importance sampling
@@ -17,20 +17,15 @@ plane cannot see itself, so there is no indirect light and ``direct`` is exact �
 Sampler: ``stratified`` (so ``spp`` must be a square: 64 = 8², the paper's 196 = 14²). With several
 emitters, each emitter sample picks one of them at random; with an independent sampler that
 choice alone puts ~1/√spp relative noise on the flash term (a delta light that is otherwise
-noise-free). Stratifying the choice over a pixel's samples removed most of it: relative L1 to a
-4096-spp reference at 64 spp went from 6.6 % (independent) to 1.6 % (stratified), measured here.
+noise-free). Stratifying the choice over a pixel's samples removes most of it
+(docs/conventions.md#capture-rendering).
 
 Scene reuse: the scene is loaded once per emitter set (environment yes/no, sun yes/no) and then
 updated per sample through ``mi.traverse`` + ``params.update()`` (textures, envmap data, flash
 intensity and position, sun, the sensor's ``x_fov`` and ``to_world``); a change of map or
-environment shape reloads it. A new camera pose per sample costs no kernel recompile (measured:
-128², random poses of :mod:`brdfgan.data.capture` per sample render as fast as a fixed one).
-Measured on this 2-core machine while otherwise idle (``llvm_ad_rgb``,
-``python -m benchmarks.bench_capture``, median of 6): a ``render()`` call takes 0.349 s with
-traverse-update vs 0.361 s with a reload at 256²/64 spp, 4.01 s vs 4.06 s at 512²/196 spp. The
-work outside ``mi.render`` shrinks from 33 to 18 ms (256²) and from 51 to 33 ms (512²), but
-``mi.render`` itself is 92–99 % of the call, so reuse gains only 1–4 %. It is the default
-(``reuse_scene=True``); results are identical either way (tested).
+environment shape reloads it. A new camera pose per sample costs no kernel recompile. Reuse is the
+default (``reuse_scene=True``) though ``mi.render`` dominates a call, so it gains only a few
+percent (docs/conventions.md#capture-rendering); results are identical either way (tested).
 """
 
 from __future__ import annotations
@@ -288,8 +283,8 @@ class CaptureRenderer:
                     resolution=self.resolution,
                     spp=self.spp,
                     # The sampler's load-time seed also enters the samples (stratified sampler,
-                    # measured): keep it fixed so a reused scene and a fresh one agree, and vary
-                    # only the seed of mi.render.
+                    # docs/conventions.md#capture-rendering): keep it fixed so a reused scene and
+                    # a fresh one agree, and vary only the seed of mi.render.
                     seed=0,
                 )
             )

@@ -35,8 +35,8 @@ import torch
 
 from brdfgan.core.lighting import Environment, equirect_directions, flash_irradiance, normalize_environment
 from brdfgan.core.sampling import log_uniform
-from brdfgan.data.flash import blackbody_rgb
-from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, ordered
+from brdfgan.data.phone.flash import blackbody_rgb
+from brdfgan.data.storage.spec_checks import DatasetConfigError, in_range, integer, ordered
 from brdfgan.errors import UserError
 from brdfgan.mitsuba_render.environment import sunsky_environment
 

@@ -1,76 +1,13 @@
-"""Streaming ``LightningDataModule`` over the WebDataset shards of :mod:`brdfgan.data.shards`.
+"""Streaming ``LightningDataModule`` over the WebDataset shards of :mod:`brdfgan.data.storage.shards`.
+What a batch holds, epochs, shuffling, resuming, validation subsets, fewer shards than workers,
+the simulated phone and skipped data: docs/data.md#loading.
 
-Pipeline (one per DataLoader worker; webdataset reads the shards)::
-
-    shard list ─ split by rank ─ split by worker ─ read tar ─ group members ─ [shuffle buffer]
-        ─ decode_sample ─ batch ─ (train: cut to the epoch's batch quota)
-
-Batches are formed inside the workers and the DataLoader runs with ``batch_size=None``, so one
-worker sends one ready batch (a single shared-memory transfer) and the number of batches per
-rank is under our control. A batch is::
-
-    {"photo": (B, 3, H, W) float32, linear LDR in [0, 1],
-     "maps": (B, 8, H, W) float32, layout of brdfgan.core.svbrdf,
-     "key": list[str], "meta": list[dict]}
-
-``meta`` stays a list of plain dicts (one per sample): Lightning's device transfer and
-``pin_memory`` leave non-tensors alone, and nothing is lost to a collation of mixed types.
-
-Training is an infinite stream cut into epochs of ``epoch_samples`` (default: the number of valid
-samples in the train split). Every rank yields exactly :attr:`ShardDataModule.train_batches_per_epoch`
-full batches per epoch, so DDP ranks never wait on each other. Each epoch the shard list is
-permuted with a seed from ``(seed, epoch)`` — the same on every rank and worker, so splitting the
-permuted list still partitions it — and each worker keeps a shuffle buffer of ``shuffle_buffer``
-undecoded samples (memory: buffer × compressed sample size, ≈ 4–5 MB per sample at 512² for
-noisy data, per worker). Webdataset's own ``shardshuffle`` is not used: it permutes after the
-split with the same seed every epoch. The epoch counter lives in the dataset object; train
-workers are persistent so that each keeps counting (a fresh worker would restart at epoch 0).
-
-Resume. A train loader made while Lightning restores a checkpoint starts at the epoch reached
-and skips, in each worker, exactly the batches of that epoch the run had already trained on
-(the stream is a pure function of ``(seed, epoch, rank, worker)``, so skipping reproduces the
-position, shuffle buffer and crop draws included): the resumed run sees the same samples in the
-same order as an uninterrupted one.
-
-Validation and test read every sample exactly once, in a fixed order (no shuffling), split by
-rank and by worker; ``val_samples`` caps validation at a fixed subset of that size, distributed
-over ranks and workers from the per-shard counts.
-
-Fewer shards than ranks × workers. Webdataset splits whole shards with ``islice(urls, i, None,
-n)``; a worker or rank that gets no shard yields nothing and, with its default
-``empty_check=True``, raises "No samples found in dataset". Here ``empty_check`` is off and:
-- train: if shards < ranks × workers, no splitting happens; every worker streams all shards in its
-  own seeded order (sampling with repetition, like webdataset's ``resampled`` mode) and a
-  :class:`ShardWarning` says so. Epoch lengths stay exact, so nothing hangs.
-- val/test: if shards < ranks, every rank evaluates the whole split (correct metrics, repeated
-  work) instead of leaving ranks with zero batches; if shards < workers, the extra workers idle.
-  Both cases warn. Ranks may still get different numbers of batches when shards hold different
-  counts: log with ``sync_dist`` at epoch end (the default for validation), never call a
-  collective inside ``validation_step``.
-
-Rank and world size are read once in :meth:`ShardDataModule.setup` (from the trainer) and
-stored in the dataset: webdataset's ``split_by_node`` asks ``torch.distributed`` inside the
-worker, which is not initialised in spawned workers and would make every rank read every shard.
-
-Sensor effects. With a :class:`~brdfgan.data.sensor.SensorEffects` (``sensor``), the photos of the
-splits in ``sensor_splits`` (default: train only, so validation and test metrics stay comparable
-across models) go through the simulated phone capture and ``predict``'s decoding in the worker,
-on the whole sample and before the train crop: the vignetting is centred on the frame and the
-auto exposure sees the whole photo, as in ``predict``. Each sample's noise comes from a generator
-seeded by ``(seed, epoch, repeat, key)`` in training (``repeat``: its pass over the shards within
-the epoch) and ``key`` alone in val/test, so a rerun and a resumed run draw the same values and runs
-of any seed are validated on the same photos; what
-was drawn is in ``meta["sensor"]``. The crop draws are separate, so switching the sensor on or
-off leaves every crop where it was. ``eval_sensor`` is applied to the other splits instead,
-typically the intake alone (no effects, 8-bit sRGB and ``predict``'s auto exposure: a photo with
-an exposure error is re-exposed as ``brdfgan predict`` would), so evaluation sees what inference
-sees without noise that would make metrics less comparable.
-
-Corrupt data. :meth:`setup` verifies every shard's structure (headers only, see
-:func:`~brdfgan.data.shards.verify_shard`); truncated or garbage shards are skipped with a
-:class:`ShardWarning` naming them. Errors while streaming (a sample that does not decode, a read
-error) are warned about and skipped too. :attr:`ShardDataModule.skipped` counts both, across
-worker processes.
+The contract: every rank yields exactly :attr:`ShardDataModule.train_batches_per_epoch` full
+batches per training epoch, so DDP ranks never wait on each other; the training stream is a pure
+function of ``(seed, epoch, rank, worker)``, so a resumed run sees the samples an uninterrupted one
+would, in the same order; validation and test read every sample once, in a fixed order. Damaged
+shards and samples are skipped with a :class:`ShardWarning` and counted in
+:attr:`ShardDataModule.skipped`, across worker processes.
 """
 
 from __future__ import annotations
@@ -94,9 +31,9 @@ from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
 from brdfgan.core.flash_geometry import pixel_scale
 from brdfgan.core.render import FlashCapture
-from brdfgan.data.capture import sample_as_photographed
-from brdfgan.data.sensor import SensorEffects
-from brdfgan.data.shards import (
+from brdfgan.data.phone.conditions import sample_as_photographed
+from brdfgan.data.phone.sensor import SensorEffects
+from brdfgan.data.storage.shards import (
     MANIFEST_NAME,
     Sample,
     ShardError,
@@ -105,7 +42,7 @@ from brdfgan.data.shards import (
     read_manifest,
     verify_shard,
 )
-from brdfgan.data.spec_checks import DatasetConfigError
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 from brdfgan.metrics import hotspot_centres, stored_photo_size
 
 __all__ = [
@@ -266,7 +203,7 @@ class EpochStream(IterableDataset):
 
 
 class ShardStream(EpochStream):
-    """Batches of one split for one rank; see the module docstring for the splitting rules.
+    """Batches of one split for one rank; the splitting rules: docs/data.md#loading.
 
     ``kind="train"``: infinite shuffled stream cut to ``batches_per_epoch`` full batches per
     epoch (summed over the DataLoader workers). ``"val"``/``"test"``: one pass in shard order,
@@ -425,15 +362,21 @@ class ShardStream(EpochStream):
         dataset = wds.WebDataset(
             list(urls),
             handler=self._stream_error,
-            shardshuffle=False,  # the list comes permuted (train) or in order (val/test)
+            # The list comes permuted (train) or in order (val/test); webdataset's own shuffle
+            # would permute after the split, with the same seed every epoch.
+            shardshuffle=False,
             nodesplitter=self._split_by_rank if split_ranks else None,
             workersplitter=wds.split_by_worker if split_workers else None,
-            empty_check=False,  # an idle worker is fine; see the module docstring
+            # A rank or worker left without a shard yields nothing instead of raising "No samples
+            # found in dataset": too few shards are handled (and warned about) by the caller.
+            empty_check=False,
         )
         return iter(dataset)
 
     def _split_by_rank(self, source: Iterator[dict]) -> Iterator[dict]:
-        # Like wds.split_by_node, but with the rank stored at setup (see the module docstring).
+        # Like wds.split_by_node, but with the rank stored at setup: split_by_node asks
+        # torch.distributed inside the worker, which spawned workers have not initialised, so
+        # every rank would read every shard.
         yield from islice(source, self.rank, None, self.world_size)
 
     def _stream_error(self, error: Exception) -> bool:
@@ -577,12 +520,12 @@ class ShardDataModule(L.LightningDataModule):
             :func:`random_crop`), e.g. 128² crops of 256² data for 4× cheaper steps; validation
             and test always see whole samples. ``None``: whole samples.
         prepare: called by :meth:`prepare_data` (rank 0 only), e.g. to generate a missing dataset.
-        sensor: simulated phone sensor and file effects on the photos (see the module docstring);
+        sensor: simulated phone sensor and file effects on the photos (docs/data.md#loading);
             ``None`` or ``enabled: false``: the stored photos as they are.
         sensor_splits: the splits ``sensor`` applies to, among ``"train"``, ``"val"``, ``"test"``.
         eval_sensor: applied to the splits not in ``sensor_splits`` (``None``: stored photos).
         align_maps: resample each sample's maps into its photo's pixels (the recorded camera,
-            :func:`~brdfgan.data.capture.maps_as_photographed`), for training and evaluation alike;
+            :func:`~brdfgan.data.phone.conditions.maps_as_photographed`), for training and evaluation alike;
             ``False`` reads them in texture space as stored (how models before v4 were trained and
             measured).
 
@@ -836,7 +779,9 @@ class ShardDataModule(L.LightningDataModule):
     def _loader(self, stream: EpochStream, *, persistent: bool) -> DataLoader:
         return DataLoader(
             stream,
-            batch_size=None,  # batches are formed in the workers
+            # Batches are formed in the workers: one shared-memory transfer per batch, and the
+            # number of batches per rank is this module's to fix (exact epochs).
+            batch_size=None,
             num_workers=self.num_workers,
             pin_memory=self.pin_memory,
             persistent_workers=persistent,

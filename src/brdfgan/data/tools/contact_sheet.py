@@ -19,8 +19,8 @@ import numpy as np
 import torch
 
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, resize_image, split_maps
-from brdfgan.data.material_source import SCANNED_PREFIX
-from brdfgan.data.shards import Sample, iter_shard, list_shards
+from brdfgan.data.materials.source import SCANNED_PREFIX
+from brdfgan.data.storage.shards import Sample, iter_shard, list_shards
 from brdfgan.errors import UserError
 from brdfgan.figures import caption, with_column_header
 from brdfgan.io.images import write_image

@@ -50,8 +50,8 @@ from brdfgan.core.render import (
     project_to_image,
     view_footprint,
 )
-from brdfgan.data.shards import Sample
-from brdfgan.data.spec_checks import in_range, ordered
+from brdfgan.data.storage.shards import Sample
+from brdfgan.data.storage.spec_checks import in_range, ordered
 
 FOV_RANGE_DEG = (1.0, 120.0)
 # With the widest field of view the corner rays are 67.8° off the axis; 20° of tilt keeps them
@@ -276,10 +276,10 @@ def maps_as_photographed(maps: torch.Tensor, meta: Mapping[str, Any]) -> torch.T
 
     Why: a randomised capture looks at the sample from a few per cent closer and up to a few
     degrees tilted, so in texture space a texel lies up to ~5 px (at 256²) away from where the photo
-    shows it. Fine relief then has no fixed relation to the photo — measured on the v3 data, the
-    high-pass correlation between photo and base colour was 0.05–0.5 in texture space and 0.8–0.9
-    in the photo's view — and a network learns only what survives that blur (its normals came out
-    flat). Unchanged (the same tensor) for samples without a recorded camera.
+    shows it. Fine relief then has no fixed relation to the photo, and a network learns only what
+    survives that blur (``docs/default_model_v3.md``, "The maps were not where the photos showed
+    them", has the correlations before and after). Unchanged (the same tensor) for samples
+    without a recorded camera.
 
     Shape:
         - maps: ``(8, H, W)``

@@ -1,7 +1,7 @@
 """Training photos rendered on the fly: a bank of material maps, fresh capture conditions for every
 draw, the project's torch renderer.
 
-Shards (:mod:`brdfgan.data.generation`) photograph each training material once or a few times,
+Shards (:mod:`brdfgan.data.storage.generation`) photograph each training material once or a few times,
 under one light each, and cost every fresh machine the whole generation before its first step.
 Here a training sample is drawn anew every time:
 
@@ -22,7 +22,7 @@ Here a training sample is drawn anew every time:
    auto-exposes it off by the drawn error. This runs in
    :meth:`RenderedDataModule.on_after_batch_transfer`, on the device the model trains on: the
    CPU workers draw and crop, a GPU renders.
-5. **The phone** (``sensor``, :class:`~brdfgan.data.sensor.SensorEffects`) and the train crop, as
+5. **The phone** (``sensor``, :class:`~brdfgan.data.phone.sensor.SensorEffects`) and the train crop, as
    for shard photos.
 
 Validation and test stay Mitsuba shards (only those splits are generated), so no model is graded
@@ -52,11 +52,29 @@ from brdfgan.core.relight import SKY_LIGHT_DISTANCE
 from brdfgan.core.render import PointLights, render_point_lights, view_grid, warp_maps_to_view, warp_to_view
 from brdfgan.core.sampling import log_uniform
 from brdfgan.core.svbrdf import BASECOLOR, NORMAL, normalize_normal
-from brdfgan.data.augment import random_crops
-from brdfgan.data.capture import CaptureDraw
-from brdfgan.data.datamodule import EpochStream, ShardDataModule, collate_samples, random_crop, sensed_sample
-from brdfgan.data.flash import blackbody_rgb
-from brdfgan.data.generation import (
+from brdfgan.data.loading.augment import random_crops
+from brdfgan.data.loading.datamodule import (
+    EpochStream,
+    ShardDataModule,
+    collate_samples,
+    random_crop,
+    sensed_sample,
+)
+from brdfgan.data.materials.base import height_to_normal
+from brdfgan.data.materials.noise import fbm
+from brdfgan.data.materials.scanned import read_scanned_material, scanned_material_folders
+from brdfgan.data.materials.source import PaintedMaterial, recolor_scan
+from brdfgan.data.phone.conditions import CaptureDraw
+from brdfgan.data.phone.environments import (
+    EnvironmentSpec,
+    balance_environment,
+    build_environment_pools,
+    draw_lighting,
+    flash_centre_irradiance,
+    load_environment,
+)
+from brdfgan.data.phone.flash import blackbody_rgb
+from brdfgan.data.storage.generation import (
     DatasetSpec,
     derive_seed,
     material_seed,
@@ -66,20 +84,8 @@ from brdfgan.data.generation import (
     split_materials,
     split_scan_sets,
 )
-from brdfgan.data.lighting import (
-    EnvironmentSpec,
-    balance_environment,
-    build_environment_pools,
-    draw_lighting,
-    flash_centre_irradiance,
-    load_environment,
-)
-from brdfgan.data.material_source import PaintedMaterial, recolor_scan
-from brdfgan.data.materials.base import height_to_normal
-from brdfgan.data.materials.noise import fbm
-from brdfgan.data.scanned import read_scanned_material, scanned_material_folders
-from brdfgan.data.shards import Sample, ShardError, decode_maps, encode_maps
-from brdfgan.data.spec_checks import DatasetConfigError, in_range, integer, ordered
+from brdfgan.data.storage.shards import Sample, ShardError, decode_maps, encode_maps
+from brdfgan.data.storage.spec_checks import DatasetConfigError, in_range, integer, ordered
 from brdfgan.io.atomic import atomic_replace, write_text_atomic
 
 __all__ = [
@@ -437,9 +443,9 @@ def draw_scene(
     relief: ReliefSampling = ReliefSampling(),
 ) -> PhotoScene:
     """One training photo's scene, a pure function of ``seed``: a bank material and a crop of it,
-    the capture, flash and lighting draws of the spec (as :func:`~brdfgan.data.generation.material_samples`
-    draws them for a Mitsuba render) with the environment as ``environment_lights_count`` distant
-    lights plus its sun."""
+    the capture, flash and lighting draws of the spec (as
+    :func:`~brdfgan.data.storage.generation.material_samples` draws them for a Mitsuba render)
+    with the environment as ``environment_lights_count`` distant lights plus its sun."""
     spec = bank.spec
     generator = torch.Generator().manual_seed(seed)
     material = bank.draw(generator)
@@ -647,7 +653,7 @@ class RenderedStream(EpochStream):
 
 
 class RenderedDataModule(ShardDataModule):
-    """:class:`~brdfgan.data.datamodule.ShardDataModule` whose training photos are rendered on
+    """:class:`~brdfgan.data.loading.datamodule.ShardDataModule` whose training photos are rendered on
     the fly from ``bank`` (module docstring); validation and test read Mitsuba shards from
     ``data_dir``, and :meth:`prepare_data` generates only the splits the run needs.
 
@@ -659,7 +665,7 @@ class RenderedDataModule(ShardDataModule):
         compile_renderer: render through ``torch.compile`` (training photos have one shape, so
             it compiles once; worth it for runs of more than a few hundred steps).
         epoch_samples: training photos an epoch (there is no split to count).
-        **kwargs: as :class:`~brdfgan.data.datamodule.ShardDataModule` (``train_split`` is unused).
+        **kwargs: as :class:`~brdfgan.data.loading.datamodule.ShardDataModule` (``train_split`` is unused).
     """
 
     def __init__(
@@ -728,9 +734,10 @@ class RenderedDataModule(ShardDataModule):
         return self.photograph(batch)
 
     def photograph(self, batch: Mapping[str, Any]) -> dict[str, Any]:
-        """A batch of scenes as the training batch of :func:`~brdfgan.data.datamodule.collate_samples`:
-        rendered (:func:`photograph_scenes`, on the batch's device), through ``sensor`` and the
-        train crop on the CPU, back on the batch's device."""
+        """A batch of scenes as the training batch of
+        :func:`~brdfgan.data.loading.datamodule.collate_samples`: rendered
+        (:func:`photograph_scenes`, on the batch's device), through ``sensor`` and the train crop
+        on the CPU, back on the batch's device."""
         device = batch["scene_maps"].device
         with torch.no_grad():
             photos, maps, scales = photograph_scenes(*scene_tensors(batch), self._render)
