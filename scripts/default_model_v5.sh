@@ -14,8 +14,9 @@ cd "$(dirname "$0")/.."
 PY=.venv/bin/python
 export OMP_NUM_THREADS=2
 OUT=logs/v5
+RUNS_OUT=$OUT/height  # the stages' runs of today's recipe (logs/v5/final_seed0, fixres_seed0: the first recipe's)
 REF=src/brdfgan/weights/references
-SHIPPED=$OUT/fixres_seed0  # the run a v5 release is exported from (stage 2, seed 0)
+SHIPPED=$RUNS_OUT/fixres_seed0  # the run a v5 release is exported from (stage 2, seed 0)
 
 resume() {  # the checkpoint to resume a run folder from, if any
   [ -f "$1/checkpoints/last.ckpt" ] && echo "ckpt_path=$1/checkpoints/last.ckpt" || true
@@ -23,33 +24,36 @@ resume() {  # the checkpoint to resume a run folder from, if any
 
 final() {  # stage 1 (conf/experiment/v5.yaml), 6 000 batches of 4 rendered 128² crops, ~85 min each
   for seed in ${SEEDS:-0 1}; do
-    $PY train.py experiment=v5 test=false seed=$seed hydra.run.dir=$OUT/final_seed$seed $(resume $OUT/final_seed$seed)
+    $PY train.py experiment=v5 test=false seed=$seed hydra.run.dir=$RUNS_OUT/final_seed$seed \
+      $(resume $RUNS_OUT/final_seed$seed)
   done
 }
 
 fixres() {  # stage 2 (conf/experiment/v5_fixres.yaml): each stage-1 run on whole 256² photos
   for seed in ${SEEDS:-0 1}; do
-    $PY train.py experiment=v5_fixres init_from=$OUT/final_seed$seed/checkpoints/last.ckpt test=false \
-      seed=$seed hydra.run.dir=$OUT/fixres_seed$seed $(resume $OUT/fixres_seed$seed)
+    $PY train.py experiment=v5_fixres init_from=$RUNS_OUT/final_seed$seed/checkpoints/last.ckpt test=false \
+      seed=$seed hydra.run.dir=$RUNS_OUT/fixres_seed$seed $(resume $RUNS_OUT/fixres_seed$seed)
   done
 }
 
 normal_curve() {  # validation normal angle through both stages (v4 ended at 7.91°, a flat map 7.95°)
   local runs=() seed
   for seed in 0 1; do
-    [ -d $OUT/final_seed$seed ] && runs+=("seed $seed=$OUT/final_seed$seed+$OUT/fixres_seed$seed")
+    [ -d $RUNS_OUT/final_seed$seed ] && runs+=("seed $seed=$RUNS_OUT/final_seed$seed+$RUNS_OUT/fixres_seed$seed")
   done
   $PY -m scripts.learning_curve "${runs[@]}" --metric val/normal_angle_deg --reference "flat map=7.95" \
-    --out $OUT/normal_curve
-  cp $OUT/normal_curve.png docs/default_model_v5_normal_curve.png  # the table is in docs/default_model.md
+    --out $RUNS_OUT/normal_curve
+  cp $RUNS_OUT/normal_curve.png docs/default_model_v5_normal_curve.png  # the table is in docs/default_model.md
 }
 
 evaluate() {  # validation parts, test sets, both OOD variants: the v5 runs there are, v4, the references
   local models="v4: $V4" run
-  declare -A RUNS=([v5]=fixres_seed0 [v5_seed1]=fixres_seed1 [v5_stage1]=final_seed0 [v5_stage1_seed1]=final_seed1)
-  for run in v5 v5_seed1 v5_stage1 v5_stage1_seed1; do  # those that have finished (the machine may be new)
-    if [ -f "$OUT/${RUNS[$run]}/checkpoints/last.ckpt" ]; then
-      models="$models, $run: $OUT/${RUNS[$run]}/checkpoints/last.ckpt"
+  # Today's recipe's runs, and the first recipe's stage 2 (v5_first) beside them.
+  declare -A RUNS=([v5]=$RUNS_OUT/fixres_seed0 [v5_seed1]=$RUNS_OUT/fixres_seed1 [v5_stage1]=$RUNS_OUT/final_seed0
+                   [v5_stage1_seed1]=$RUNS_OUT/final_seed1 [v5_first]=$OUT/fixres_seed0)
+  for run in v5 v5_seed1 v5_stage1 v5_stage1_seed1 v5_first; do  # those that have finished (the machine may be new)
+    if [ -f "${RUNS[$run]}/checkpoints/last.ckpt" ]; then
+      models="$models, $run: ${RUNS[$run]}/checkpoints/last.ckpt"
     fi
   done
   models="$models, mean_maps: $REF/mean_maps.safetensors, photo_basecolor: $REF/photo_basecolor.safetensors"
@@ -58,13 +62,13 @@ evaluate() {  # validation parts, test sets, both OOD variants: the v5 runs ther
   for split in ${SPLITS:-val test}; do
     for part in procedural scans; do
       $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_${split}_$part \
-        data.prepare=null grid_samples=0 hydra.run.dir=$OUT/eval_${split}_$part "ckpt={$models}"
+        data.prepare=null grid_samples=0 hydra.run.dir=$RUNS_OUT/eval_${split}_$part "ckpt={$models}"
     done
   done
   $PY generate.py dataset_spec=ood progress=false
   $PY generate.py dataset_spec=ood_close progress=false
-  $PY evaluate.py data=ood grid_samples=0 hydra.run.dir=$OUT/eval_ood_standard "ckpt={$models}"
-  $PY evaluate.py data=ood_close grid_samples=0 hydra.run.dir=$OUT/eval_ood_close "ckpt={$models}"
+  $PY evaluate.py data=ood grid_samples=0 hydra.run.dir=$RUNS_OUT/eval_ood_standard "ckpt={$models}"
+  $PY evaluate.py data=ood_close grid_samples=0 hydra.run.dir=$RUNS_OUT/eval_ood_close "ckpt={$models}"
 }
 
 export_weights() {
@@ -75,27 +79,37 @@ export_weights() {
 }
 
 ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's changes added at a time
-  # (rendered photos with the calibrated sensor; + relief sampling; + no shading image = v5), 1 000
-  # batches each, one seed, scored on the validation split's two parts (docs/default_model.md).
-  local steps="data.epoch_samples=2000 trainer.max_epochs=2 trainer.check_val_every_n_epoch=2 test=false"
-  local norelief="data.relief.swap_probability=0 data.relief.bump_probability=0"
+  # (rendered photos with the calibrated sensor; + relief sampling; + no shading image = the first
+  # v5 recipe), then the height head and the slope term (today's experiment=v5), 1 000
+  # batches each, scored on the validation split's two parts (docs/default_model.md). ROWS picks
+  # rows (default all), SEED another seed (its runs are <row>_seed<SEED>).
+  local seed=${SEED:-0} suffix=""
+  [ "$seed" = 0 ] || suffix=_seed$seed
+  local steps="data.epoch_samples=2000 trainer.max_epochs=2 trainer.check_val_every_n_epoch=2 test=false seed=$seed"
+  # Each row in today's experiment=v5 and explicit overrides, so the rows stay what they were
+  # when the recipe moves on.
+  local slopes="experiment=v5 model.generator.normal_head=slopes loss.normal_tilt_weight=0"
+  local relief="data.relief.swap_probability=0.25 data.relief.bump_probability=0.5"
   declare -A RUNS=(
     [v4_recipe]="experiment=anchored data.prepare=null"  # the training shards there are (a session cannot wait for all 63)
-    [rendered]="experiment=v5 model.generator.shading=detached $norelief"
-    [rendered_relief]="experiment=v5 model.generator.shading=detached"
-    [v5_recipe]="experiment=v5"
-    # The normals as a height's differences (integrable), on the rendered row (docs/data.md, "(e)").
-    [rendered_height]="experiment=v5 model.generator.shading=detached $norelief model.generator.normal_head=height"
+    [rendered]="$slopes"
+    [rendered_relief]="$slopes $relief"
+    [v5_recipe]="$slopes $relief model.generator.shading=none"  # the first v5 recipe
+    # The normals as a height's differences (integrable slopes; docs/data.md, "(e)"),
+    [rendered_height]="experiment=v5 loss.normal_tilt_weight=0"
+    # and a squared slope error beside the angle (the angle alone is minimised by a flat map
+    # where a tilt is uncertain; docs/default_model_v3.md): today's experiment=v5.
+    [rendered_height_tilt]="experiment=v5"
   )
   local run models=""
-  for run in v4_recipe rendered rendered_relief v5_recipe rendered_height; do
-    [ -f $OUT/ablation/$run/checkpoints/last.ckpt ] ||
-      $PY train.py ${RUNS[$run]} $steps hydra.run.dir=$OUT/ablation/$run
-    models="$models${models:+, }$run: $OUT/ablation/$run/checkpoints/last.ckpt"
+  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt}; do
+    [ -f $OUT/ablation/$run$suffix/checkpoints/last.ckpt ] ||
+      $PY train.py ${RUNS[$run]} $steps hydra.run.dir=$OUT/ablation/$run$suffix
+    models="$models${models:+, }$run$suffix: $OUT/ablation/$run$suffix/checkpoints/last.ckpt"
   done
   for part in procedural scans; do
     $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_val_$part \
-      data.prepare=null grid_samples=0 hydra.run.dir=$OUT/ablation/eval_val_$part "ckpt={$models}"
+      data.prepare=null grid_samples=0 hydra.run.dir=$OUT/ablation/eval_val_$part$suffix "ckpt={$models}"
   done
 }
 

@@ -390,7 +390,8 @@ def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> 
 def test_the_summary_says_how_the_training_photos_were_made(tmp_path: Path) -> None:
     from brdfgan.inference.model.export_weights import recipe_totals, training_summary
 
-    v5 = _fake_training_run(tmp_path / "v5", ["experiment=v5"], epoch=14, step=6000)
+    relief = ["data.relief.swap_probability=0.25", "data.relief.bump_probability=0.5"]
+    v5 = _fake_training_run(tmp_path / "v5", ["experiment=v5", *relief], epoch=14, step=6000)
     dataset = training_summary(tmp_path / "v5", v5, None)["dataset"]
     assert dataset["training_photos"] == "rendered on the fly"
     assert dataset["relief"]["swap_probability"] == 0.25 and dataset["relief"]["bump_probability"] == 0.5

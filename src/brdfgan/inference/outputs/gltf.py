@@ -108,6 +108,9 @@ class _Buffer:
         return len(self.views) - 1
 
 
+# The longest function of the package on purpose: the glTF document is one literal whose parts
+# (buffers, views, accessors, images, textures, material, mesh, node) reference each other by
+# index, so it reads best whole, beside the binary chunk those indices point into.
 def build_glb(
     *,
     basecolor_png: bytes,
