@@ -24,7 +24,7 @@ slopes, or of a height's differences (``normal_head``).
 
 Ablation-only switches (no shipped recipe sets them; ``docs/default_model.md`` has each one's
 run): ``anchored=False``, ``shading`` other than ``"detached"``, ``global_features=False``,
-``highlight_profile=False``, ``normal_head="height"``.
+``highlight_profile=False``. ``normal_head="height"`` is the v5 candidate's (``experiment=v5``).
 """
 
 from __future__ import annotations
