@@ -73,7 +73,7 @@ evaluate() {  # validation parts, test sets, both OOD variants: the v5 runs ther
 
 export_weights() {
   $PY -m brdfgan.cli export-weights $SHIPPED --out src/brdfgan/weights/default.safetensors \
-    --model-id brdfgan-default-v5 --metrics $OUT/eval_test_procedural/metrics.json --metrics-model v5 \
+    --model-id brdfgan-default-v5 --metrics $RUNS_OUT/eval_test_procedural/metrics.json --metrics-model v5 \
     --hardware "2 vCPU x86_64 (no GPU), 2 threads, one training at a time"
   $PY -m tests.test_shipped_weights  # refresh the stored statistics
 }

@@ -402,3 +402,20 @@ def test_the_highlight_profile_reads_the_lobe_width() -> None:
     photo, frame = _flat_photo(roughness=0.15, metallic=1.0)
     corner = profile(photo[..., :32, :32], crop_flash_frame(frame, 0.0, 0.0))[0].split(PROFILE_RINGS)
     assert corner[2][0] == 0.0 and corner[0][0] == 0.0 and corner[2][-1] == 1.0
+
+
+def test_a_config_stored_before_the_shipped_defaults_keeps_its_own_defaults() -> None:
+    from brdfgan.runs import WeightsError, build_network
+
+    target = "brdfgan.models.anchored.AnchoredUNet"
+    # Written before issue 48 (no normal_head): a missing key meant the old default, so a network
+    # that relied on the unblurred anchor is refused by name, not built with today's defaults.
+    with pytest.raises(WeightsError, match="anchor_blur=False is a retired option"):
+        build_network(target, {"width": 4, "depth": 3, "head_gain": 10.0}, "old.yaml")
+    old = {"width": 4, "depth": 3, "anchor_blur": True, "correction_blur": True}
+    built = build_network(target, old, "old.yaml")
+    assert isinstance(built, AnchoredUNet)
+    assert (built.head_gain, built.global_features, built.highlight_profile) == (1.0, False, False)
+    # Written since: missing keys are today's defaults.
+    new = build_network(target, {"width": 4, "depth": 3, "normal_head": "slopes"}, "new.yaml")
+    assert isinstance(new, AnchoredUNet) and new.head_gain == 10.0

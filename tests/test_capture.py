@@ -189,7 +189,7 @@ def test_traverse_update_equals_a_fresh_load() -> None:
     fresh = CaptureRenderer(RES, SPP, CAPTURE, 16, reuse_scene=False)
     sky = load_environment(sunsky_spec(0, 0), 16)
     room = load_environment(room_spec(0, 0), 16)
-    # Each sample with its own camera pose, field of view and flash position (data.capture).
+    # Each sample with its own camera pose, field of view and flash position (data.phone.conditions).
     tilted = CaptureDraw(
         fov_deg=70.0,
         tilt_deg=6.0,

@@ -1,4 +1,4 @@
-"""Material mixing and recolouring (brdfgan.data.materials.mixing / recolor / data.material_source)."""
+"""Material mixing and recolouring (brdfgan.data.materials.mixing / recolor / data.materials.source)."""
 
 from __future__ import annotations
 

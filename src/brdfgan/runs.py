@@ -188,7 +188,8 @@ def build_network(target: str, arguments: Mapping[str, Any], where: str | os.Pat
     module_name, class_name = NETWORK_CLASSES[target]
     cls = getattr(importlib.import_module(module_name), class_name)
     _reject_nested_targets(arguments, where, target)
-    arguments = _without_retired_options(cls, arguments, where, target)
+    upgrade = getattr(cls, "upgrade_stored_config", None)
+    arguments = _without_retired_options(cls, upgrade(arguments) if upgrade else arguments, where, target)
     parameters, hints, _ = signature_of(cls)
     for name, value in arguments.items():
         if name not in parameters:

@@ -30,6 +30,7 @@ run): ``anchored=False``, ``shading`` other than ``"detached"``, ``global_featur
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any, ClassVar, Literal, cast
 
 import torch
@@ -158,6 +159,16 @@ class _Decoder(nn.Module):
         return self.head(x)
 
 
+# The constructor's defaults before they became the shipped model's (issue 48).
+_DEFAULTS_BEFORE_SHIPPED: dict[str, Any] = {
+    "head_gain": 1.0,
+    "anchor_blur": False,
+    "correction_blur": False,
+    "global_features": False,
+    "highlight_profile": False,
+}
+
+
 class AnchoredUNet(nn.Module):
     """The photo-anchored two-decoder U-Net (module docstring).
 
@@ -200,6 +211,17 @@ class AnchoredUNet(nn.Module):
     # that names one (the shipped weights' does) loads when it asks for that value
     # (brdfgan.runs.build_network).
     RETIRED_OPTIONS: ClassVar[dict[str, Any]] = {"anchor_blur": True, "correction_blur": True}
+
+    @classmethod
+    def upgrade_stored_config(cls, config: Mapping[str, Any]) -> dict[str, Any]:
+        """A stored config as today's constructor reads it. Configs written before the defaults
+        became the shipped model's (they have no ``normal_head``) left out what they did not set,
+        and a missing key then meant the old default: those are filled in, so an old network is
+        built as it was, or refused by name when it needs a retired option
+        (brdfgan.runs.build_network)."""
+        if "normal_head" in config:
+            return dict(config)
+        return {**_DEFAULTS_BEFORE_SHIPPED, **config}
 
     def __init__(
         self,

@@ -64,7 +64,7 @@ def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.
     datamodule = hydra.utils.instantiate(cfg.data, _convert_="all")
     check_data = getattr(datamodule, "check_data", None)
     if check_data is not None:
-        check_data()
+        check_data("fit")  # what testing reads is checked when the test starts
     L.seed_everything(cfg.seed, workers=True)
     loss = hydra.utils.instantiate(cfg.loss, _convert_="all")
     module = hydra.utils.instantiate(cfg.model, loss=loss, _convert_="all")

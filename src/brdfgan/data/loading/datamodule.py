@@ -603,22 +603,24 @@ class ShardDataModule(L.LightningDataModule):
 
     # -- Lightning hooks ------------------------------------------------------------------
 
-    def check_data(self) -> None:
+    def check_data(self, stage: str = "fit") -> None:
         """Raise :class:`DatasetConfigError` now if the data path can neither be read nor
-        generated (what ``prepare_data`` would raise, without generating): a run calls it
-        before building its model and trainer, so a mistyped path is its first output line."""
+        generated for ``stage`` (what ``prepare_data`` would raise, without generating): a run
+        calls it before building its model and trainer, so a mistyped path is its first output
+        line."""
         if self._prepare is not None:
-            self._prepare(check_only=True, **self._prepare_arguments())
+            self._prepare(check_only=True, **self._prepare_arguments(stage))
         elif not self.data_dir.is_dir():
             raise DatasetConfigError(f"data.data_dir={self.data_dir}: no such folder")
 
-    def _prepare_arguments(self) -> dict[str, Any]:
-        """What ``prepare`` is called with besides ``check_only``: nothing, all splits."""
+    def _prepare_arguments(self, stage: str | None) -> dict[str, Any]:
+        """What ``prepare`` is called with for ``stage`` (``None``: the trainer's) besides
+        ``check_only``: nothing, all splits."""
         return {}
 
     def prepare_data(self) -> None:
         if self._prepare is not None:
-            self._prepare(**self._prepare_arguments())
+            self._prepare(**self._prepare_arguments(None))
 
     def setup(self, stage: str | None = None) -> None:
         kinds = {"fit": ("train", "val"), "validate": ("val",), "test": ("test",), "predict": ("test",)}.get(

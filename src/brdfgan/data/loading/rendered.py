@@ -695,15 +695,16 @@ class RenderedDataModule(ShardDataModule):
         self.bank.build()
         super().prepare_data()
 
-    def _prepare_arguments(self) -> dict[str, Any]:
-        return {"splits": self._shard_splits()}
+    def _prepare_arguments(self, stage: str | None) -> dict[str, Any]:
+        return {"splits": self._shard_splits(stage)}
 
-    def _shard_splits(self) -> tuple[str, ...]:
-        """The shard splits this run reads: validation when fitting or validating, test when
-        testing (all without a trainer)."""
-        fn = None if self.trainer is None else self.trainer.state.fn
+    def _shard_splits(self, stage: str | None = None) -> tuple[str, ...]:
+        """The shard splits ``stage`` reads (``None``: the trainer's stage): validation when
+        fitting or validating, test when testing (all without a stage)."""
+        if stage is None and self.trainer is not None and self.trainer.state.fn is not None:
+            stage = str(self.trainer.state.fn.value)
         wanted = {"fit": ("val",), "validate": ("val",), "test": ("test",), "predict": ("test",)}
-        splits = wanted.get(str(fn.value) if fn is not None else "", ("val", "test"))
+        splits = wanted.get(stage or "", ("val", "test"))
         return tuple(split for split in splits if self.splits[split] is not None)
 
     def num_samples(self, kind: str = "train") -> int:
