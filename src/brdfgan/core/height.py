@@ -38,9 +38,10 @@ def _slopes(normal: Tensor) -> tuple[Tensor, Tensor]:
     return dh_dx, dh_drow
 
 
-def height_slope_channels(height: Tensor) -> Tensor:
+def height_slope_channels(height: Tensor, *, periodic: bool = False) -> Tensor:
     """The slope channels ``(−∂h/∂x, −∂h/∂y)`` of a height field by central differences, borders
-    replicated (a crop does not tile): ``normalize(s_x, s_y, 1)`` is its normal map, the
+    replicated (a crop does not tile) or, ``periodic``, wrapped (a tileable height gives tileable
+    slopes): ``normalize(s_x, s_y, 1)`` is its normal map, the
     convention of :func:`~brdfgan.data.materials.base.height_to_normal` (+y up the rows). A
     network that predicts a height and takes its normals from it gives integrable (curl-free)
     slopes, as a real surface's are.
@@ -59,7 +60,7 @@ def height_slope_channels(height: Tensor) -> Tensor:
         [0.0, -2.0]
     """
     check_shape(height, "B 1 H W", name="height")
-    padded = F.pad(height, (1, 1, 1, 1), mode="replicate")
+    padded = F.pad(height, (1, 1, 1, 1), mode="circular" if periodic else "replicate")
     dh_dx = (padded[..., 1:-1, 2:] - padded[..., 1:-1, :-2]) / 2.0
     dh_dy = (padded[..., :-2, 1:-1] - padded[..., 2:, 1:-1]) / 2.0  # row − 1 is +Y
     return torch.cat([-dh_dx, -dh_dy], dim=1)

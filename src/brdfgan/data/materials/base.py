@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import torch
 from torch import Tensor
 
+from brdfgan.core.height import height_slope_channels
 from brdfgan.core.svbrdf import join_maps, normalize_normal
 
 
@@ -124,6 +125,5 @@ def height_to_normal(height: Tensor) -> Tensor:
         - height: ``(1, H, W)`` in texel units
         - output: ``(3, H, W)`` unit normals
     """
-    dh_dx = (torch.roll(height, -1, dims=-1) - torch.roll(height, 1, dims=-1)) / 2.0
-    dh_dy = (torch.roll(height, 1, dims=-2) - torch.roll(height, -1, dims=-2)) / 2.0  # row − 1 is +Y
-    return normalize_normal(torch.cat([-dh_dx, -dh_dy, torch.ones_like(height)], dim=0))
+    slopes = height_slope_channels(height[None], periodic=True)[0]
+    return normalize_normal(torch.cat([slopes, torch.ones_like(height)], dim=0))
