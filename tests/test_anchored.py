@@ -180,6 +180,15 @@ def test_without_shading_the_surface_decoder_ignores_the_albedo_path() -> None:
     assert model.surface.blocks[0][0].in_channels == 2 * 4 + 4  # no extra shading channels
 
 
+def _slopes_and_curl(model: AnchoredUNet) -> tuple[torch.Tensor, torch.Tensor]:
+    """A photo's predicted slope ``∂h/∂x`` and the slopes' discrete curl inside (central
+    differences commute, so a height's slopes have none)."""
+    normal = model(torch.rand(1, 3, 64, 64))[0, 3:6]
+    slope_x, slope_y = -normal[0] / normal[2], -normal[1] / normal[2]  # ∂h/∂x, ∂h/∂y
+    curl = (slope_x[:-2, 1:-1] - slope_x[2:, 1:-1]) / 2 - (slope_y[1:-1, 2:] - slope_y[1:-1, :-2]) / 2
+    return slope_x, curl
+
+
 def test_the_height_head_gives_integrable_normals_of_the_generators_convention() -> None:
     torch.manual_seed(3)
     model = AnchoredUNet(width=4, depth=3, head_gain=10.0, normal_head="height")
@@ -187,20 +196,14 @@ def test_the_height_head_gives_integrable_normals_of_the_generators_convention()
         for parameter in model.parameters():
             parameter.add_(0.05 * torch.randn_like(parameter))
     assert model.surface.head.out_channels == 2  # height, roughness logit
-    normal = model(torch.rand(1, 3, 64, 64))[:, 3:6]
-    slope_x, slope_y = -normal[0, 0] / normal[0, 2], -normal[0, 1] / normal[0, 2]  # ∂h/∂x, ∂h/∂y
+    slope_x, curl = _slopes_and_curl(model)
     assert slope_x.abs().mean() > 1e-2  # relief, not a flat map
-    # Central differences commute: the curl of a height's slopes is zero inside (a slope head's
-    # is not).
-    curl = (slope_x[:-2, 1:-1] - slope_x[2:, 1:-1]) / 2 - (slope_y[1:-1, 2:] - slope_y[1:-1, :-2]) / 2
-    assert curl[1:-1, 1:-1].abs().max() < 1e-4 * slope_x.abs().max()
-    slopes = AnchoredUNet(width=4, depth=3, head_gain=10.0)
+    assert curl[1:-1, 1:-1].abs().max() < 1e-4 * slope_x.abs().max()  # zero inside
+    slopes = AnchoredUNet(width=4, depth=3, head_gain=10.0)  # a slope head's curl is not
     with torch.no_grad():
         slopes.surface.head.weight.normal_(0, 0.1)
-    normal = slopes(torch.rand(1, 3, 64, 64))[:, 3:6]
-    sx, sy = -normal[0, 0] / normal[0, 2], -normal[0, 1] / normal[0, 2]
-    curl = (sx[:-2, 1:-1] - sx[2:, 1:-1]) / 2 - (sy[1:-1, 2:] - sy[1:-1, :-2]) / 2
-    assert curl.abs().max() > 0.1 * sx.abs().max()
+    slope_x, curl = _slopes_and_curl(slopes)
+    assert curl.abs().max() > 0.1 * slope_x.abs().max()
     # The same slopes as the training data's normals (height_to_normal) away from the borders.
     height = torch.randn(1, 1, 16, 16)
     ours = normalize_normal(torch.cat([height_slope_channels(height), torch.ones_like(height)], dim=1))
