@@ -100,17 +100,32 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
     # and a squared slope error beside the angle (the angle alone is minimised by a flat map
     # where a tilt is uncertain; docs/default_model_v3.md): today's experiment=v5.
     [rendered_height_tilt]="experiment=v5"
+    # Each with a quarter of the crops' own relief removed: a texture over a flat surface, where
+    # every model drew relief on the near-flat held-out scans (docs/default_model.md).
+    [rendered_height_flat]="experiment=v5 loss.normal_tilt_weight=0 data.relief.flat_probability=0.25"
+    [rendered_height_tilt_flat]="experiment=v5 data.relief.flat_probability=0.25"
   )
   local run models=""
-  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt}; do
+  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat}; do
     [ -f $OUT/ablation/$run$suffix/checkpoints/last.ckpt ] ||
       $PY train.py ${RUNS[$run]} $steps hydra.run.dir=$OUT/ablation/$run$suffix
     models="$models${models:+, }$run$suffix: $OUT/ablation/$run$suffix/checkpoints/last.ckpt"
   done
-  for part in procedural scans; do
-    $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_val_$part \
-      data.prepare=null grid_samples=0 hydra.run.dir=$OUT/ablation/eval_val_$part$suffix "ckpt={$models}"
+  # Chosen on validation; HELD_OUT=1 also scores the test split's parts and both OOD variants,
+  # to report (never to choose by).
+  local split part
+  for split in val ${HELD_OUT:+test}; do
+    for part in procedural scans; do
+      $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_${split}_$part \
+        data.prepare=null grid_samples=0 hydra.run.dir=$OUT/ablation/eval_${split}_$part$suffix "ckpt={$models}"
+    done
   done
+  if [ -n "${HELD_OUT:-}" ]; then
+    $PY generate.py dataset_spec=ood progress=false
+    $PY generate.py dataset_spec=ood_close progress=false
+    $PY evaluate.py data=ood grid_samples=0 hydra.run.dir=$OUT/ablation/eval_ood_standard$suffix "ckpt={$models}"
+    $PY evaluate.py data=ood_close grid_samples=0 hydra.run.dir=$OUT/ablation/eval_ood_close$suffix "ckpt={$models}"
+  fi
 }
 
 # v4, the model v5 is measured against, from the history (the release before v5).

@@ -22,6 +22,7 @@ from brdfgan.data.loading.rendered import (
     ReliefSampling,
     RenderedDataModule,
     RenderedStream,
+    add_relief,
     capture_scene,
     collate_scenes,
     photograph_scenes,
@@ -273,6 +274,35 @@ def test_plain_albedo_fades_the_base_colour_toward_its_mean_and_nothing_else(ban
     )
     assert set(record) == {"swap", "bumps", "plain_albedo"}
     assert torch.equal(relief_only[NORMAL], with_fade[NORMAL])
+
+
+def test_flat_relief_removes_the_crops_own_relief_and_keeps_every_other_draw(bank: MaterialBank) -> None:
+    crop = first_crop(bank).clone()  # with a ripple: relief of its own to remove
+    crop[NORMAL] = add_relief(crop[NORMAL], torch.sin(torch.arange(32.0) / 3).expand(1, 32, 32), 0.2)
+    flattened, record = sample_relief(
+        bank, crop, ReliefSampling(flat_probability=1.0), torch.Generator().manual_seed(4)
+    )
+    assert record == {"flat": True}
+    assert torch.equal(flattened[NORMAL], torch.tensor([0.0, 0.0, 1.0]).view(3, 1, 1).expand(3, 32, 32))
+    assert torch.equal(flattened[:3], crop[:3]) and torch.equal(flattened[6:], crop[6:])
+    validate_maps(flattened)
+    # Bumps drawn with it lie on the flat surface: the same bumps as over a flat crop without it.
+    bumps = ReliefSampling(bump_probability=1.0)
+    flat_crop = flattened.clone()
+    over_flat, _ = sample_relief(bank, flat_crop, bumps, torch.Generator().manual_seed(6))
+    both, record = sample_relief(
+        bank, crop, replace(bumps, flat_probability=1.0), torch.Generator().manual_seed(6)
+    )
+    assert set(record) == {"flat", "bumps"}
+    torch.testing.assert_close(both[NORMAL], over_flat[NORMAL])
+    # A swapped crop keeps its partner's relief; and switched on, it leaves the earlier draws as
+    # they were (the same swap, bumps and fade).
+    every = ReliefSampling(swap_probability=1.0, bump_probability=1.0, plain_albedo_probability=1.0)
+    without, record_without = sample_relief(bank, crop, every, torch.Generator().manual_seed(7))
+    with_flat, record_with = sample_relief(
+        bank, crop, replace(every, flat_probability=1.0), torch.Generator().manual_seed(7)
+    )
+    assert record_with == record_without and torch.equal(with_flat, without)
 
 
 def test_relief_sampling_leaves_every_other_draw_of_the_photo_as_it_was(bank: MaterialBank) -> None:

@@ -321,7 +321,11 @@ class ReliefSampling:
       channel, contrast uniform in ``[0, 1)``), so the photo's variation is mostly the relief's
       shading. Relief under a uniform albedo is what a network learns from fastest (docs/data.md,
       "Relief"); the faded crops teach what relief shading looks like, the others to tell it
-      from a texture.
+      from a texture;
+    - ``flat_probability``: the crop's own relief is removed (its normals set flat) unless swapped,
+      so the base colour's texture appears over a flat surface — wood grain, marble veins, print:
+      the near-flat held-out scans on which every model drew relief from the texture
+      (docs/default_model.md). Bumps, when drawn, are added after it.
 
     Checked on construction, naming the keys under ``data.relief``.
     """
@@ -333,12 +337,14 @@ class ReliefSampling:
     bump_cells_min: int = 2
     bump_cells_max: int = 32
     plain_albedo_probability: float = 0.0
+    flat_probability: float = 0.0
 
     def __post_init__(self) -> None:
         key = "data.relief"
         in_range(f"{key}.swap_probability", self.swap_probability, 0.0, 1.0)
         in_range(f"{key}.bump_probability", self.bump_probability, 0.0, 1.0)
         in_range(f"{key}.plain_albedo_probability", self.plain_albedo_probability, 0.0, 1.0)
+        in_range(f"{key}.flat_probability", self.flat_probability, 0.0, 1.0)
         in_range(f"{key}.bump_slope_min", self.bump_slope_min, 0.0, 2.0, low_open=True)
         in_range(f"{key}.bump_slope_max", self.bump_slope_max, 0.0, 2.0, low_open=True)
         ordered(key, self, "bump_slope_min", "bump_slope_max")
@@ -379,31 +385,41 @@ def add_relief(normal: Tensor, height: Tensor, rms_slope: float) -> Tensor:
 def sample_relief(
     bank: MaterialBank, maps: Tensor, sampling: ReliefSampling, generator: torch.Generator
 ) -> tuple[Tensor, dict[str, Any]]:
-    """The crop ``maps`` with :class:`ReliefSampling`'s relief (swapped, then bumped, then the
-    base colour faded, as drawn from ``generator``; the same number of draws whatever happens)
-    and what was drawn.
+    """The crop ``maps`` with :class:`ReliefSampling`'s relief (swapped or flattened, then bumped,
+    then the base colour faded, as drawn from ``generator``; for one ``sampling`` the same number
+    of draws whatever happens) and what was drawn.
 
     Shape:
         - maps: ``(8, R, R)``; output: ``(8, R, R)``
     """
     u = torch.rand(4, generator=generator, dtype=torch.float64).tolist()
     record: dict[str, Any] = {}
-    out = maps
+    own = normal = maps[NORMAL]
     if u[0] < sampling.swap_probability:
         partner = bank.draw(generator)
         crops, _ = random_crops(partner.maps, 1, maps.shape[-1], generator, partner.crop or bank.spec.crop)
-        out = maps.clone()
-        out[NORMAL] = crops[0][NORMAL]
+        normal = crops[0][NORMAL]
         record["swap"] = {"family": partner.family}
+    bump: Tensor | None = None
     if u[1] < sampling.bump_probability:
         slope = log_uniform(u[2], sampling.bump_slope_min, sampling.bump_slope_max)
         cells = round(log_uniform(u[3], sampling.bump_cells_min, sampling.bump_cells_max))
-        height = fbm(maps.shape[-1], cells, generator, octaves=4)[None]
-        out = out.clone() if out is maps else out
-        out[NORMAL] = add_relief(out[NORMAL], height, slope)
+        bump = fbm(maps.shape[-1], cells, generator, octaves=4)[None]
         record["bumps"] = {"rms_slope": slope, "cells": cells}
-    # Drawn after the rest, so that switching it on leaves the swaps and bumps as they were.
+    # The fade, then the flattening, drawn after the rest (the flattening only when it is on), so
+    # that switching either on leaves every earlier draw as it was.
     fade = torch.rand(2, generator=generator, dtype=torch.float64).tolist()
+    if sampling.flat_probability > 0.0:
+        flat = float(torch.rand(1, generator=generator, dtype=torch.float64)) < sampling.flat_probability
+        if flat and "swap" not in record:
+            normal = torch.tensor([0.0, 0.0, 1.0], dtype=maps.dtype).view(3, 1, 1).expand_as(normal)
+            record["flat"] = True
+    if bump is not None:
+        normal = add_relief(normal, bump, record["bumps"]["rms_slope"])
+    out = maps
+    if normal is not own:
+        out = maps.clone()
+        out[NORMAL] = normal
     if fade[0] < sampling.plain_albedo_probability:
         out = out.clone() if out is maps else out
         mean = out[BASECOLOR].mean(dim=(1, 2), keepdim=True)
