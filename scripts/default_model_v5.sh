@@ -104,9 +104,12 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
     # every model drew relief on the near-flat held-out scans (docs/default_model.md).
     [rendered_height_flat]="experiment=v5 loss.normal_tilt_weight=0 data.relief.flat_probability=0.25"
     [rendered_height_tilt_flat]="experiment=v5 data.relief.flat_probability=0.25"
+    # Half of the crops' relief turned inside out: whether dark is low is then not in the base
+    # colour (the training scans disagree on it; docs/data.md), only in the photo's shading.
+    [rendered_height_invert]="experiment=v5 loss.normal_tilt_weight=0 data.relief.invert_probability=0.5"
   )
   local run models=""
-  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat}; do
+  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat rendered_height_invert}; do
     [ -f $OUT/ablation/$run$suffix/checkpoints/last.ckpt ] ||
       $PY train.py ${RUNS[$run]} $steps hydra.run.dir=$OUT/ablation/$run$suffix
     models="$models${models:+, }$run$suffix: $OUT/ablation/$run$suffix/checkpoints/last.ckpt"

@@ -305,6 +305,27 @@ def test_flat_relief_removes_the_crops_own_relief_and_keeps_every_other_draw(ban
     assert record_with == record_without and torch.equal(with_flat, without)
 
 
+def test_inverted_relief_negates_the_slopes_so_grooves_become_ridges(bank: MaterialBank) -> None:
+    crop = first_crop(bank).clone()
+    ripple = torch.sin(torch.arange(32.0) / 3).expand(1, 32, 32)
+    flat = torch.tensor([0.0, 0.0, 1.0]).view(3, 1, 1).expand(3, 32, 32)
+    crop[NORMAL] = add_relief(flat, ripple, 0.2)
+    sampling = ReliefSampling(invert_probability=1.0)
+    inverted, record = sample_relief(bank, crop, sampling, torch.Generator().manual_seed(4))
+    assert record == {"inverted": True}
+    # The relief of the negated height: the same slopes' magnitudes, the opposite signs.
+    torch.testing.assert_close(inverted[NORMAL], add_relief(flat, -ripple, 0.2))
+    assert torch.equal(inverted[:3], crop[:3]) and torch.equal(inverted[6:], crop[6:])
+    validate_maps(inverted)
+    # Switched on, it leaves the earlier draws as they were (the same swap, bumps and fade).
+    every = ReliefSampling(swap_probability=1.0, bump_probability=1.0, plain_albedo_probability=1.0)
+    without, record_without = sample_relief(bank, crop, every, torch.Generator().manual_seed(7))
+    with_invert, record_with = sample_relief(
+        bank, crop, replace(every, invert_probability=1.0), torch.Generator().manual_seed(7)
+    )
+    assert record_with == {**record_without, "inverted": True} and torch.equal(with_invert[:3], without[:3])
+
+
 def test_relief_sampling_leaves_every_other_draw_of_the_photo_as_it_was(bank: MaterialBank) -> None:
     from brdfgan.data.loading.rendered import draw_scene
 

@@ -325,7 +325,11 @@ class ReliefSampling:
     - ``flat_probability``: the crop's own relief is removed (its normals set flat) unless swapped,
       so the base colour's texture appears over a flat surface — wood grain, marble veins, print:
       the near-flat held-out scans on which every model drew relief from the texture
-      (docs/default_model.md). Bumps, when drawn, are added after it.
+      (docs/default_model.md). Bumps, when drawn, are added after it;
+    - ``invert_probability``: the crop's relief (its own, swapped or flat) is turned inside out,
+      its slopes negated, so grooves become ridges under the same base colour. Whether a dark line
+      is low or high is then not in the base colour — the training scans disagree on it
+      (docs/data.md) — and only the photo's shading tells. Bumps are added after it.
 
     Checked on construction, naming the keys under ``data.relief``.
     """
@@ -338,6 +342,7 @@ class ReliefSampling:
     bump_cells_max: int = 32
     plain_albedo_probability: float = 0.0
     flat_probability: float = 0.0
+    invert_probability: float = 0.0
 
     def __post_init__(self) -> None:
         key = "data.relief"
@@ -345,6 +350,7 @@ class ReliefSampling:
         in_range(f"{key}.bump_probability", self.bump_probability, 0.0, 1.0)
         in_range(f"{key}.plain_albedo_probability", self.plain_albedo_probability, 0.0, 1.0)
         in_range(f"{key}.flat_probability", self.flat_probability, 0.0, 1.0)
+        in_range(f"{key}.invert_probability", self.invert_probability, 0.0, 1.0)
         in_range(f"{key}.bump_slope_min", self.bump_slope_min, 0.0, 2.0, low_open=True)
         in_range(f"{key}.bump_slope_max", self.bump_slope_max, 0.0, 2.0, low_open=True)
         ordered(key, self, "bump_slope_min", "bump_slope_max")
@@ -382,12 +388,18 @@ def add_relief(normal: Tensor, height: Tensor, rms_slope: float) -> Tensor:
     return normalize_normal(torch.cat([-slopes, torch.ones_like(height)]), dim=0)
 
 
+def _happens(probability: float, generator: torch.Generator) -> bool:
+    """One draw from ``generator`` below ``probability``; no draw at all when it is 0, so an option
+    switched off leaves every later draw as it was before the option existed."""
+    return probability > 0.0 and float(torch.rand(1, generator=generator, dtype=torch.float64)) < probability
+
+
 def sample_relief(
     bank: MaterialBank, maps: Tensor, sampling: ReliefSampling, generator: torch.Generator
 ) -> tuple[Tensor, dict[str, Any]]:
-    """The crop ``maps`` with :class:`ReliefSampling`'s relief (swapped or flattened, then bumped,
-    then the base colour faded, as drawn from ``generator``; for one ``sampling`` the same number
-    of draws whatever happens) and what was drawn.
+    """The crop ``maps`` with :class:`ReliefSampling`'s relief (swapped or flattened, inverted,
+    then bumped, then the base colour faded, as drawn from ``generator``; for one ``sampling`` the
+    same number of draws whatever happens) and what was drawn.
 
     Shape:
         - maps: ``(8, R, R)``; output: ``(8, R, R)``
@@ -406,14 +418,15 @@ def sample_relief(
         cells = round(log_uniform(u[3], sampling.bump_cells_min, sampling.bump_cells_max))
         bump = fbm(maps.shape[-1], cells, generator, octaves=4)[None]
         record["bumps"] = {"rms_slope": slope, "cells": cells}
-    # The fade, then the flattening, drawn after the rest (the flattening only when it is on), so
-    # that switching either on leaves every earlier draw as it was.
+    # The fade, then the flattening and the inversion, drawn after the rest (the last two only when
+    # on), so that switching any of them on leaves every earlier draw as it was.
     fade = torch.rand(2, generator=generator, dtype=torch.float64).tolist()
-    if sampling.flat_probability > 0.0:
-        flat = float(torch.rand(1, generator=generator, dtype=torch.float64)) < sampling.flat_probability
-        if flat and "swap" not in record:
-            normal = torch.tensor([0.0, 0.0, 1.0], dtype=maps.dtype).view(3, 1, 1).expand_as(normal)
-            record["flat"] = True
+    if _happens(sampling.flat_probability, generator) and "swap" not in record:
+        normal = torch.tensor([0.0, 0.0, 1.0], dtype=maps.dtype).view(3, 1, 1).expand_as(normal)
+        record["flat"] = True
+    if _happens(sampling.invert_probability, generator):
+        normal = normal * torch.tensor([-1.0, -1.0, 1.0], dtype=maps.dtype).view(3, 1, 1)
+        record["inverted"] = True
     if bump is not None:
         normal = add_relief(normal, bump, record["bumps"]["rms_slope"])
     out = maps
