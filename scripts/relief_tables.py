@@ -5,7 +5,8 @@ photo shows of it (definitions in :mod:`brdfgan.data.tools.relief`; the tables i
 material resolution as the bank paints them, cut into training crops as the bank cuts them) and
 for the training scan sets (crops as the spec's scan sampling cuts them): the flat map's angle
 (mean tilt), the flat texels, the nearly flat windows, the angle on steep texels and the slope
-power by octave of spatial frequency.
+power by octave of spatial frequency; and whether the base colour's dark lines are the relief's
+grooves or its ridges, per family and per training scan set.
 
 (b, c) **Observability and the sensor**: training photos drawn as ``data=rendered`` draws them
 (:func:`~brdfgan.data.loading.rendered.draw_scene`: a bank material and crop, the capture, flash and
@@ -70,6 +71,7 @@ from brdfgan.data.tools.relief import (
     FLAT_WINDOW_DEG,
     SLOPE_BANDS,
     STEEP_DEG,
+    dark_is_low_cosine,
     delivered_noise_log,
     flat_share,
     flat_window_share,
@@ -279,6 +281,29 @@ def realism_table(rows: Sequence[ReliefRow]) -> str:
     )
     lines = [header, "|---|" + "---|" * (5 + len(BAND_LABELS) + 1)]
     lines += [f"| {row.name} | " + " | ".join(row.cells()) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def dark_is_low_table(bank: HandfulBank, materials: dict[str, list[PaintedMaterial]]) -> str:
+    """Per procedural family (its painted materials, whole) and per training scan set (whole, as
+    the bank reads it): :func:`~brdfgan.data.tools.relief.dark_is_low_cosine`, x / y, with the
+    flat map's angle beside it; the scans sorted by the cosine."""
+    lines = ["| material | dark is low, cosine x / y | flat map's angle ° |", "|---|---|---|"]
+
+    def row(name: str, maps: Tensor) -> tuple[float, str]:
+        cosine = dark_is_low_cosine(maps).mean(dim=0).tolist()
+        angle = float(tilt_deg(maps[:, NORMAL]).mean())
+        return sum(cosine) / 2, f"| {name} | {cosine[0]:+.2f} / {cosine[1]:+.2f} | {angle:.1f} |"
+
+    for family, painted in materials.items():
+        lines.append(row(f"{family} (procedural)", torch.stack([m.maps for m in painted]))[1])
+    scans = sorted(row(folder.name, bank.scan(which)[None]) for which, folder in enumerate(bank.scan_folders))
+    lines += [line for _, line in scans]
+    signs = torch.tensor([cosine for cosine, _ in scans])
+    lines.append(
+        f"| **training scans: {int((signs > 0.1).sum())} of {len(scans)} above +0.1, "
+        f"{int((signs < -0.1).sum())} under −0.1** | median {float(signs.median()):+.2f} | |"
+    )
     return "\n".join(lines) + "\n"
 
 
@@ -524,6 +549,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         f"{spec.resolution}² each; {args.scan_crops} crops per scan set)\n"
     )
     print(realism_table(rows))
+    print("Is dark low? The base colour's log luminance as a height against the relief (+1: dark lines")
+    print("are grooves, −1: ridges; each family's painted materials and each training scan set, whole):\n")
+    print(dark_is_low_table(handful, materials))
     source = "the painted materials" if bank is handful else "the whole bank"
     print(
         f"### (b, c) What the training photos show of it ({args.photos} photos drawn from {source} and "

@@ -251,3 +251,28 @@ def test_delivered_noise_and_rounding_are_in_log_units() -> None:
     dark = torch.full((1, 3, 1, 1), 0.002)
     norm = math.sqrt(sum(w * w for w in (0.2126, 0.7152, 0.0722)))
     assert srgb8_rounding_log(dark).item() == pytest.approx(norm * step / math.sqrt(12) / 0.002, rel=1e-3)
+
+
+def test_dark_is_low_reads_the_sign_that_ties_the_base_colour_to_the_relief() -> None:
+    height = 3.0 * fbm(SIZE, 4, torch.Generator().manual_seed(0), octaves=3)
+    other = 3.0 * fbm(SIZE, 4, torch.Generator().manual_seed(1), octaves=3)
+    maps = flat_maps(SIZE, SIZE, basecolor=(0.5, 0.5, 0.5), roughness=0.6, batch=(1,))
+    maps[0, NORMAL] = height_to_normal(height[None])
+    # A base colour darkest in the valleys: the texture and the relief agree, whatever its level.
+    maps[0, :3] = (0.3 + 0.1 * height).clamp(0.05, 1.0)
+    agreeing = relief.dark_is_low_cosine(maps)
+    assert agreeing.shape == (1, 2) and bool((agreeing > 0.8).all())
+    brighter = maps.clone()
+    brighter[0, :3] = maps[0, :3] * 0.7
+    torch.testing.assert_close(relief.dark_is_low_cosine(brighter), agreeing, atol=0.05, rtol=0)
+    # The relief turned inside out: ridges where the base colour is dark, the sign flips exactly.
+    inverted = maps.clone()
+    inverted[0, 3:5] *= -1
+    torch.testing.assert_close(relief.dark_is_low_cosine(inverted), -agreeing)
+    # A texture drawn apart from the relief says little of it; a plain base colour says nothing.
+    apart = maps.clone()
+    apart[0, :3] = (0.3 + 0.1 * other).clamp(0.05, 1.0)
+    assert bool((relief.dark_is_low_cosine(apart).abs() < 0.3).all())
+    plain = maps.clone()
+    plain[0, :3] = 0.5
+    assert relief.dark_is_low_cosine(plain).tolist() == [[0.0, 0.0]]

@@ -6,7 +6,8 @@ tables are in docs/data.md, "Relief: what the training data shows and what a pho
 - **Realism: what relief the maps hold.** :func:`tilt_deg` (a texel's angle from +Z; its mean is
   the angle a flat map scores), :func:`flat_share`, :func:`flat_window_share`,
   :func:`steep_angle_share` and :func:`slope_band_energy` (how the slope field's power spreads
-  over octaves of spatial frequency).
+  over octaves of spatial frequency); :func:`dark_is_low_cosine` (whether the base colour's dark
+  lines are the relief's grooves or its ridges).
 - **Observability: what a photo can show of it.** :func:`scene_relief_shading` (the photo with its
   relief over the same photo with flat normals, in log luminance, rendered as a training photo is
   rendered), :func:`delivered_noise_log` and :func:`srgb8_rounding_log` (the photo's noise in the
@@ -29,7 +30,8 @@ from torch import Tensor
 from brdfgan.core.checks import check_shape
 from brdfgan.core.exposure import auto_exposure_scale, log_luminance
 from brdfgan.core.filtering import gaussian_blur
-from brdfgan.core.svbrdf import NORMAL
+from brdfgan.core.height import height_slope_channels
+from brdfgan.core.svbrdf import BASECOLOR, NORMAL, srgb_to_linear
 from brdfgan.data.loading.rendered import render_scenes
 from brdfgan.losses.parameter import TILT_Z_MIN
 from brdfgan.metrics import observable_mask, srgb8_rounding_log  # their home: the evaluator grades with them
@@ -42,6 +44,7 @@ __all__ = [
     "LOG_FLOOR",
     "SLOPE_BANDS",
     "STEEP_DEG",
+    "dark_is_low_cosine",
     "delivered_noise_log",
     "flat_share",
     "flat_window_share",
@@ -261,6 +264,44 @@ def slope_band_energy(normal: Tensor, bands: Sequence[float] = SLOPE_BANDS) -> T
         band = (power * inside).sum(dim=(-2, -1))
         shares.append(torch.where(total > 0, band / total.clamp_min(1e-300), torch.zeros_like(total)))
     return torch.stack(shares, dim=-1).to(normal.dtype)
+
+
+def dark_is_low_cosine(maps: Tensor, blur_px: float = 1.0) -> Tensor:
+    """How far "dark is low" holds on a material: the cosine, per slope component, between the
+    slopes of its base colour's log luminance taken as a height (blurred by ``blur_px``, borders
+    reflected) and its normal map's :func:`slope_field`, summed over the map. +1: every dark line
+    is a groove; −1: every dark line is a ridge; 0: the base colour says nothing of the relief's
+    sign. A network that reads relief from the base colour rather than from the shading learns
+    the sign its training materials agree on.
+
+    Shape:
+        - maps: ``(*, 8, H, W)`` (the base colour sRGB-encoded, as stored)
+        - output: ``(*, 2)``, the x and y components; 0 where either field is constant
+
+    Example:
+        A bright square raised above a dark ground (its base colour outlines the relief the right
+        way), then the same relief inverted:
+
+        >>> height = torch.zeros(1, 1, 32, 32)
+        >>> height[..., 8:24, 8:24] = 4.0
+        >>> maps = torch.zeros(8, 32, 32)
+        >>> maps[:3] = 0.2 + 0.6 * (height[0] > 0)
+        >>> maps[3:6] = torch.cat([height_slope_channels(height)[0], torch.ones(1, 32, 32)])
+        >>> [round(v, 2) for v in dark_is_low_cosine(maps).tolist()]
+        [0.89, 0.89]
+        >>> maps[3:5] *= -1
+        >>> [round(v, 2) for v in dark_is_low_cosine(maps).tolist()]
+        [-0.89, -0.89]
+    """
+    dims = check_shape(maps, "* 8 H W", name="maps")
+    flat = maps.reshape(-1, 8, dims["H"], dims["W"]).to(torch.float64)
+    height = gaussian_blur(_log_luminance(srgb_to_linear(flat[:, BASECOLOR])), blur_px, border="reflect")
+    texture = -height_slope_channels(height)  # the height's gradient, as slope_field's slopes are
+    relief = slope_field(flat[:, NORMAL])
+    dot = (texture * relief).sum(dim=(-2, -1))
+    norms = texture.square().sum(dim=(-2, -1)).mul(relief.square().sum(dim=(-2, -1))).sqrt()
+    cosine = torch.where(norms > 0, dot / norms.clamp_min(1e-300), torch.zeros_like(dot))
+    return cosine.reshape(*maps.shape[:-3], 2).to(maps.dtype)
 
 
 # ----------------------------------------------------------------------------- observability
