@@ -107,9 +107,12 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
     # Half of the crops' relief turned inside out: whether dark is low is then not in the base
     # colour (the training scans disagree on it; docs/data.md), only in the photo's shading.
     [rendered_height_invert]="experiment=v5 loss.normal_tilt_weight=0 data.relief.invert_probability=0.5"
+    # and with half of the base colours faded besides: relief shading under a plain albedo, which
+    # the issue's scratch harness learned from (docs/data.md, "(d)").
+    [rendered_height_invert_plain]="experiment=v5 loss.normal_tilt_weight=0 data.relief.invert_probability=0.5 data.relief.plain_albedo_probability=0.5"
   )
   local run models=""
-  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat rendered_height_invert}; do
+  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat rendered_height_invert rendered_height_invert_plain}; do
     [ -f $OUT/ablation/$run$suffix/checkpoints/last.ckpt ] ||
       $PY train.py ${RUNS[$run]} $steps hydra.run.dir=$OUT/ablation/$run$suffix
     models="$models${models:+, }$run$suffix: $OUT/ablation/$run$suffix/checkpoints/last.ckpt"

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 import torch
+from scripts.relief_by_material import FLAT, SlopeSums, markdown
 
 from brdfgan.core.svbrdf import NORMAL, flat_maps
 from brdfgan.data.materials.base import height_to_normal
 from brdfgan.data.materials.noise import fbm
-from scripts.relief_by_material import FLAT, SlopeSums, markdown
 
 
 def bumpy(scale: float) -> torch.Tensor:
