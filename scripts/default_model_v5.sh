@@ -58,17 +58,25 @@ evaluate() {  # validation parts, test sets, both OOD variants: the v5 runs ther
   done
   models="$models, mean_maps: $REF/mean_maps.safetensors, photo_basecolor: $REF/photo_basecolor.safetensors"
   models="$models, de_lit: $REF/de_lit.safetensors"
-  local split part
-  for split in ${SPLITS:-val test}; do
+  score "$models" $RUNS_OUT/eval_ "" ood ${SPLITS:-val test}
+}
+
+score() {  # score MODELS PREFIX SUFFIX OOD SPLIT...: "ckpt={MODELS}" on each split's two parts and,
+  # OOD non-empty, both OOD variants; each set's results in PREFIX<set>SUFFIX
+  local models=$1 prefix=$2 suffix=$3 ood=$4 split part
+  shift 4
+  for split in "$@"; do
     for part in procedural scans; do
       $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_${split}_$part \
-        data.prepare=null grid_samples=0 hydra.run.dir=$RUNS_OUT/eval_${split}_$part "ckpt={$models}"
+        data.prepare=null grid_samples=0 hydra.run.dir=$prefix${split}_$part$suffix "ckpt={$models}"
     done
   done
-  $PY generate.py dataset_spec=ood progress=false
-  $PY generate.py dataset_spec=ood_close progress=false
-  $PY evaluate.py data=ood grid_samples=0 hydra.run.dir=$RUNS_OUT/eval_ood_standard "ckpt={$models}"
-  $PY evaluate.py data=ood_close grid_samples=0 hydra.run.dir=$RUNS_OUT/eval_ood_close "ckpt={$models}"
+  if [ -n "$ood" ]; then
+    $PY generate.py dataset_spec=ood progress=false
+    $PY generate.py dataset_spec=ood_close progress=false
+    $PY evaluate.py data=ood grid_samples=0 hydra.run.dir=${prefix}ood_standard$suffix "ckpt={$models}"
+    $PY evaluate.py data=ood_close grid_samples=0 hydra.run.dir=${prefix}ood_close$suffix "ckpt={$models}"
+  fi
 }
 
 export_weights() {
@@ -119,19 +127,7 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
   done
   # Chosen on validation; HELD_OUT=1 also scores the test split's parts and both OOD variants,
   # to report (never to choose by).
-  local split part
-  for split in val ${HELD_OUT:+test}; do
-    for part in procedural scans; do
-      $PY evaluate.py data=procedural_and_scans data.data_dir=data/procedural_and_scans_${split}_$part \
-        data.prepare=null grid_samples=0 hydra.run.dir=$OUT/ablation/eval_${split}_$part$suffix "ckpt={$models}"
-    done
-  done
-  if [ -n "${HELD_OUT:-}" ]; then
-    $PY generate.py dataset_spec=ood progress=false
-    $PY generate.py dataset_spec=ood_close progress=false
-    $PY evaluate.py data=ood grid_samples=0 hydra.run.dir=$OUT/ablation/eval_ood_standard$suffix "ckpt={$models}"
-    $PY evaluate.py data=ood_close grid_samples=0 hydra.run.dir=$OUT/ablation/eval_ood_close$suffix "ckpt={$models}"
-  fi
+  score "$models" $OUT/ablation/eval_ "$suffix" "${HELD_OUT:-}" val ${HELD_OUT:+test}
 }
 
 # v4, the model v5 is measured against, from the history (the release before v5).
