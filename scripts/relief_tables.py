@@ -299,10 +299,10 @@ def dark_is_low_table(bank: HandfulBank, materials: dict[str, list[PaintedMateri
         lines.append(row(f"{family} (procedural)", torch.stack([m.maps for m in painted]))[1])
     scans = sorted(row(folder.name, bank.scan(which)[None]) for which, folder in enumerate(bank.scan_folders))
     lines += [line for _, line in scans]
-    signs = torch.tensor([cosine for cosine, _ in scans])
+    cosines = torch.tensor([cosine for cosine, _ in scans])
     lines.append(
-        f"| **training scans: {int((signs > 0.1).sum())} of {len(scans)} above +0.1, "
-        f"{int((signs < -0.1).sum())} under −0.1** | median {float(signs.median()):+.2f} | |"
+        f"| **training scans: {int((cosines > 0.1).sum())} of {len(scans)} above +0.1, "
+        f"{int((cosines < -0.1).sum())} under −0.1** | median {float(cosines.median()):+.2f} | |"
     )
     return "\n".join(lines) + "\n"
 
