@@ -90,7 +90,7 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
   # (rendered photos with the calibrated sensor; + relief sampling; + no shading image = the first
   # v5 recipe), then the height head and the slope term (today's experiment=v5), 1 000
   # batches each, scored on the validation split's two parts (docs/default_model.md). ROWS picks
-  # rows (default all), SEED another seed (its runs are <row>_seed<SEED>).
+  # rows (default all), SEED another seed (its runs are <row>_seed<SEED>), EVAL the scores' folders.
   local seed=${SEED:-0} suffix=""
   [ "$seed" = 0 ] || suffix=_seed$seed
   local steps="data.epoch_samples=2000 trainer.max_epochs=2 trainer.check_val_every_n_epoch=2 test=false seed=$seed"
@@ -118,16 +118,22 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
     # and with half of the base colours faded besides: relief shading under a plain albedo, which
     # the issue's scratch harness learned from (docs/data.md, "(d)").
     [rendered_height_invert_plain]="experiment=v5 loss.normal_tilt_weight=0 data.relief.invert_probability=0.5 data.relief.plain_albedo_probability=0.5"
+    # Shading first: the normals trained alone on those photos (experiment=v5_shading), which
+    # read some relief from the shading where the full recipe reads none; then the inverted row's
+    # recipe starting from its weights, so the whole generator learns on with that reading.
+    [shading_first]="experiment=v5_shading"
+    [rendered_height_invert_after_shading]="experiment=v5 loss.normal_tilt_weight=0 data.relief.invert_probability=0.5 init_from=$OUT/ablation/shading_first$suffix/checkpoints/last.ckpt"
   )
   local run models=""
-  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat rendered_height_invert rendered_height_invert_plain}; do
+  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat rendered_height_invert rendered_height_invert_plain shading_first rendered_height_invert_after_shading}; do
     [ -f $OUT/ablation/$run$suffix/checkpoints/last.ckpt ] ||
       $PY train.py ${RUNS[$run]} $steps hydra.run.dir=$OUT/ablation/$run$suffix
     models="$models${models:+, }$run$suffix: $OUT/ablation/$run$suffix/checkpoints/last.ckpt"
   done
   # Chosen on validation; HELD_OUT=1 also scores the test split's parts and both OOD variants,
-  # to report (never to choose by).
-  score "$models" $OUT/ablation/eval_ "$suffix" "${HELD_OUT:-}" val ${HELD_OUT:+test}
+  # to report (never to choose by). EVAL names the scores' folders (default eval: a later subset
+  # of ROWS given its own name keeps the earlier scores).
+  score "$models" $OUT/ablation/${EVAL:-eval}_ "$suffix" "${HELD_OUT:-}" val ${HELD_OUT:+test}
 }
 
 # v4, the model v5 is measured against, from the history (the release before v5).

@@ -66,7 +66,7 @@ def test_a_wrong_value_names_the_key_before_anything_is_built(
      ["experiment=paper", "debug=default"], ["experiment=paper"], ["experiment=default_model_finetune"],
      ["model=deschaintre2018"], ["model=anchored"], ["loss=no_adv"], ["loss=supervised"], ["trainer=gpu"],
      ["trainer=ddp"], ["logger=many"], ["data=deschaintre"], ["callbacks=none"], ["data=rendered"],
-     ["experiment=v5"], ["experiment=v5_fixres", "init_from=x"]],
+     ["experiment=v5"], ["experiment=v5_fixres", "init_from=x"], ["experiment=v5_shading"]],
 )  # fmt: skip
 def test_every_shipped_config_passes_the_check(tmp_path: Path, overrides: list[str]) -> None:
     check_config(compose_train(overrides, tmp_path), CHECKED_GROUPS)

@@ -510,3 +510,26 @@ def test_normal_tilt_weight_adds_to_the_normal_term_only() -> None:
         parameter_loss(pred, true_maps, normal_tilt_weight=-1.0)
     loss = GANLoss(LossSwitches(adversarial=False, feature=False, rendering=False), normal_tilt_weight=2.0)
     torch.testing.assert_close(loss.generator_terms(pred, true_maps)["param_normal"], tilted["param_normal"])
+
+
+def test_parameter_maps_sum_only_the_chosen_terms_and_train_only_those_maps() -> None:
+    pred, true_maps = random_maps(8, 8, seed=3, batch=(2,)), random_maps(8, 8, seed=4, batch=(2,))
+    every = parameter_loss(pred, true_maps)
+    chosen = parameter_loss(pred, true_maps, maps=("normal", "metallic"))
+    for name in ("param_basecolor", "param_normal", "param_roughness", "param_metallic"):
+        torch.testing.assert_close(chosen[name], every[name])  # all four still reported
+    torch.testing.assert_close(chosen["param"], every["param_normal"] + every["param_metallic"])
+    for maps in ((), ("albedo",)):
+        with pytest.raises(ValueError, match="maps must be"):
+            parameter_loss(pred, true_maps, maps=maps)
+
+    # Normals alone: no other channel of the prediction gets a gradient.
+    live = pred.clone().requires_grad_(True)
+    loss = GANLoss(LossSwitches(adversarial=False, feature=False, rendering=False), parameter_maps=["normal"])
+    loss.generator_terms(live, true_maps)["g_total"].backward()
+    assert live.grad is not None
+    assert live.grad[:, NORMAL].abs().sum() > 0
+    for index in (BASECOLOR, ROUGHNESS, METALLIC):
+        assert live.grad[:, index].abs().sum() == 0
+    with pytest.raises(UserError, match=r"loss.parameter_maps=\['normals'\]"):
+        GANLoss(parameter_maps=["normals"])

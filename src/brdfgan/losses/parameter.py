@@ -16,6 +16,7 @@ different losses"). The combination is one line in :func:`parameter_loss`.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Literal
 
 import torch
@@ -30,7 +31,8 @@ from brdfgan.core.svbrdf import check_map_pair, normalize_normal, split_maps
 # acos(1 - ε)/π ≈ 4.5e-4 instead of 0.
 ANGULAR_EPS = 1e-6
 
-PARAMETER_TERMS: tuple[str, ...] = ("param_basecolor", "param_normal", "param_roughness", "param_metallic")
+PARAMETER_MAPS: tuple[str, ...] = ("basecolor", "normal", "roughness", "metallic")
+PARAMETER_TERMS: tuple[str, ...] = tuple(f"param_{name}" for name in PARAMETER_MAPS)
 
 MetallicLoss = Literal["l1", "bce"]
 # Predicted metallic values are clamped to [ε, 1 − ε] inside the BCE so log(0) never occurs.
@@ -132,7 +134,11 @@ def tilt_squared_error(pred: Tensor, target: Tensor, dim: int = -3) -> Tensor:
 
 
 def parameter_loss(
-    pred: Tensor, target: Tensor, metallic: MetallicLoss = "l1", normal_tilt_weight: float = 0.0
+    pred: Tensor,
+    target: Tensor,
+    metallic: MetallicLoss = "l1",
+    normal_tilt_weight: float = 0.0,
+    maps: Sequence[str] = PARAMETER_MAPS,
 ) -> dict[str, Tensor]:
     """The paper's L_p and its per-map parts: L1 on base color, roughness and metallic, mean
     angular distance on the normals.
@@ -142,10 +148,13 @@ def parameter_loss(
         metallic: ``"l1"`` (the paper) or ``"bce"`` (:func:`metallic_bce`) for the metallic term.
         normal_tilt_weight: when positive, ``param_normal`` also adds this times the mean
             :func:`tilt_squared_error` (not the paper's; 0 leaves the paper's term).
+        maps: the maps whose terms ``param`` sums (all four: the paper's L_p); a subset trains
+            those maps alone, e.g. ``("normal",)`` for a stage that learns the normals first.
 
     Returns:
-        ``param_basecolor``, ``param_normal``, ``param_roughness``, ``param_metallic`` (scalars)
-        and ``param`` = L_p, their sum (see the module docstring).
+        ``param_basecolor``, ``param_normal``, ``param_roughness``, ``param_metallic`` (scalars,
+        all four whatever ``maps``, to be logged) and ``param`` = L_p, the sum of those ``maps``
+        names (see the module docstring).
 
     Shape:
         - pred, target: ``(*, 8, H, W)`` in the layout of :mod:`brdfgan.core.svbrdf`
@@ -172,6 +181,8 @@ def parameter_loss(
         raise ValueError(f"metallic must be 'l1' or 'bce', got {metallic!r}")
     if not normal_tilt_weight >= 0.0:
         raise ValueError(f"normal_tilt_weight must be >= 0, got {normal_tilt_weight}")
+    if not maps or not set(maps) <= set(PARAMETER_MAPS):
+        raise ValueError(f"maps must be a non-empty subset of {PARAMETER_MAPS}, got {tuple(maps)}")
     p, t = split_maps(pred), split_maps(target)
     metallic_term = (
         metallic_bce(p.metallic, t.metallic) if metallic == "bce" else (p.metallic - t.metallic).abs()
@@ -186,5 +197,6 @@ def parameter_loss(
         terms["param_normal"] = terms["param_normal"] + normal_tilt_weight * (
             tilt_squared_error(p.normal, t.normal).mean()
         )
-    terms["param"] = sum((terms[name] for name in PARAMETER_TERMS[1:]), terms[PARAMETER_TERMS[0]])
+    counted = [terms[f"param_{name}"] for name in PARAMETER_MAPS if name in maps]
+    terms["param"] = sum(counted[1:], counted[0])
     return terms

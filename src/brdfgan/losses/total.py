@@ -15,7 +15,7 @@ live predictions and may compute the real outputs under ``torch.no_grad()`` (the
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from torch import Tensor, nn
@@ -29,7 +29,7 @@ from brdfgan.losses.adversarial import (
     lsgan_discriminator_loss,
     lsgan_generator_loss,
 )
-from brdfgan.losses.parameter import MetallicLoss, parameter_loss
+from brdfgan.losses.parameter import PARAMETER_MAPS, MetallicLoss, parameter_loss
 from brdfgan.losses.rendering import RenderingLoss, RenderPairing
 
 GENERATOR_WEIGHT = 0.25  # the paper's ¼
@@ -137,6 +137,9 @@ class GANLoss(nn.Module):
             :func:`~brdfgan.losses.parameter.metallic_bce`) or ``"l1"`` (the paper).
         normal_tilt_weight: weight of the squared slope error added to the normal term (0, the
             paper: none; see :func:`~brdfgan.losses.parameter.tilt_squared_error`).
+        parameter_maps: the maps the parameter term trains (all four: the paper); with
+            ``("normal",)`` and no other term the generator learns the normals alone (a first
+            stage; the other maps' terms are still reported).
         rendering_pairing: ``"cross"`` (shipped) or ``"joint"`` (the paper): which maps are
             rendered together (see :func:`~brdfgan.losses.rendering.cross_paired`).
     """
@@ -154,6 +157,7 @@ class GANLoss(nn.Module):
         metallic_loss: MetallicLoss = "bce",
         normal_tilt_weight: float = 0.0,
         rendering_pairing: RenderPairing = "cross",
+        parameter_maps: Sequence[str] = PARAMETER_MAPS,
     ) -> None:
         super().__init__()
         if rendering_pairing not in ("joint", "cross"):
@@ -166,6 +170,12 @@ class GANLoss(nn.Module):
         if not normal_tilt_weight >= 0.0:
             raise UserError(f"loss.normal_tilt_weight={normal_tilt_weight}: must be >= 0")
         self.normal_tilt_weight = float(normal_tilt_weight)
+        maps = tuple(str(name) for name in parameter_maps)
+        if not maps or not set(maps) <= set(PARAMETER_MAPS):
+            raise UserError(
+                f"loss.parameter_maps={list(maps)}: must be a non-empty list among {list(PARAMETER_MAPS)}"
+            )
+        self.parameter_maps = maps
         self.switches = switches
         self.seed = seed
         self.rendering_sampling = rendering_sampling
@@ -236,7 +246,9 @@ class GANLoss(nn.Module):
         if s.parameter:
             with record_function("brdfgan/parameter_loss_forward"):
                 terms.update(
-                    parameter_loss(pred_maps, true_maps, self.metallic_loss, self.normal_tilt_weight)
+                    parameter_loss(
+                        pred_maps, true_maps, self.metallic_loss, self.normal_tilt_weight, self.parameter_maps
+                    )
                 )
         if s.rendering and self.rendering_loss is not None:
             with record_function("brdfgan/rendering_loss_forward"):
@@ -267,5 +279,6 @@ class GANLoss(nn.Module):
         return (
             f"switches={self.switches}, weight={self.weight}, feature_weight={self.feature_weight}, "
             f"metallic_loss={self.metallic_loss}, normal_tilt_weight={self.normal_tilt_weight}, "
+            f"parameter_maps={list(self.parameter_maps)}, "
             f"rendering_pairing={self.rendering_loss.pairing if self.rendering_loss is not None else None}"
         )
