@@ -8,7 +8,8 @@ Each sample of the folder's ``test`` split (Mitsuba photos through the evaluatio
 ``evaluate.py data=procedural_and_scans data.data_dir=FOLDER`` reads them), grouped by its
 material's family (a scan set's name for scans): the flat map's angle, each model's normal angle
 and the cosine of its slopes with the true ones, pooled over the group's texels (+1: the relief
-the right way round, −1: inside out, 0: unrelated), and the RMS of its slopes over the truth's.
+the right way round, −1: inside out, 0: unrelated), and the RMS of its slopes over the truth's
+(the evaluator's :class:`~brdfgan.metrics.SlopeAgreement`, per material).
 Markdown on stdout.
 """
 
@@ -22,35 +23,14 @@ from pathlib import Path
 import hydra
 import torch
 from hydra import compose, initialize_config_dir
-from torch import Tensor
 
-from brdfgan.core.svbrdf import NORMAL, flat_maps
-from brdfgan.data.tools.relief import slope_field
+from brdfgan.core.svbrdf import flat_maps
 from brdfgan.evaluation.config import register_configs
-from brdfgan.metrics.svbrdf_metrics import NormalAngularError
+from brdfgan.metrics.svbrdf_metrics import NormalAngularError, SlopeAgreement
 from brdfgan.runs import load_generator
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 FLAT = "flat map"
-
-
-class SlopeSums:
-    """Running sums of one model's slopes against the truth's: ``Σ p·t``, ``Σ p²``, ``Σ t²``."""
-
-    def __init__(self) -> None:
-        self.sums = torch.zeros(3, dtype=torch.float64)
-
-    def add(self, pred: Tensor, true: Tensor) -> None:
-        p, t = slope_field(pred[:, NORMAL].double()), slope_field(true[:, NORMAL].double())
-        self.sums += torch.stack([(p * t).sum(), p.square().sum(), t.square().sum()])
-
-    def cosine(self) -> float:
-        dot, pp, tt = self.sums.tolist()
-        return dot / (pp * tt) ** 0.5 if pp > 0 and tt > 0 else 0.0
-
-    def rms_ratio(self) -> float:
-        _, pp, tt = self.sums.tolist()
-        return (pp / tt) ** 0.5 if tt > 0 else float("nan")
 
 
 def material_rows(
@@ -72,7 +52,7 @@ def material_rows(
     datamodule.splits["test"] = "test"
     datamodule.setup("test")
     angles: dict[tuple[str, str], NormalAngularError] = defaultdict(NormalAngularError)
-    slopes: dict[tuple[str, str], SlopeSums] = defaultdict(SlopeSums)
+    slopes: dict[tuple[str, str], SlopeAgreement] = defaultdict(SlopeAgreement)
     counts: dict[str, int] = defaultdict(int)
     with torch.no_grad():
         for batch in datamodule.test_dataloader():
@@ -84,19 +64,19 @@ def material_rows(
                 counts[family] += 1
                 for name, pred in predictions.items():
                     angles[family, name].update(pred[i : i + 1], truth[i : i + 1])
-                    slopes[family, name].add(pred[i : i + 1], truth[i : i + 1])
-    return {
-        family: {
-            name: (
+                    slopes[family, name].update(pred[i : i + 1], truth[i : i + 1])
+    rows: dict[str, dict[str, tuple[float, ...]]] = {}
+    for family in sorted(counts):
+        rows[family] = {}
+        for name in [FLAT, *models]:
+            agreement = slopes[family, name].compute()
+            rows[family][name] = (
                 float(angles[family, name].compute()),
-                slopes[family, name].cosine(),
-                slopes[family, name].rms_ratio(),
+                float(agreement["normal_slope_cosine"]),
+                float(agreement["normal_slope_ratio"]),
                 counts[family],
             )
-            for name in [FLAT, *models]
-        }
-        for family in sorted(counts)
-    }
+    return rows
 
 
 def markdown(rows: dict[str, dict[str, tuple[float, ...]]]) -> str:

@@ -4,8 +4,9 @@ Trains the v4 generator (``experiment=anchored``'s model) on its normals alone �
 loss, nothing else — for ``--steps`` batches of photos rendered on the fly (``data=rendered``,
 any of its options as Hydra overrides), then scores the normals on the validation split's Mitsuba
 photos (delivered through the evaluation sensor): mean angle against the flat map's, and the
-slope cosine (pooled over texels: the cosine between predicted and true slope fields
-``(−n_x/n_z, −n_y/n_z)``; 0 for flat or unrelated normals, 1 for the right relief up to scale).
+slope cosine (the evaluator's :class:`~brdfgan.metrics.SlopeAgreement`: pooled over texels, the
+cosine between predicted and true slope fields; 0 for flat or unrelated normals, 1 for the right
+relief up to scale).
 The observable angle counts only the texels whose relief the photo shows (the flash's relief
 shading, :func:`brdfgan.metrics.relief_shading`, above the photo's 8-bit rounding,
 :func:`brdfgan.data.tools.relief.observable_mask`). Each change to the data is judged by this run at
@@ -35,6 +36,7 @@ from brdfgan.data.loading.rendered import RenderedDataModule
 from brdfgan.data.tools.relief import observable_mask, srgb8_rounding_log
 from brdfgan.io.atomic import write_text_atomic
 from brdfgan.losses.parameter import angular_distance
+from brdfgan.metrics import SlopeAgreement
 from brdfgan.metrics import relief_shading as flash_relief_shading
 from brdfgan.training.config import register_configs
 
@@ -42,9 +44,8 @@ CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
 def normal_scores(pred: Tensor, true: Tensor, observable: Tensor) -> dict[str, Tensor]:
-    """Sums for the normals' scores over a batch: angle to the truth and the flat map's angle
-    (degrees, summed over texels, and over the ``observable`` texels), the slope fields' products
-    and squares, and the texel counts.
+    """Sums for the normals' angles over a batch: angle to the truth and the flat map's angle
+    (degrees, summed over texels, and over the ``observable`` texels), and the texel count.
 
     Shape:
         - pred, true: ``(B, 3, H, W)`` unit normals; observable: ``(B, 1, H, W)`` bool
@@ -52,8 +53,6 @@ def normal_scores(pred: Tensor, true: Tensor, observable: Tensor) -> dict[str, T
     """
     flat = torch.zeros_like(true)
     flat[:, 2] = 1.0
-    p_slope = -pred[:, :2] / pred[:, 2:].clamp_min(1e-3)
-    t_slope = -true[:, :2] / true[:, 2:].clamp_min(1e-3)
     angle = angular_distance(pred, true, dim=1) * 180.0
     flat_angle = angular_distance(flat, true, dim=1) * 180.0
     weight = observable[:, 0].to(angle.dtype)
@@ -62,21 +61,17 @@ def normal_scores(pred: Tensor, true: Tensor, observable: Tensor) -> dict[str, T
         "flat_angle": flat_angle.sum(),
         "observable_angle": (angle * weight).sum(),
         "observable_flat_angle": (flat_angle * weight).sum(),
-        "slope_dot": (p_slope * t_slope).sum(),
-        "pred_slope_sq": p_slope.square().sum(),
-        "true_slope_sq": t_slope.square().sum(),
         "texels": torch.tensor(float(true[:, 0].numel())),
     }
 
 
 def summarize(sums: Mapping[str, float]) -> dict[str, float]:
     """Mean angles (all texels; the observable ones, ``Σ θ·mask / N`` as :func:`~brdfgan.data
-    .relief.observable_angle`), their ratios to the flat map's, and the pooled slope cosine."""
+    .relief.observable_angle`) and their ratios to the flat map's."""
     angle = sums["angle"] / sums["texels"]
     flat = sums["flat_angle"] / sums["texels"]
     observable = sums["observable_angle"] / sums["texels"]
     observable_flat = sums["observable_flat_angle"] / sums["texels"]
-    cosine = sums["slope_dot"] / max((sums["pred_slope_sq"] * sums["true_slope_sq"]) ** 0.5, 1e-12)
     return {
         "angle_deg": angle,
         "flat_angle_deg": flat,
@@ -84,13 +79,13 @@ def summarize(sums: Mapping[str, float]) -> dict[str, float]:
         "observable_angle_deg": observable,
         "observable_flat_angle_deg": observable_flat,
         "observable_vs_flat": observable / max(observable_flat, 1e-12) - 1.0,
-        "slope_cosine": cosine,
     }
 
 
 def evaluate(generator: nn.Module, batches: Sequence[Mapping[str, Any]]) -> dict[str, float]:
     generator.eval()
     sums: dict[str, float] = {}
+    slopes = SlopeAgreement()
     with torch.no_grad():
         for batch in batches:
             pred = generator(batch["photo"], batch["flash"])
@@ -99,8 +94,9 @@ def evaluate(generator: nn.Module, batches: Sequence[Mapping[str, Any]]) -> dict
             observable = observable_mask(shading, srgb8_rounding_log(batch["photo"]))
             for name, value in normal_scores(pred[:, NORMAL], batch["maps"][:, NORMAL], observable).items():
                 sums[name] = sums.get(name, 0.0) + float(value)
+            slopes.update(pred, batch["maps"])
     generator.train()
-    return summarize(sums)
+    return {**summarize(sums), "slope_cosine": float(slopes.compute()["normal_slope_cosine"])}
 
 
 def training_batches(module: RenderedDataModule) -> Iterator[dict[str, Any]]:

@@ -23,17 +23,21 @@ from brdfgan.core.svbrdf import (
     split_maps,
     srgb_to_linear,
 )
+from brdfgan.data.materials.base import height_to_normal
+from brdfgan.data.materials.noise import fbm
 from brdfgan.evaluation.evaluator import evaluate_models, markdown_table, write_results
 from brdfgan.metrics import (
     DIELECTRIC_THRESHOLD,
     FalseMetal,
     ObservableNormalAngle,
     ReliefLeak,
+    SlopeAgreement,
     SVBRDFMetrics,
     false_metal,
     observable_mask,
     relief_leak,
     relief_shading,
+    slope_agreement,
     srgb8_rounding_log,
 )
 
@@ -51,6 +55,53 @@ def half_metal_truth(batch: int = 2, size: int = 8) -> Tensor:
     maps = flat_maps(size, size, batch=(batch,), dtype=torch.float64)
     maps[:, 7, :, size // 2 :] = 1.0
     return maps
+
+
+# ---------------------------------------------------------------- slope agreement
+
+
+def fbm_relief(scale: float, batch: int = 1) -> Tensor:
+    """Flat grey maps with the normals of ``scale`` times an fbm height (negative: inside out)."""
+    maps = flat_maps(32, 32, batch=(batch,))
+    for i in range(batch):
+        height = fbm(32, 4, torch.Generator().manual_seed(i), octaves=3)[None]
+        maps[i, 3:6] = height_to_normal(scale * height)
+    return maps
+
+
+def test_slope_agreement_right_way_round_one_inside_out_minus_one_half_as_steep_half() -> None:
+    truth = fbm_relief(2.0)
+    for pred, cosine, ratio in (
+        (truth, 1.0, 1.0),
+        (fbm_relief(-2.0), -1.0, 1.0),
+        (fbm_relief(1.0), 1.0, 0.5),
+    ):
+        scores = slope_agreement(pred, truth)
+        assert scores["normal_slope_cosine"].item() == pytest.approx(cosine, abs=1e-6)
+        # slopes of a halved height, renormalised: half as steep up to the normalisation's rounding
+        assert scores["normal_slope_ratio"].item() == pytest.approx(ratio, rel=2e-2)
+    flat = slope_agreement(flat_maps(32, 32, batch=(1,)), truth)
+    assert flat["normal_slope_cosine"].item() == 0.0 and flat["normal_slope_ratio"].item() == 0.0
+    on_flat = slope_agreement(truth, flat_maps(32, 32, batch=(1,)))  # no true relief to agree with
+    assert all(math.isnan(value.item()) for value in on_flat.values())
+    # Unrelated relief: near 0.
+    other = fbm_relief(2.0, batch=2)[1:]
+    assert abs(slope_agreement(other, truth)["normal_slope_cosine"].item()) < 0.2
+
+
+def test_slope_agreement_pools_texels_exactly_over_batch_splits() -> None:
+    truth, pred = fbm_relief(2.0, batch=3), fbm_relief(1.0, batch=3).flip(0)
+    split, whole = SlopeAgreement(), SlopeAgreement()
+    split.update(pred[:1], truth[:1])
+    split.update(pred[1:], truth[1:])
+    whole.update(pred, truth)
+    a, b = split.compute(), whole.compute()
+    for key in ("normal_slope_cosine", "normal_slope_ratio"):
+        torch.testing.assert_close(a[key], b[key], rtol=1e-12, atol=0.0)
+        torch.testing.assert_close(b[key], slope_agreement(pred, truth)[key])
+    # Pooled, not a mean of per-sample cosines.
+    per_sample = torch.stack([slope_agreement(pred[i], truth[i])["normal_slope_cosine"] for i in range(3)])
+    assert not torch.isclose(per_sample.mean(), b["normal_slope_cosine"])
 
 
 # ---------------------------------------------------------------- false metal
@@ -410,12 +461,14 @@ def test_evaluator_tables_report_false_metal_and_relief_leak(tmp_path: Path) -> 
     header, rule, copy, right = markdown_table(results).splitlines()
     columns = [cell.strip() for cell in header.strip("|").split("|")]
     start = columns.index("false metal")
-    assert columns[start : start + 5] == [
+    assert columns[start : start + 7] == [
         "false metal",
         "relief leak",
         "leak slope",
         "normal ° seen",
         "flat ° seen",
+        "slope cos",
+        "slope ratio",
     ]
     assert start == columns.index("chk metal") + 1
     assert rule.count("---") == len(columns)

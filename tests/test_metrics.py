@@ -57,6 +57,8 @@ SCALAR_KEYS = (
     "normal_angle_deg/observable_flat",
     "relief_leak",
     "relief_leak/slope",
+    "normal_slope_cosine",
+    "normal_slope_ratio",
 )
 
 
@@ -444,6 +446,8 @@ def test_reset() -> None:
     assert before["rmse/roughness"] > 0
     assert after.pop("basecolor_saturation_ratio").item() == pytest.approx(1.0, abs=1e-6)
     assert after.pop("normal_angle_deg/observable_flat").item() > 0  # a flat map misses the random relief
+    for key in ("normal_slope_cosine", "normal_slope_ratio"):
+        assert after.pop(key).item() == pytest.approx(1.0), key  # the same relief, as steep
     for key in CHECKERBOARD_KEYS:
         assert after.pop(key).item() == 1.0, key  # identical maps: the same period-2 power
     for key, value in after.items():

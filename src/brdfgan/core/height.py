@@ -29,13 +29,27 @@ AO_DIRECTIONS = 8
 AO_RADIUS_FRACTION = 1.0 / 16.0  # of the sample side
 
 
-def _slopes(normal: Tensor) -> tuple[Tensor, Tensor]:
-    """``(∂h/∂x, ∂h/∂row)`` in height per pixel of the same unit as a pixel; normals tilted to
-    grazing are clamped (a slope of at most 20)."""
-    nz = normal[..., 2, :, :].clamp_min(0.05)
-    dh_dx = -normal[..., 0, :, :] / nz
-    dh_drow = normal[..., 1, :, :] / nz  # +y is up the rows: rows go down
-    return dh_dx, dh_drow
+# slope_field clamps n_z to at least this before taking slopes (tilts up to 87°, a slope of 20):
+# grazing normals stay finite.
+SLOPE_Z_MIN = 0.05
+
+
+def slope_field(normal: Tensor) -> Tensor:
+    """The surface slopes ``(s_x, s_y) = (−n_x/n_z, −n_y/n_z)``: height gained per unit of
+    distance along +x and +y (+y up the rows), the slopes the normals of :func:`height_slope_channels`
+    are made of, n_z clamped at :data:`SLOPE_Z_MIN`. Same dtype as ``normal``.
+
+    Shape:
+        - normal: ``(*, 3, H, W)``
+        - output: ``(*, 2, H, W)``
+
+    Example:
+        >>> slope_field(torch.tensor([0.6, 0.0, 0.8]).view(3, 1, 1)).flatten().tolist()
+        [-0.75, -0.0]
+    """
+    check_shape(normal, "* 3 H W", name="normal")
+    z = normal[..., 2:3, :, :].clamp_min(SLOPE_Z_MIN)
+    return -normal[..., :2, :, :] / z
 
 
 def height_slope_channels(height: Tensor, *, periodic: bool = False) -> Tensor:
@@ -88,7 +102,8 @@ def height_from_normals(normal: Tensor, *, periodic: bool = False) -> Tensor:
     """
     check_shape(normal, "* 3 H W", name="normals")
     height, width = normal.shape[-2:]
-    dh_dx, dh_drow = _slopes(normal.to(torch.float64))
+    dh_dx, dh_dy = slope_field(normal.to(torch.float64)).unbind(-3)
+    dh_drow = -dh_dy  # +y is up the rows: rows go down
     # A sample is a flat surface: a mean slope is a bias of the normals (a periodic field cannot
     # hold one anyway), and integrated it would become a ramp that swamps the relief.
     dh_dx = dh_dx - dh_dx.mean(dim=(-2, -1), keepdim=True)

@@ -117,6 +117,8 @@ def markdown_table(results: Mapping[str, Mapping[str, float]]) -> str:
         ("relief_leak/slope", "leak slope"),
         ("normal_angle_deg/observable", "normal ° seen"),
         ("normal_angle_deg/observable_flat", "flat ° seen"),
+        ("normal_slope_cosine", "slope cos"),
+        ("normal_slope_ratio", "slope ratio"),
     ]
     columns += [(f"hotspot/{m}", f"hot {label}") for m, label in HOTSPOT_COLUMNS.items()]
     present = [(key, label) for key, label in columns if any(key in v for v in results.values())]

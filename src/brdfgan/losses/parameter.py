@@ -22,6 +22,7 @@ from typing import Literal
 import torch
 from torch import Tensor
 
+from brdfgan.core.height import slope_field
 from brdfgan.core.svbrdf import check_map_pair, normalize_normal, split_maps
 
 # The dot product is clamped to [-1 + ε, 1 - ε] because d acos(x)/dx = -1/√(1-x²) is infinite at
@@ -37,8 +38,6 @@ PARAMETER_TERMS: tuple[str, ...] = tuple(f"param_{name}" for name in PARAMETER_M
 MetallicLoss = Literal["l1", "bce"]
 # Predicted metallic values are clamped to [ε, 1 − ε] inside the BCE so log(0) never occurs.
 BCE_EPS = 1e-6
-# tilt_squared_error clamps n_z to at least this before taking slopes (tilts up to 87°).
-TILT_Z_MIN = 0.05
 
 
 def angular_distance(a: Tensor, b: Tensor, dim: int = -3, eps: float = ANGULAR_EPS) -> Tensor:
@@ -107,30 +106,23 @@ def metallic_bce(pred: Tensor, target: Tensor, eps: float = BCE_EPS) -> Tensor:
     return -(t * torch.log(p) + (1.0 - t) * torch.log1p(-p))
 
 
-def tilt_squared_error(pred: Tensor, target: Tensor, dim: int = -3) -> Tensor:
-    """Squared difference of the surface slopes ``(n_x/n_z, n_y/n_z)`` of two normal fields, per
-    pixel (summed over the two slopes), in at least float32.
+def tilt_squared_error(pred: Tensor, target: Tensor) -> Tensor:
+    """Squared difference of the surface slopes (:func:`~brdfgan.core.height.slope_field`) of two
+    normal fields, per pixel (summed over the two slopes), in at least float32.
 
     Why beside the angular distance: an angle is an L1-type error, minimised by the conditional
     *median*; where the photo leaves a tilt uncertain — and a quarter of the training texels are
     flat — that median is exactly flat, so the network's normals collapse to flat first and learn
     slowly after (the normal-only runs: ``docs/default_model_v3.md``, "The maps were not where the
     photos showed them"). Squared error targets the conditional mean, whose gradient grows with the
-    miss. n_z is clamped to
-    :data:`TILT_Z_MIN` so grazing normals stay finite.
+    miss.
 
     Shape:
-        - pred, target: ``(*, 3, H, W)`` (vector axis ``dim``), unit normals with z > 0
+        - pred, target: ``(*, 3, H, W)``, unit normals with z > 0
         - output: ``(*, H, W)``
     """
     dtype = torch.promote_types(torch.promote_types(pred.dtype, target.dtype), torch.float32)
-
-    def slopes(normal: Tensor) -> Tensor:
-        x, y, z = normal.to(dtype).unbind(dim)
-        z = z.clamp_min(TILT_Z_MIN)
-        return torch.stack([x / z, y / z], dim=dim)
-
-    return (slopes(pred) - slopes(target)).square().sum(dim=dim)
+    return (slope_field(pred.to(dtype)) - slope_field(target.to(dtype))).square().sum(dim=-3)
 
 
 def parameter_loss(

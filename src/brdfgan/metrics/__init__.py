@@ -2,7 +2,8 @@
 downscaled resolution, normal angular error, a fixed-configuration re-rendering error, the
 base colour's saturation ratio and hue error, the period-2 (checkerboard) power relative to the
 truth's, the error near the flash highlight relative to elsewhere, the metallic read into
-dielectrics (false metal) and the relief shading left in the base colour (relief leak).
+dielectrics (false metal), the relief shading left in the base colour (relief leak) and whether
+the relief drawn is the surface's (slope agreement).
 Definitions in :mod:`brdfgan.metrics.svbrdf_metrics`.
 """
 
@@ -26,6 +27,7 @@ from brdfgan.metrics.svbrdf_metrics import (
     ReliefLeak,
     RerenderError,
     SaturationRatio,
+    SlopeAgreement,
     SVBRDFMetrics,
     area_downscale,
     basecolor_hsv,
@@ -47,6 +49,7 @@ from brdfgan.metrics.svbrdf_metrics import (
     relief_leak,
     relief_shading,
     saturation_ratio,
+    slope_agreement,
     srgb8_rounding_log,
     stored_photo_size,
 )
@@ -72,6 +75,7 @@ __all__ = [
     "RerenderError",
     "SVBRDFMetrics",
     "SaturationRatio",
+    "SlopeAgreement",
     "area_downscale",
     "basecolor_hsv",
     "basecolor_log_error",
@@ -92,6 +96,7 @@ __all__ = [
     "relief_leak",
     "relief_shading",
     "saturation_ratio",
+    "slope_agreement",
     "srgb8_rounding_log",
     "stored_photo_size",
 ]

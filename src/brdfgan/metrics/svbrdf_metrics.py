@@ -32,6 +32,7 @@ from brdfgan.core.flash_geometry import (
     check_flash_frame,
     hotspot_disk,
 )
+from brdfgan.core.height import slope_field
 from brdfgan.core.render import render_point_lights
 from brdfgan.core.sampling import (
     RenderConfigs,
@@ -1300,6 +1301,91 @@ class ObservableNormalAngle(Metric):
         }
 
 
+# ---------------------------------------------------------------- relief drawn the right way round
+#
+# The normal angle says how far the normals are from the truth, not whether the relief a model
+# draws is the surface's: relief drawn inside out (grooves as ridges) and relief drawn where there
+# is none cost about the same angle. The slope fields s = (−n_x/n_z, −n_y/n_z)
+# (brdfgan.core.height.slope_field) answer that, pooled over every texel of the dataset:
+#
+#     cosine = Σ p·t / sqrt(Σ|p|² Σ|t|²)   +1 the relief the right way round (up to scale),
+#                                          −1 inside out, 0 unrelated (or a flat prediction)
+#     ratio  = sqrt(Σ|p|² / Σ|t|²)         the drawn relief's steepness over the truth's (0: flat)
+#
+# Pooled sums, not per-sample means: a near-flat sample has no slope direction to agree with, and
+# its cosine would be noise counted as much as a deeply carved one's. Both are NaN when every true
+# texel is flat.
+
+
+def _slope_sums(pred: Tensor, true: Tensor) -> Tensor:
+    """``(Σ p·t, Σ|p|², Σ|t|²)`` of the two normal maps' slope fields: a float64 ``(3,)``."""
+    p = slope_field(split_maps(pred).normal.to(torch.float64))
+    t = slope_field(split_maps(true).normal.to(torch.float64))
+    return torch.stack([(p * t).sum(), p.square().sum(), t.square().sum()])
+
+
+def _slope_values(sums: Tensor) -> dict[str, Tensor]:
+    dot, pred_sq, true_sq = sums.unbind()
+    nan = torch.full_like(true_sq, math.nan)
+    # A flat prediction agrees with nothing: cosine 0, not 0/0.
+    cosine = torch.where(pred_sq > 0, dot / (pred_sq * true_sq).sqrt().clamp_min(1e-300), 0.0)
+    return {
+        "normal_slope_cosine": torch.where(true_sq > 0, cosine, nan),
+        "normal_slope_ratio": torch.where(true_sq > 0, _ratio(pred_sq, true_sq).sqrt(), nan),
+    }
+
+
+def slope_agreement(pred: Tensor, true: Tensor) -> dict[str, Tensor]:
+    """The predicted relief against the true one (see the section's comment): ``normal_slope_cosine``
+    (+1 right way round, −1 inside out, 0 unrelated or flat) and ``normal_slope_ratio`` (RMS slope
+    over the truth's), pooled over every texel of every sample; NaN when the truth is flat.
+
+    Shape:
+        - pred, true: ``(*, 8, H, W)``
+        - output: float64 scalars
+
+    Example:
+        The truth's relief inside out, and half as steep:
+
+        >>> from brdfgan.core.svbrdf import flat_maps
+        >>> true = flat_maps(1, 2)
+        >>> true[3:6, 0, 0] = torch.tensor([0.6, 0.0, 0.8])
+        >>> pred = true.clone()
+        >>> pred[3:5] = -pred[3:5] / 2
+        >>> {name: round(value.item(), 3) for name, value in slope_agreement(pred, true).items()}
+        {'normal_slope_cosine': -1.0, 'normal_slope_ratio': 0.429}
+    """
+    check_map_pair(pred, true)
+    return _slope_values(_slope_sums(pred, true))
+
+
+class SlopeAgreement(Metric):
+    """:func:`slope_agreement` over a whole dataset: the three sums accumulate over the updates.
+
+    Shape:
+        - pred, true: ``(B, 8, H, W)`` or ``(8, H, W)``
+        - compute: ``normal_slope_cosine``, ``normal_slope_ratio`` (float64 scalars, NaN before any
+          update or while every true texel is flat)
+    """
+
+    is_differentiable = False
+    higher_is_better = True
+    full_state_update = False
+
+    sums: Tensor
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.add_state("sums", torch.zeros(3, dtype=torch.float64), dist_reduce_fx="sum")
+
+    def update(self, pred: Tensor, true: Tensor) -> None:
+        pred, true = _as_batch(pred, true)
+        self.sums += _slope_sums(pred, true)
+
+    def compute(self) -> dict[str, Tensor]:
+        return _slope_values(self.sums)
+
+
 class SVBRDFMetrics(MetricCollection):
     """All evaluation metrics behind one ``update(pred_maps, true_maps, hotspot=None, flash=None,
     photo=None)``, computed as a flat dict. ``hotspot`` (the flash positions, :func:`hotspot_centres`)
@@ -1321,7 +1407,9 @@ class SVBRDFMetrics(MetricCollection):
     base colour's error on the true relief shading: 0 = right, +1 = the relief is in the base
     colour), with ``photo`` ``normal_angle_deg/observable`` and ``…/observable_flat``
     (:class:`ObservableNormalAngle`: the model's and a flat map's angle over the texels whose relief
-    the photo shows) and, with ``hotspot``, ``hotspot/<map>`` (:class:`HotspotError`; with
+    the photo shows), ``normal_slope_cosine`` and ``normal_slope_ratio`` (:class:`SlopeAgreement`: +1
+    the relief the right way round, −1 inside out; the drawn relief's steepness over the truth's)
+    and, with ``hotspot``, ``hotspot/<map>`` (:class:`HotspotError`; with
     ``hotspot_rmse`` also ``hotspot/<map>/inside`` and ``/outside``). Log them with
     ``log_dict(metrics.compute())`` — Lightning's ``log_dict(metrics)`` expects scalar metrics.
 
@@ -1375,6 +1463,7 @@ class SVBRDFMetrics(MetricCollection):
         metrics["false_metal"] = FalseMetal(**kw)
         metrics["relief_leak"] = ReliefLeak(**kw)
         metrics["normal_angle_deg/observable"] = ObservableNormalAngle(**kw)
+        metrics["normal_slope"] = SlopeAgreement(**kw)
         if hotspot:
             metrics["hotspot"] = HotspotError(
                 hotspot_radius_fraction, albedo_space=albedo_space, rmse=hotspot_rmse, prefix="hotspot/", **kw

@@ -30,10 +30,9 @@ from torch import Tensor
 from brdfgan.core.checks import check_shape
 from brdfgan.core.exposure import auto_exposure_scale, log_luminance
 from brdfgan.core.filtering import gaussian_blur
-from brdfgan.core.height import height_slope_channels
+from brdfgan.core.height import height_slope_channels, slope_field
 from brdfgan.core.svbrdf import BASECOLOR, NORMAL, srgb_to_linear
 from brdfgan.data.loading.rendered import render_scenes
-from brdfgan.losses.parameter import TILT_Z_MIN
 from brdfgan.metrics import observable_mask, srgb8_rounding_log  # their home: the evaluator grades with them
 
 __all__ = [
@@ -54,7 +53,6 @@ __all__ = [
     "relief_share",
     "scene_relief_shading",
     "slope_band_energy",
-    "slope_field",
     "srgb8_rounding_log",
     "steep_angle_share",
     "tilt_deg",
@@ -196,24 +194,6 @@ def flat_window_share(
     means = torch.nn.functional.avg_pool2d(flat, window, stride=window)
     share = (means < threshold_deg).to(normal.dtype).mean(dim=(-3, -2, -1))
     return share.reshape(tilt.shape[:-2])
-
-
-def slope_field(normal: Tensor) -> Tensor:
-    """The surface slopes ``(s_x, s_y) = (−n_x/n_z, −n_y/n_z)`` (height gained per unit of
-    distance along +x and +y, the convention of :func:`~brdfgan.data.materials.base.height_to_normal`),
-    n_z clamped at :data:`~brdfgan.losses.parameter.TILT_Z_MIN` so grazing normals stay finite.
-
-    Shape:
-        - normal: ``(*, 3, H, W)``
-        - output: ``(*, 2, H, W)``
-
-    Example:
-        >>> slope_field(torch.tensor([0.6, 0.0, 0.8]).view(3, 1, 1)).flatten().tolist()
-        [-0.75, -0.0]
-    """
-    check_shape(normal, "* 3 H W", name="normal")
-    z = normal[..., 2:3, :, :].clamp_min(TILT_Z_MIN)
-    return -normal[..., :2, :, :] / z
 
 
 def slope_band_energy(normal: Tensor, bands: Sequence[float] = SLOPE_BANDS) -> Tensor:
