@@ -123,9 +123,15 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
     # recipe starting from its weights, so the whole generator learns on with that reading.
     [shading_first]="experiment=v5_shading"
     [rendered_height_invert_after_shading]="experiment=v5 loss.normal_tilt_weight=0 data.relief.invert_probability=0.5 init_from=$OUT/ablation/shading_first$suffix/checkpoints/last.ckpt"
+    # v4 itself (both stages) trained on for 1 000 batches of rendered photos at stage 2's rate:
+    # whether the fresh light of every draw (room light, exposure, the phone) teaches v4's
+    # roughness and metal without costing the base colour it learned from the Mitsuba shards,
+    # and the same with half the relief inverted (no dark-is-low prior to pick up on the way).
+    [v4_then_rendered]="$slopes init_from=$V4 model.optimizer.lr=1e-4"
+    [v4_then_rendered_invert]="$slopes init_from=$V4 model.optimizer.lr=1e-4 data.relief.invert_probability=0.5"
   )
   local run models=""
-  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat rendered_height_invert rendered_height_invert_plain shading_first rendered_height_invert_after_shading}; do
+  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat rendered_height_invert rendered_height_invert_plain shading_first rendered_height_invert_after_shading v4_then_rendered v4_then_rendered_invert}; do
     [ -f $OUT/ablation/$run$suffix/checkpoints/last.ckpt ] ||
       $PY train.py ${RUNS[$run]} $steps hydra.run.dir=$OUT/ablation/$run$suffix
     models="$models${models:+, }$run$suffix: $OUT/ablation/$run$suffix/checkpoints/last.ckpt"
