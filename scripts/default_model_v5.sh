@@ -130,11 +130,11 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
     [v4_then_rendered]="$slopes init_from=$V4 model.optimizer.lr=1e-4"
     [v4_then_rendered_invert]="$slopes init_from=$V4 model.optimizer.lr=1e-4 data.relief.invert_probability=0.5"
   )
-  local run models=""
+  local run models="v4: $V4, mean_maps: $REF/mean_maps.safetensors"  # the shipped model and the flat, constant reference beside every row
   for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat rendered_height_invert rendered_height_invert_plain shading_first rendered_height_invert_after_shading v4_then_rendered v4_then_rendered_invert}; do
     [ -f $OUT/ablation/$run$suffix/checkpoints/last.ckpt ] ||
       $PY train.py ${RUNS[$run]} $steps hydra.run.dir=$OUT/ablation/$run$suffix
-    models="$models${models:+, }$run$suffix: $OUT/ablation/$run$suffix/checkpoints/last.ckpt"
+    models="$models, $run$suffix: $OUT/ablation/$run$suffix/checkpoints/last.ckpt"
   done
   # Chosen on validation; HELD_OUT=1 also scores the test split's parts and both OOD variants,
   # to report (never to choose by). EVAL names the scores' folders (default eval: a later subset
