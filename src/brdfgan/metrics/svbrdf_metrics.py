@@ -1353,7 +1353,7 @@ def slope_agreement(pred: Tensor, true: Tensor) -> dict[str, Tensor]:
         >>> pred = true.clone()
         >>> pred[3:5] = -pred[3:5] / 2
         >>> {name: round(value.item(), 3) for name, value in slope_agreement(pred, true).items()}
-        {'normal_slope_cosine': -1.0, 'normal_slope_ratio': 0.429}
+        {'normal_slope_cosine': -1.0, 'normal_slope_ratio': 0.5}
     """
     check_map_pair(pred, true)
     return _slope_values(_slope_sums(pred, true))
