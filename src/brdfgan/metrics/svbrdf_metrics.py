@@ -1331,7 +1331,7 @@ def _slope_values(sums: Tensor) -> dict[str, Tensor]:
     cosine = torch.where(pred_sq > 0, dot / (pred_sq * true_sq).sqrt().clamp_min(1e-300), 0.0)
     return {
         "normal_slope_cosine": torch.where(true_sq > 0, cosine, nan),
-        "normal_slope_ratio": torch.where(true_sq > 0, _ratio(pred_sq, true_sq).sqrt(), nan),
+        "normal_slope_ratio": _ratio(pred_sq, true_sq).sqrt(),  # NaN for a flat truth, as _ratio gives
     }
 
 
