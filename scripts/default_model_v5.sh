@@ -5,7 +5,7 @@
 # split's two parts, the procedural and scan test sets and both OOD variants beside v4 and the
 # trivial references; export_weights ships it. One training at a time on the two threads.
 #
-#   scripts/default_model_v5.sh [final|fixres|normal_curve|evaluate|ablation|export_weights]...
+#   scripts/default_model_v5.sh [final|fixres|normal_curve|evaluate|ablation|shading_curve|export_weights]...
 #   (default: final fixres normal_curve evaluate, in order; SEEDS="1" runs one seed per session)
 #
 # Long trainings resume: rerunning a stage continues each unfinished run from its last.ckpt.
@@ -140,6 +140,19 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
   # to report (never to choose by). EVAL names the scores' folders (default eval: a later subset
   # of ROWS given its own name keeps the earlier scores).
   score "$models" $OUT/ablation/${EVAL:-eval}_ "$suffix" "${HELD_OUT:-}" val ${HELD_OUT:+test}
+}
+
+shading_curve() {  # the normals alone (experiment=v5_shading) 8x as long: 8 000 batches of 4, ~75 min,
+  # validated every 2 000: whether more photos lift the slope cosine past the 1 000-2 000-batch
+  # plateau (docs/default_model.md, "More photos"); scored beside v4 like an ablation row.
+  local run=$OUT/shading_curve
+  [ -f $run/.done ] || {
+    $PY train.py experiment=v5_shading data.epoch_samples=8000 trainer.max_epochs=4 \
+      trainer.check_val_every_n_epoch=1 test=false hydra.run.dir=$run $(resume $run)
+    touch $run/.done
+  }
+  score "v4: $V4, mean_maps: $REF/mean_maps.safetensors, shading_curve: $run/checkpoints/last.ckpt" \
+    $OUT/shading_curve_ "" "${HELD_OUT:-}" val ${HELD_OUT:+test}
 }
 
 # v4, the model v5 is measured against, from the history (the release before v5).

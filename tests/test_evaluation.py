@@ -408,6 +408,19 @@ def test_the_summary_says_how_the_training_photos_were_made(tmp_path: Path) -> N
 
 
 @pytest.mark.integration
+def test_the_summary_of_a_rendered_run_without_shards_reads_its_banks_spec(tmp_path: Path) -> None:
+    # data.prepare=null (no shards generated, as on a GPU machine without Mitsuba): the bank's spec
+    # says what the materials were.
+    from brdfgan.inference.model.export_weights import training_summary
+
+    overrides = ["experiment=v5", "data.prepare=null", "+dataset_spec@data.bank.spec=procedural_and_scans"]
+    run = _fake_training_run(tmp_path / "gpu", overrides, epoch=0, step=10)
+    summary = training_summary(tmp_path / "gpu", run, None)
+    assert summary["dataset"]["training_photos"] == "rendered on the fly"
+    assert summary["resolution"] == 256 and summary["dataset"]["scans"]["fraction"] == 0.35
+
+
+@pytest.mark.integration
 def test_the_summary_records_the_share_of_scanned_materials(tmp_path: Path) -> None:
     from brdfgan.inference.model.export_weights import training_summary
 

@@ -42,6 +42,7 @@ from brdfgan.data.phone.environments import (
 from brdfgan.data.phone.flash import blackbody_rgb
 from brdfgan.data.storage.generation import DatasetSpec, MitsubaPhotographer, material_seed, paint_material
 from brdfgan.data.storage.shards import decode_maps
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 from tests.conftest import compose_train, random_maps, run_python
 
 RES = 64
@@ -172,6 +173,42 @@ def test_bank_build_resumes_and_leaves_a_complete_bank_alone(bank: MaterialBank)
     assert not bank.ready()
     MaterialBank(TINY_SPEC, bank.root.parent, environment_resolution=16).build(progress=False)
     assert victim.read_bytes() == before and bank.ready()
+
+
+def test_bank_painted_by_several_processes_is_byte_for_byte_the_same(
+    bank: MaterialBank, tmp_path: Path
+) -> None:
+    parallel = MaterialBank(TINY_SPEC, tmp_path, environment_resolution=16, paint_workers=2)
+    assert parallel.root.name == bank.root.name
+    parallel.build(progress=False)
+    assert parallel.ready()
+    names = sorted(path.name for path in bank.root.iterdir())
+    assert names == sorted(path.name for path in parallel.root.iterdir())
+    for name in names:
+        assert (parallel.root / name).read_bytes() == (bank.root / name).read_bytes(), name
+
+
+def test_bank_keeps_a_complete_environment_table_and_retabulates_another_resolution(
+    bank: MaterialBank, tmp_path: Path
+) -> None:
+    # A table carried to a machine without Mitsuba (sun and sky need it) is used as it is.
+    carried = MaterialBank(TINY_SPEC, tmp_path, environment_resolution=16)
+    carried.root.mkdir(parents=True)
+    table = carried.root / "environments.npz"
+    table.write_bytes((bank.root / "environments.npz").read_bytes())
+    stamp = table.stat().st_mtime_ns
+    carried.build(progress=False)
+    assert table.stat().st_mtime_ns == stamp and carried.ready()
+    # At another resolution the table no longer fits: it is tabulated again.
+    (carried.root / "bank.json").unlink()
+    MaterialBank(TINY_SPEC, tmp_path, environment_resolution=8).build(progress=False)
+    with np.load(table) as data:
+        assert {data[name].shape[0] for name in data.files if name.endswith("/radiance")} == {8}
+
+
+def test_bank_rejects_no_paint_workers(tmp_path: Path) -> None:
+    with pytest.raises(DatasetConfigError, match=r"data\.bank\.paint_workers=0"):
+        MaterialBank(TINY_SPEC, tmp_path, paint_workers=0)
 
 
 def test_bank_folder_follows_the_materials_not_the_capture(tmp_path: Path) -> None:
@@ -339,8 +376,6 @@ def test_relief_sampling_leaves_every_other_draw_of_the_photo_as_it_was(bank: Ma
 
 
 def test_relief_sampling_names_a_bad_key() -> None:
-    from brdfgan.data.storage.spec_checks import DatasetConfigError
-
     with pytest.raises(DatasetConfigError, match=r"data\.relief\.swap_probability"):
         ReliefSampling(swap_probability=1.5)
     with pytest.raises(DatasetConfigError, match=r"data\.relief"):

@@ -35,8 +35,10 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import multiprocessing
 import random
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -136,7 +138,15 @@ class MaterialBank:
     The training scan sets are read from ``spec.scans.folder`` when first drawn and kept in memory.
     """
 
-    def __init__(self, spec: DatasetSpec, folder: str | Path, environment_resolution: int = 64) -> None:
+    def __init__(
+        self,
+        spec: DatasetSpec,
+        folder: str | Path,
+        environment_resolution: int = 64,
+        paint_workers: int = 1,
+    ) -> None:
+        if paint_workers < 1:
+            raise DatasetConfigError(f"data.bank.paint_workers={paint_workers}: must be >= 1")
         if spec.scanned is not None:
             raise DatasetConfigError(
                 "dataset_spec.scanned: a scanned dataset is test only; it has no training materials to bank"
@@ -151,6 +161,7 @@ class MaterialBank:
         self.root = Path(folder) / digest
         self.identity = identity
         self.environment_resolution = environment_resolution
+        self.paint_workers = paint_workers
         scans = scan_materials(spec)
         self.procedural = tuple(i for i in split_materials(spec)["train"] if i not in scans)
         if spec.scans.enabled:
@@ -182,29 +193,38 @@ class MaterialBank:
         return self.root / f"m{index:06d}.u16z"
 
     def build(self, progress: bool = True) -> Path:
-        """Paint what is missing and write ``bank.json``; a complete bank is left as it is."""
+        """Paint what is missing and write ``bank.json``; a complete bank is left as it is.
+
+        ``paint_workers`` processes paint at once; each material's bytes depend on its index
+        alone (its own seed, one torch thread), so the bank is the same for any worker count.
+        """
         from tqdm import tqdm
 
         if self.ready():
             return self.root
         self.root.mkdir(parents=True, exist_ok=True)
-        materials: dict[str, Any] = {}
-        with single_torch_thread():  # the bytes of a material do not depend on the core count
-            for index in tqdm(self.procedural, desc="material bank", unit="material", disable=not progress):
-                path = self.material_path(index)
-                meta_path = path.with_suffix(".json")
-                if path.exists() and meta_path.exists():  # painted by a build that was killed later
-                    materials[str(index)] = json.loads(meta_path.read_text())
-                    continue
-                generator = torch.Generator().manual_seed(material_seed(self.spec.seed, index))
-                material = paint_material(self.spec, "train", index, generator)
-                meta = _material_meta(material)
-                # The metadata first: a maps file on disk always has its metadata beside it.
-                write_text_atomic(meta_path, json.dumps(meta, sort_keys=True))
-                with atomic_replace(path) as temp:
-                    temp.write_bytes(encode_maps(material.maps))
-                materials[str(index)] = meta
-        self._write_environments()
+        missing = [index for index in self.procedural if not self._painted(index)]
+        bar = tqdm(total=len(self.procedural), initial=len(self.procedural) - len(missing),
+                   desc="material bank", unit="material", disable=not progress)  # fmt: skip
+        with bar:
+            if self.paint_workers == 1 or len(missing) <= 1:
+                with single_torch_thread():
+                    for index in missing:
+                        paint_bank_material(self.spec, index, self.material_path(index))
+                        bar.update()
+            else:
+                # spawn, not fork: the parent's torch thread pool may already be running.
+                context = multiprocessing.get_context("spawn")
+                workers = min(self.paint_workers, len(missing))
+                with ProcessPoolExecutor(workers, mp_context=context) as pool:
+                    paths = [self.material_path(index) for index in missing]
+                    for _ in pool.map(paint_bank_material, [self.spec] * len(missing), missing, paths):
+                        bar.update()
+        materials = {
+            str(index): json.loads(self.material_path(index).with_suffix(".json").read_text())
+            for index in self.procedural
+        }
+        self.tabulate_environments()
         index_text = json.dumps(
             {
                 "identity": self.identity,
@@ -218,7 +238,19 @@ class MaterialBank:
         write_text_atomic(self.root / INDEX_FILE, index_text)
         return self.root
 
-    def _write_environments(self) -> None:
+    def _painted(self, index: int) -> bool:
+        """Whether material ``index`` is on disk (painted by a build that was killed later)."""
+        path = self.material_path(index)
+        return path.exists() and path.with_suffix(".json").exists()
+
+    def tabulate_environments(self, path: Path | None = None) -> Path:
+        """Tabulate the training environments into ``path`` (default: the bank's
+        ``environments.npz``), unless a table of every one at this resolution is there already:
+        a killed build's, or one tabulated elsewhere and carried to a machine without Mitsuba,
+        which the sun-and-sky environments need."""
+        path = path or self.root / "environments.npz"
+        if path.exists() and self._environments_complete(path):
+            return path
         arrays: dict[str, np.ndarray] = {}
         for spec in self.environments:
             environment = load_environment(spec, self.environment_resolution)
@@ -227,8 +259,20 @@ class MaterialBank:
                 arrays[f"{spec.env_id}/sun"] = np.asarray(
                     [*environment.sun.direction, *environment.sun.irradiance], dtype=np.float64
                 )
-        with atomic_replace(self.root / "environments.npz", keep_suffix=True) as temp:
+        with atomic_replace(path, keep_suffix=True) as temp:
             np.savez(temp, allow_pickle=False, **arrays)
+        return path
+
+    def _environments_complete(self, path: Path) -> bool:
+        try:
+            with np.load(path) as data:
+                return all(
+                    f"{spec.env_id}/radiance" in data.files
+                    and data[f"{spec.env_id}/radiance"].shape[0] == self.environment_resolution
+                    for spec in self.environments
+                )
+        except (OSError, ValueError):  # unreadable: tabulated again
+            return False
 
     # -- drawing --------------------------------------------------------------------------
 
@@ -290,6 +334,19 @@ class MaterialBank:
         if recolor.probability > 0 and recolor_draw < recolor.probability:
             maps, extra["recolor"] = recolor_scan(maps, recolor, generator)
         return PaintedMaterial(maps, f"scanned/{folder.name}", {}, extra, self.spec.scans.crop)
+
+
+def paint_bank_material(spec: DatasetSpec, index: int, path: Path) -> None:
+    """Paint training material ``index`` of ``spec`` as generation paints it into ``path`` (a
+    bank's ``m<index>.u16z``), its family, parameters and extras into the ``.json`` beside it
+    first, each written atomically, so a maps file on disk always has its metadata beside it. One torch
+    thread: the bytes do not depend on the core count."""
+    with single_torch_thread():
+        generator = torch.Generator().manual_seed(material_seed(spec.seed, index))
+        material = paint_material(spec, "train", index, generator)
+    write_text_atomic(path.with_suffix(".json"), json.dumps(_material_meta(material), sort_keys=True))
+    with atomic_replace(path) as temp:
+        temp.write_bytes(encode_maps(material.maps))
 
 
 def _material_meta(material: PaintedMaterial) -> dict[str, Any]:

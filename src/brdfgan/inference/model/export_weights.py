@@ -93,7 +93,12 @@ def training_summary(
     config = RunFolder(run_dir).config()
     state = read_checkpoint(checkpoint)
     data = config.data
-    spec = OmegaConf.to_container(data.prepare.spec, resolve=False) if "prepare" in data else None
+    # The spec that generated the shards; a rendered run with data.prepare=null (no shards made,
+    # as on a machine without Mitsuba) names its bank's own.
+    node = OmegaConf.select(data, "prepare.spec", default=None) or OmegaConf.select(
+        data, "bank.spec", default=None
+    )
+    spec = OmegaConf.to_container(node, resolve=False) if node is not None else None
     spec = spec if isinstance(spec, dict) else {}
     summary: dict[str, Any] = {
         "resolution": int(spec.get("resolution", 256)),
