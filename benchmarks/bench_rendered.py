@@ -11,15 +11,19 @@ minutes), batches of the v4 recipe (4 photos of 256², 128² windows), and per b
   and Adam (``experiment=anchored``'s model and loss, its rendering loss compiled);
 
 then the whole step (draw + compiled render + phone + v4 step) and the rendering's share of it,
-beside the v4 step alone (what a shard batch costs on top of decoding).
+beside the v4 step alone (what a shard batch costs on top of decoding). Last, what a fresh clone
+pays before its first step: painting a bank (the same spec with ``--paint-materials`` materials,
+into temporary folders) by one process and by ``--paint-workers`` (``data.bank.paint_workers``).
 
-    python -m benchmarks.bench_rendered [--batches 8]
+    python -m benchmarks.bench_rendered [--batches 8] [--paint-materials 120] [--paint-workers 2]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import statistics
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -29,7 +33,7 @@ import torch
 
 from benchmarks.bench_train import median_seconds
 from brdfgan.core.render import render_point_lights
-from brdfgan.data.loading.rendered import RenderedStream, photograph_scenes, scene_tensors
+from brdfgan.data.loading.rendered import MaterialBank, RenderedStream, photograph_scenes, scene_tensors
 from brdfgan.training.config import register_configs
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
@@ -40,6 +44,8 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--batches", type=int, default=8)
+    parser.add_argument("--paint-materials", type=int, default=120, help="the painting rows' spec size")
+    parser.add_argument("--paint-workers", type=int, default=2, help="the parallel painting row's processes")
     args = parser.parse_args()
     register_configs()
     with hydra.initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
@@ -68,6 +74,9 @@ def main() -> None:
         compile_seconds = time.perf_counter() - start
         fast = median_seconds(lambda: photograph_scenes(*scene_tensors(scenes[1]), compiled), 5)
     phone = median_seconds(lambda: module.photograph(scenes[2]), 3) - eager  # photograph renders eagerly
+    module.photograph_threads = 2
+    phone_threaded = median_seconds(lambda: module.photograph(scenes[2]), 3) - eager
+    module.photograph_threads = 1
     batches = [module.photograph(batch) for batch in scenes[2:]]
 
     model = hydra.utils.instantiate(
@@ -96,6 +105,7 @@ def main() -> None:
         ("render, eager", eager),
         (f"render, compiled (compiles once: {compile_seconds:.0f} s)", fast),
         ("phone + train crop", phone),
+        ("(phone + train crop, 2 threads: `data.photograph_threads=2`)", phone_threaded),
         ("v4 step (forward, supervised loss, backward, Adam)", v4_step),
         ("whole on-the-fly step (compiled render)", whole),
     ]
@@ -106,6 +116,27 @@ def main() -> None:
         print(f"| {name} | {seconds * 1000:.0f} | {seconds / whole:.0%} |")
     print(f"rendering's share of the whole step: {fast / whole:.0%}; the step against a shard batch's "
           f"v4 step alone: {whole / v4_step:.2f}×")  # fmt: skip
+    paint_table(module.bank, args.paint_materials, args.paint_workers)
+
+
+def paint_table(bank: MaterialBank, materials: int, workers: int) -> None:
+    """Time a whole bank build (painting and the environment table) of ``bank``'s spec cut to
+    ``materials`` materials, by one process and by ``workers``; one Markdown table."""
+    spec = dataclasses.replace(bank.spec, materials=materials)
+    seconds = {}
+    for count in (1, workers):
+        with tempfile.TemporaryDirectory(prefix="bench_bank-") as folder:
+            fresh = MaterialBank(spec, folder, bank.environment_resolution, paint_workers=count)
+            start = time.perf_counter()
+            fresh.build(progress=False)
+            seconds[count] = time.perf_counter() - start
+    painted = fresh.procedural_count
+    print(
+        f"\nbank build, {painted} procedural materials at {spec.material_resolution}², the environment table"
+    )
+    print("| processes | s | materials/s | time ratio |\n| --- | --- | --- | --- |")
+    for count, took in seconds.items():
+        print(f"| {count} | {took:.1f} | {painted / took:.1f} | {took / seconds[1]:.2f}× |")
 
 
 if __name__ == "__main__":

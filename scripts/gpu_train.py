@@ -9,9 +9,10 @@ GPU every batch, the material bank painted by ``--paint-workers`` CPU processes)
    faded (the shading-first stage);
 2. ``experiment=v5`` from stage 1's last weights: the full recipe.
 
-Both at ``--batch`` photos a batch with ``--workers`` loader processes, ``trainer=gpu``
-(bf16-mixed), validation and checkpoints off. :class:`TimedSnapshots` saves the weights at
-``--snapshots`` evenly spaced times of each stage's share, so the two stages give learning curves;
+Both with the plan's generator width (``--width``; twice v5's by default), photos a batch
+(``--batch``), loader processes and threads for the phone (``data.photograph_threads``),
+``trainer=gpu`` (bf16-mixed), validation and checkpoints off. :class:`TimedSnapshots` saves the
+weights at evenly spaced times of each stage's share, so the two stages give learning curves;
 each snapshot is exported (fp16, ``brdfgan export-weights``) to ``OUT/<stage>_<k>.safetensors``,
 to be scored on the CPU machine (``evaluate.py "ckpt={…}"``). ``OUT/gpu_train.json`` holds the
 plan, the steps and photos of every snapshot and the stages' step times
@@ -161,12 +162,15 @@ def stage(scans: Path, to: Path = STAGED) -> None:
 
 @dataclass(frozen=True)
 class Plan:
-    """Sizes of a run: photos a batch, loader and painting processes, snapshots a stage,
-    stage 1's share of the training time, the device and precision; ``overrides`` on top."""
+    """Sizes of a run: the generator's width, photos a batch, loader processes, threads for the
+    phone, painting processes, snapshots a stage, stage 1's share of the training time, the
+    device and precision; ``overrides`` on top."""
 
     device: str
+    width: int
     batch: int
     workers: int
+    photograph_threads: int
     paint_workers: int
     snapshots: int
     shading_share: float
@@ -203,8 +207,10 @@ def stage_overrides(plan: Plan, work: Path, name: str, seconds: float, init_from
         experiment,
         f"trainer={'gpu' if cuda else 'cpu'}",
         f"trainer.precision={plan.precision}",
+        f"model.generator.width={plan.width}",
         f"data.batch_size={plan.batch}",
         f"data.num_workers={plan.workers}",
+        f"data.photograph_threads={plan.photograph_threads}",
         f"data.pin_memory={str(cuda).lower()}",
         f"data.data_dir={work / 'data'}",
         "data.epoch_samples=100000000",  # one epoch that the snapshots end
@@ -358,12 +364,17 @@ def run(plan: Plan, budget: float, out: Path) -> int:
     return status
 
 
-GPU_PLAN = Plan(device="cuda", batch=32, workers=14, paint_workers=16, snapshots=3, shading_share=0.45,
-                precision="bf16-mixed")  # fmt: skip
+# One GPU: v5's generator at twice its width (4x the weights: the normals alone plateau from
+# 4 000 to 8 000 batches at v5's width on the CPU machine, so more photos alone do not lift them;
+# docs/default_model.md, "More photos"), 32 photos a batch. Two snapshots a stage: four fp16
+# exports of ~15 MB fit OUT's 64 MiB.
+GPU_PLAN = Plan(device="cuda", width=32, batch=32, workers=14, photograph_threads=8, paint_workers=16,
+                snapshots=2, shading_share=0.45, precision="bf16-mixed")  # fmt: skip
 # Minutes on a CPU: the same path at toy sizes (a 24-material procedural bank at 128², no scans,
 # 64² photos, a narrow network).
 TINY_PLAN = Plan(
-    device="cpu", batch=2, workers=0, paint_workers=2, snapshots=2, shading_share=0.5, precision="32-true",
+    device="cpu", width=8, batch=2, workers=0, photograph_threads=2, paint_workers=2, snapshots=2,
+    shading_share=0.5, precision="32-true",
     overrides=(
         "data.bank.spec.materials=24",
         "data.bank.spec.scans.fraction=0",
@@ -371,7 +382,6 @@ TINY_PLAN = Plan(
         "data.bank.spec.material_resolution=128",
         "data.bank.spec.resolution=64",
         "data.train_crop=32",
-        "model.generator.width=8",
     ),
 )  # fmt: skip
 
@@ -390,6 +400,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     running.add_argument("--device", choices=("cuda", "cpu"), default="cuda")
     running.add_argument("--tiny", action="store_true", help="toy sizes (the CPU smoke mode)")
     running.add_argument("--batch", type=int, help="photos a batch (default: the plan's)")
+    running.add_argument("--width", type=int, help="the generator's width (default: the plan's; v5's is 16)")
     running.add_argument("--out", type=Path, default=Path(os.environ.get("OUT", "gpu_train_out")))
     args = parser.parse_args(argv)
     if args.command == "stage":
@@ -401,7 +412,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         return 2
     plan = TINY_PLAN if args.tiny else GPU_PLAN
-    plan = Plan(**{**asdict(plan), "device": args.device, "batch": args.batch or plan.batch})
+    plan = Plan(**{**asdict(plan), "device": args.device, "batch": args.batch or plan.batch,
+                   "width": args.width or plan.width})  # fmt: skip
     return run(plan, args.budget, args.out)
 
 

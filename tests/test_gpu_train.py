@@ -35,7 +35,7 @@ def test_stage_overrides_compose_to_v5s_two_stages_on_one_gpu(tmp_path: Path) ->
     check_config(shading, CHECKED_GROUPS)  # the callbacks' arguments fit their signatures too
     assert list(shading.loss.parameter_maps) == ["normal"] and not shading.loss.switches.rendering
     assert shading.get("init_from") is None
-    first = tmp_path / "runs" / "shading" / "snapshots" / "snapshot3.ckpt"
+    first = tmp_path / "runs" / "shading" / "snapshots" / "snapshot2.ckpt"
     full = compose_train(gpu_train.stage_overrides(plan, tmp_path, "full", 200.0, first), tmp_path)
     check_config(full, CHECKED_GROUPS)
     assert full.loss.switches.rendering and full.init_from == str(first)
@@ -44,11 +44,12 @@ def test_stage_overrides_compose_to_v5s_two_stages_on_one_gpu(tmp_path: Path) ->
         assert cfg.data.prepare is None and cfg.data.bank.spec.scans.fraction == 0.35
         assert (cfg.data.bank.folder, cfg.data.bank.paint_workers) == (str(tmp_path / "banks"), 16)
         assert (cfg.data.batch_size, cfg.data.num_workers, cfg.data.compile_renderer) == (32, 14, False)
+        assert (cfg.model.generator.width, cfg.data.photograph_threads) == (32, 8)
         trainer = cfg.trainer
         assert (trainer.accelerator, trainer.devices, trainer.precision) == ("gpu", 1, "bf16-mixed")
         assert (trainer.max_epochs, trainer.limit_val_batches, trainer.enable_checkpointing) == (1, 0, False)
         assert set(cfg.callbacks) == {"snapshots", "step_timer"} and cfg.test is False
-        assert (cfg.callbacks.snapshots.seconds, cfg.callbacks.snapshots.count) == (seconds, 3)
+        assert (cfg.callbacks.snapshots.seconds, cfg.callbacks.snapshots.count) == (seconds, 2)
 
 
 class _SlowModel(LightningModule):

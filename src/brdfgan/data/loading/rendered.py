@@ -38,7 +38,7 @@ import logging
 import multiprocessing
 import random
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -208,10 +208,9 @@ class MaterialBank:
                    desc="material bank", unit="material", disable=not progress)  # fmt: skip
         with bar:
             if self.paint_workers == 1 or len(missing) <= 1:
-                with single_torch_thread():
-                    for index in missing:
-                        paint_bank_material(self.spec, index, self.material_path(index))
-                        bar.update()
+                for index in missing:
+                    paint_bank_material(self.spec, index, self.material_path(index))
+                    bar.update()
             else:
                 # spawn, not fork: the parent's torch thread pool may already be running.
                 context = multiprocessing.get_context("spawn")
@@ -339,8 +338,8 @@ class MaterialBank:
 def paint_bank_material(spec: DatasetSpec, index: int, path: Path) -> None:
     """Paint training material ``index`` of ``spec`` as generation paints it into ``path`` (a
     bank's ``m<index>.u16z``), its family, parameters and extras into the ``.json`` beside it
-    first, each written atomically, so a maps file on disk always has its metadata beside it. One torch
-    thread: the bytes do not depend on the core count."""
+    first, each written atomically: a maps file on disk always has its metadata beside it. On one
+    torch thread, so the bytes do not depend on the core count."""
     with single_torch_thread():
         generator = torch.Generator().manual_seed(material_seed(spec.seed, index))
         material = paint_material(spec, "train", index, generator)
@@ -750,6 +749,10 @@ class RenderedDataModule(ShardDataModule):
         relief: relief laid over the drawn materials (:class:`ReliefSampling`; default: none).
         compile_renderer: render through ``torch.compile`` (training photos have one shape, so
             it compiles once; worth it for runs of more than a few hundred steps).
+        photograph_threads: threads that put a batch's rendered photos through the phone and
+            the train crop (per photo, in the training process, each photo seeded by its own
+            draw, so the batch is the same for any count): on a GPU machine the render is
+            milliseconds and this CPU work would otherwise set the pace.
         epoch_samples: training photos an epoch (there is no split to count).
         **kwargs: as :class:`~brdfgan.data.loading.datamodule.ShardDataModule` (``train_split`` is unused).
     """
@@ -763,16 +766,20 @@ class RenderedDataModule(ShardDataModule):
         environment_lights: int = 16,
         relief: ReliefSampling | None = None,
         compile_renderer: bool = False,
+        photograph_threads: int = 1,
         **kwargs: Any,
     ) -> None:
         if environment_lights < 1:
             raise DatasetConfigError(f"data.environment_lights={environment_lights}: must be >= 1")
+        if photograph_threads < 1:
+            raise DatasetConfigError(f"data.photograph_threads={photograph_threads}: must be >= 1")
         super().__init__(data_dir, epoch_samples=epoch_samples, train_split=None, **kwargs)
         self.relief = relief or ReliefSampling()
         self.hparams.pop("bank", None)  # checkpoints hold plain values only
         self.hparams["relief"] = asdict(self.relief)
         self.bank = bank
         self.environment_lights = environment_lights
+        self.photograph_threads = photograph_threads
         self._render = (
             torch.compile(render_point_lights, dynamic=False) if compile_renderer else render_point_lights
         )
@@ -828,18 +835,27 @@ class RenderedDataModule(ShardDataModule):
         device = batch["scene_maps"].device
         with torch.no_grad():
             photos, maps, scales = photograph_scenes(*scene_tensors(batch), self._render)
-        samples = []
-        for key, photo, aligned, scale, meta in zip(
-            batch["key"], photos.cpu(), maps.cpu(), scales.tolist(), batch["meta"], strict=True
-        ):
-            sample = Sample(key, photo, aligned, {**meta, "exposure_scale": scale}, check=False)
-            seed = int(meta["render"]["seed"])
-            if self.sensor is not None and self.sensor.enabled:
-                sample = sensed_sample(sample, self.sensor, _mix(seed, "sensor"))
-            if self.train_crop is not None:
-                sample = random_crop(sample, self.train_crop, random.Random(_mix(seed, "crop")))
-            samples.append(sample)
+        rendered = [
+            Sample(key, photo, aligned, {**meta, "exposure_scale": scale}, check=False)
+            for key, photo, aligned, scale, meta in zip(
+                batch["key"], photos.cpu(), maps.cpu(), scales.tolist(), batch["meta"], strict=True
+            )
+        ]
+        if self.photograph_threads == 1:
+            samples = [self._phone_and_crop(sample) for sample in rendered]
+        else:
+            with ThreadPoolExecutor(min(self.photograph_threads, len(rendered))) as pool:
+                samples = list(pool.map(self._phone_and_crop, rendered))
         collated = collate_samples(samples)
         for name in ("photo", "maps", "flash"):
             collated[name] = collated[name].to(device)
         return collated
+
+    def _phone_and_crop(self, sample: Sample) -> Sample:
+        """``sample`` through ``sensor`` and the train crop, seeded by its render's seed."""
+        seed = int(sample.meta["render"]["seed"])
+        if self.sensor is not None and self.sensor.enabled:
+            sample = sensed_sample(sample, self.sensor, _mix(seed, "sensor"))
+        if self.train_crop is not None:
+            sample = random_crop(sample, self.train_crop, random.Random(_mix(seed, "crop")))
+        return sample
