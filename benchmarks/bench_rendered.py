@@ -73,7 +73,7 @@ def main() -> None:
         photograph_scenes(*scene_tensors(scenes[0]), compiled)
         compile_seconds = time.perf_counter() - start
         fast = median_seconds(lambda: photograph_scenes(*scene_tensors(scenes[1]), compiled), 5)
-    phone, phone_threaded = (phone_seconds(module, scenes[2], eager, threads) for threads in (1, 2))
+    phone = median_seconds(lambda: module.photograph(scenes[2]), 3) - eager  # photograph renders eagerly
     batches = [module.photograph(batch) for batch in scenes[2:]]
 
     model = hydra.utils.instantiate(
@@ -102,7 +102,6 @@ def main() -> None:
         ("render, eager", eager),
         (f"render, compiled (compiles once: {compile_seconds:.0f} s)", fast),
         ("phone + train crop", phone),
-        ("(phone + train crop, 2 threads: `data.photograph_threads=2`)", phone_threaded),
         ("v4 step (forward, supervised loss, backward, Adam)", v4_step),
         ("whole on-the-fly step (compiled render)", whole),
     ]
@@ -114,16 +113,6 @@ def main() -> None:
     print(f"rendering's share of the whole step: {fast / whole:.0%}; the step against a shard batch's "
           f"v4 step alone: {whole / v4_step:.2f}×")  # fmt: skip
     paint_table(module.bank, args.paint_materials, args.paint_workers)
-
-
-def phone_seconds(module: Any, scenes: dict[str, Any], render_seconds: float, threads: int) -> float:
-    """The phone and train crop of one batch on ``threads`` threads: ``photograph`` (which renders
-    eagerly) less the eager render's ``render_seconds``."""
-    module.photograph_threads = threads
-    try:
-        return median_seconds(lambda: module.photograph(scenes), 3) - render_seconds
-    finally:
-        module.photograph_threads = 1
 
 
 def paint_table(bank: MaterialBank, materials: int, workers: int) -> None:

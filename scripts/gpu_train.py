@@ -1,21 +1,22 @@
 """v5 trained at GPU scale on photos rendered on the fly (issue 46), time-boxed for a lent GPU.
 
-The normals-only runs on the 2-core machine plateau at a slope cosine of ~0.15–0.2 (1 000–2 000
-batches of 4 crops; docs/default_model.md). This asks whether many more photos move them: two
-``train.py`` stages under one wall-time budget, on ``data=rendered`` (the photos rendered on the
-GPU every batch, the material bank painted by ``--paint-workers`` CPU processes):
+The normals-only runs on the 2-core machine plateau at a slope cosine of ~0.15–0.2, from 1 000
+to 8 000 batches of 4 crops and after a plain-albedo start alike (docs/default_model.md). This
+asks whether a larger network moves them: two ``train.py`` stages under one wall-time budget, on
+``data=rendered`` (the photos rendered on the GPU every batch, the material bank painted by
+the plan's CPU processes):
 
 1. ``experiment=v5_shading``: the normals alone, half the relief inverted, half the base colours
    faded (the shading-first stage);
 2. ``experiment=v5`` from stage 1's last weights: the full recipe.
 
 Both with the plan's generator width (``--width``; twice v5's by default), photos a batch
-(``--batch``), loader processes and threads for the phone (``data.photograph_threads``),
-``trainer=gpu`` (bf16-mixed), validation and checkpoints off. :class:`TimedSnapshots` saves the
-weights at evenly spaced times of each stage's share, so the two stages give learning curves;
-each snapshot is exported (fp16, ``brdfgan export-weights``) to ``OUT/<stage>_<k>.safetensors``,
-to be scored on the CPU machine (``evaluate.py "ckpt={…}"``). ``OUT/gpu_train.json`` holds the
-plan, the steps and photos of every snapshot and the stages' step times
+(``--batch``) and loader processes, ``trainer=gpu`` (bf16-mixed), validation and checkpoints
+off. :class:`TimedSnapshots` saves the weights at evenly spaced times of each stage's share, so
+the two stages give learning curves; each snapshot is exported (fp16, ``brdfgan
+export-weights``) to ``OUT/<stage>_<k>.safetensors``, to be scored on the CPU machine
+(``evaluate.py "ckpt={…}"``). ``OUT/gpu_train.json`` holds the plan, the steps and photos of
+every snapshot and the stages' step times
 (:class:`scripts.gpu_check.StepTimer`); ``OUT/gpu_train.log`` the tails of the runs' logs.
 
 The device machine has no Mitsuba and no ``../shared``, and a call carries at most 64 MiB, so
@@ -162,15 +163,14 @@ def stage(scans: Path, to: Path = STAGED) -> None:
 
 @dataclass(frozen=True)
 class Plan:
-    """Sizes of a run: the generator's width, photos a batch, loader processes, threads for the
-    phone, painting processes, snapshots a stage, stage 1's share of the training time, the
-    device and precision; ``overrides`` on top."""
+    """Sizes of a run: the generator's width, photos a batch, loader processes, painting
+    processes, snapshots a stage, stage 1's share of the training time, the device and
+    precision; ``overrides`` on top."""
 
     device: str
     width: int
     batch: int
     workers: int
-    photograph_threads: int
     paint_workers: int
     snapshots: int
     shading_share: float
@@ -210,7 +210,6 @@ def stage_overrides(plan: Plan, work: Path, name: str, seconds: float, init_from
         f"model.generator.width={plan.width}",
         f"data.batch_size={plan.batch}",
         f"data.num_workers={plan.workers}",
-        f"data.photograph_threads={plan.photograph_threads}",
         f"data.pin_memory={str(cuda).lower()}",
         f"data.data_dir={work / 'data'}",
         "data.epoch_samples=100000000",  # one epoch that the snapshots end
@@ -368,12 +367,12 @@ def run(plan: Plan, budget: float, out: Path) -> int:
 # 4 000 to 8 000 batches at v5's width on the CPU machine, so more photos alone do not lift them;
 # docs/default_model.md, "More photos"), 32 photos a batch. Two snapshots a stage: four fp16
 # exports of ~15 MB fit OUT's 64 MiB.
-GPU_PLAN = Plan(device="cuda", width=32, batch=32, workers=14, photograph_threads=8, paint_workers=16,
+GPU_PLAN = Plan(device="cuda", width=32, batch=32, workers=14, paint_workers=16,
                 snapshots=2, shading_share=0.45, precision="bf16-mixed")  # fmt: skip
 # Minutes on a CPU: the same path at toy sizes (a 24-material procedural bank at 128², no scans,
 # 64² photos, a narrow network).
 TINY_PLAN = Plan(
-    device="cpu", width=8, batch=2, workers=0, photograph_threads=2, paint_workers=2, snapshots=2,
+    device="cpu", width=8, batch=2, workers=0, paint_workers=2, snapshots=2,
     shading_share=0.5, precision="32-true",
     overrides=(
         "data.bank.spec.materials=24",

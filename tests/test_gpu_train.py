@@ -44,7 +44,7 @@ def test_stage_overrides_compose_to_v5s_two_stages_on_one_gpu(tmp_path: Path) ->
         assert cfg.data.prepare is None and cfg.data.bank.spec.scans.fraction == 0.35
         assert (cfg.data.bank.folder, cfg.data.bank.paint_workers) == (str(tmp_path / "banks"), 16)
         assert (cfg.data.batch_size, cfg.data.num_workers, cfg.data.compile_renderer) == (32, 14, False)
-        assert (cfg.model.generator.width, cfg.data.photograph_threads) == (32, 8)
+        assert cfg.model.generator.width == 32
         trainer = cfg.trainer
         assert (trainer.accelerator, trainer.devices, trainer.precision) == ("gpu", 1, "bf16-mixed")
         assert (trainer.max_epochs, trainer.limit_val_batches, trainer.enable_checkpointing) == (1, 0, False)

@@ -38,7 +38,7 @@ import logging
 import multiprocessing
 import random
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -749,10 +749,6 @@ class RenderedDataModule(ShardDataModule):
         relief: relief laid over the drawn materials (:class:`ReliefSampling`; default: none).
         compile_renderer: render through ``torch.compile`` (training photos have one shape, so
             it compiles once; worth it for runs of more than a few hundred steps).
-        photograph_threads: threads that put a batch's rendered photos through the phone and
-            the train crop (per photo, in the training process, each photo seeded by its own
-            draw, so the batch is the same for any count): on a GPU machine the render is
-            milliseconds and this CPU work would otherwise set the pace.
         epoch_samples: training photos an epoch (there is no split to count).
         **kwargs: as :class:`~brdfgan.data.loading.datamodule.ShardDataModule` (``train_split`` is unused).
     """
@@ -766,20 +762,16 @@ class RenderedDataModule(ShardDataModule):
         environment_lights: int = 16,
         relief: ReliefSampling | None = None,
         compile_renderer: bool = False,
-        photograph_threads: int = 1,
         **kwargs: Any,
     ) -> None:
         if environment_lights < 1:
             raise DatasetConfigError(f"data.environment_lights={environment_lights}: must be >= 1")
-        if photograph_threads < 1:
-            raise DatasetConfigError(f"data.photograph_threads={photograph_threads}: must be >= 1")
         super().__init__(data_dir, epoch_samples=epoch_samples, train_split=None, **kwargs)
         self.relief = relief or ReliefSampling()
         self.hparams.pop("bank", None)  # checkpoints hold plain values only
         self.hparams["relief"] = asdict(self.relief)
         self.bank = bank
         self.environment_lights = environment_lights
-        self.photograph_threads = photograph_threads
         self._render = (
             torch.compile(render_point_lights, dynamic=False) if compile_renderer else render_point_lights
         )
@@ -841,12 +833,7 @@ class RenderedDataModule(ShardDataModule):
                 batch["key"], photos.cpu(), maps.cpu(), scales.tolist(), batch["meta"], strict=True
             )
         ]
-        if self.photograph_threads == 1:
-            samples = [self._phone_and_crop(sample) for sample in rendered]
-        else:
-            with ThreadPoolExecutor(min(self.photograph_threads, len(rendered))) as pool:
-                samples = list(pool.map(self._phone_and_crop, rendered))
-        collated = collate_samples(samples)
+        collated = collate_samples([self._phone_and_crop(sample) for sample in rendered])
         for name in ("photo", "maps", "flash"):
             collated[name] = collated[name].to(device)
         return collated
