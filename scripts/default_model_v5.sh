@@ -147,7 +147,7 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
   score "$models" $OUT/ablation/${EVAL:-eval}_ "$suffix" "${HELD_OUT:-}" val ${HELD_OUT:+test}
 }
 
-shading_curve() {  # the normals alone (experiment=v5_shading) 8x as long: 8 000 batches of 4, ~75 min,
+shading_curve() {  # the normals alone (experiment=v5_shading) 8x as long: 8 000 batches of 4, 61 min,
   # validated every 2 000: whether more photos lift the slope cosine past the 1 000-2 000-batch
   # plateau (docs/default_model.md, "More photos"); scored beside v4 like an ablation row.
   local run=$OUT/shading_curve

@@ -31,7 +31,7 @@ The device machine has no Mitsuba and no ``../shared``, and a call carries at mo
 
   python -m scripts.gpu_train stage                                  # here, once
   python -m scripts.gpu_train run --budget 420                       # there ($OUT set)
-  python -m scripts.gpu_train run --device cpu --tiny --out /tmp/gt  # the CPU smoke mode (minutes)
+  python -m scripts.gpu_train run --device cpu --tiny --budget 200 --out /tmp/gt  # CPU smoke, ~2 min
 """
 
 from __future__ import annotations
@@ -55,7 +55,8 @@ from hydra.utils import instantiate
 from lightning.pytorch import LightningModule, Trainer
 from lightning.pytorch.callbacks import Callback
 
-from brdfgan.errors import run_reporting_errors
+from brdfgan.errors import UserError, run_reporting_errors
+from brdfgan.io.atomic import atomic_replace, write_text_atomic
 from scripts.gpu_check import TINY_PLAN as CHECK_PLAN
 from scripts.gpu_check import StepTimer, last_error_line, make_data
 
@@ -66,9 +67,14 @@ STAGED_ENVIRONMENTS = STAGED / "environments.npz"
 STAGED_SCAN_SIDE = 512
 STAND_IN_SIDE = 16
 STAGES = (("shading", "experiment=v5_shading"), ("full", "experiment=v5"))
+MIN_STAGE_S = 5.0  # less training than this is not worth a stage's start
 LOG_TAIL_BYTES = 60_000  # of each stage's log, in OUT/gpu_train.log
-STARTUP_ALLOWANCE_S = 45.0  # a stage's imports, loader processes and first batch before its clock starts
+STARTUP_ALLOWANCE_S = (
+    45.0  # a stage's imports, bank check and setup before its clock starts at on_train_start
+)
 EXPORT_RESERVE_S = 60.0  # the exports after both stages (a process each, ~5 s)
+EXPORT_TIMEOUT_S = 60.0
+MAX_EXPORT_BYTES = 16 * 2**20  # the most one file under OUT may hold to come back
 
 
 # --------------------------------------------------------------------------------------------
@@ -114,7 +120,7 @@ class TimedSnapshots(Callback):
         self.taken.append({"snapshot": k, "path": str(path), "step": trainer.global_step,
                            "photos": self._photos, "seconds": round(elapsed, 2)})  # fmt: skip
         if trainer.is_global_zero:
-            (self.dirpath / "snapshots.json").write_text(json.dumps(self.taken, indent=1) + "\n")
+            write_text_atomic(self.dirpath / "snapshots.json", json.dumps(self.taken, indent=1) + "\n")
         if k == self.count:
             trainer.should_stop = True
 
@@ -127,7 +133,7 @@ def stage(scans: Path, to: Path = STAGED) -> None:
     """Fill ``to`` (``.device/``) from the scan sets in ``scans`` (module docstring); print its size."""
     import cv2
 
-    from brdfgan.data.materials.scanned import scanned_material_folders
+    from brdfgan.data.materials.scanned import SCANNED_EXTENSIONS, scanned_material_folders
     from brdfgan.data.storage.generation import split_scan_sets
 
     work = Path(tempfile.mkdtemp(prefix="gpu_train-"))
@@ -142,14 +148,15 @@ def stage(scans: Path, to: Path = STAGED) -> None:
         side = STAND_IN_SIDE if folder.name in held_out else STAGED_SCAN_SIDE
         (temp / "scans" / folder.name).mkdir(parents=True)
         for source in sorted(folder.iterdir()):
-            if source.suffix.lower() not in (".jpg", ".jpeg", ".png"):
+            if source.suffix.lower() not in SCANNED_EXTENSIONS:
                 continue
             image = cv2.imread(str(source), cv2.IMREAD_UNCHANGED)
             if image is None:
-                raise SystemExit(f"gpu_train stage: {source}: not a readable image")
+                raise UserError(f"{source}: not a readable image")
             small = cv2.resize(image, (side, side), interpolation=cv2.INTER_AREA)
             quality = [cv2.IMWRITE_JPEG_QUALITY, 95] if source.suffix.lower() != ".png" else []
-            cv2.imwrite(str(temp / "scans" / folder.name / source.name), small, quality)
+            if not cv2.imwrite(str(temp / "scans" / folder.name / source.name), small, quality):
+                raise UserError(f"{temp / 'scans' / folder.name / source.name}: could not be written")
     bank.tabulate_environments(temp / STAGED_ENVIRONMENTS.name)
     shutil.rmtree(to, ignore_errors=True)
     temp.rename(to)
@@ -252,9 +259,16 @@ def build_bank(plan: Plan, work: Path) -> dict[str, Any]:
 
 
 def run_stage(
-    plan: Plan, work: Path, env: dict[str, str], name: str, seconds: float, init_from: Path | None
+    plan: Plan,
+    work: Path,
+    env: dict[str, str],
+    name: str,
+    seconds: float,
+    init_from: Path | None,
+    kill_after: float,
 ) -> dict[str, Any]:
-    """One ``train.py`` stage, killed ``STARTUP_ALLOWANCE_S`` past its training time at the latest."""
+    """One ``train.py`` stage of ``seconds`` of training, killed after ``kill_after`` seconds (and
+    on any exception here, an interrupt included: it runs in a process group of its own)."""
     run_dir = work / "runs" / name
     log = work / f"train_{name}.log"
     overrides = stage_overrides(plan, work, name, seconds, init_from)
@@ -265,13 +279,17 @@ def run_stage(
         process = subprocess.Popen(command, cwd=ROOT, env=env, stdout=handle, stderr=subprocess.STDOUT,
                                    start_new_session=True)  # fmt: skip
         try:
-            code = process.wait(timeout=seconds + 2 * STARTUP_ALLOWANCE_S)
+            code = process.wait(timeout=kill_after)
             if code != 0:
                 error = f"exit {code}"
         except subprocess.TimeoutExpired:
             os.killpg(process.pid, signal.SIGKILL)
             process.wait()
             error = "timed out"
+        except BaseException:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+            raise
     result: dict[str, Any] = {
         "stage": name,
         "overrides": overrides,
@@ -308,11 +326,18 @@ def export(
     target = out / f"{name}_{snapshot['snapshot']}.safetensors"
     command = [sys.executable, "-m", "brdfgan.cli", "export-weights", str(work / "runs" / name),
                "--checkpoint", snapshot["path"], "--out", str(target), "--hardware", hardware]  # fmt: skip
-    done = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True, check=False)
+    try:
+        done = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True, check=False,
+                              timeout=EXPORT_TIMEOUT_S)  # fmt: skip
+    except subprocess.TimeoutExpired:
+        return f"export failed: timed out after {EXPORT_TIMEOUT_S:.0f} s"
     if done.returncode != 0:
         lines = done.stderr.strip().splitlines()
         return f"export failed: {lines[-1] if lines else f'exit {done.returncode}'}"
     target.with_suffix(".json").unlink(missing_ok=True)  # OUT takes 8 files; the summary holds it
+    if target.stat().st_size > MAX_EXPORT_BYTES:  # it would not come back: say so instead
+        target.unlink()
+        return f"export failed: {target.name} over {MAX_EXPORT_BYTES // 2**20} MiB (a narrower --width)"
     return target.name
 
 
@@ -340,27 +365,63 @@ def run(plan: Plan, budget: float, out: Path) -> int:
     try:
         summary["bank"] = build_bank(plan, work)
         print(f"bank: {summary['bank']}", flush=True)
-        training = deadline - time.monotonic() - EXPORT_RESERVE_S - 2 * STARTUP_ALLOWANCE_S
         init_from: Path | None = None
         for name, _ in STAGES:
-            share = plan.shading_share if name == "shading" else 1.0
-            seconds = max(10.0, share * training if name == "shading" else
-                          deadline - time.monotonic() - EXPORT_RESERVE_S - STARTUP_ALLOWANCE_S)  # fmt: skip
-            result = run_stage(plan, work, env, name, seconds, init_from)
+            left = deadline - time.monotonic() - EXPORT_RESERVE_S  # for this stage and any after it
+            seconds = stage_seconds(left, name, plan.shading_share)
+            if seconds is None:
+                summary["stages"].append(
+                    {"stage": name, "error": f"skipped: {left:.0f} s of the budget left"}
+                )
+                status = 1
+                break
+            result = run_stage(plan, work, env, name, seconds, init_from, kill_after=max(left, 1.0)
+                               if name == "full" else seconds + STARTUP_ALLOWANCE_S * 2)  # fmt: skip
             summary["stages"].append(result)
             print(f"{name}: {json.dumps({k: v for k, v in result.items() if k != 'overrides'})}", flush=True)
             result["exported"] = [export(work, env, name, s, out, hardware) for s in result["snapshots"]]
-            if "error" in result or not result["snapshots"]:
+            _write_summary(out, summary, work)
+            if (
+                "error" in result
+                or not result["snapshots"]
+                or any(entry.startswith("export failed") for entry in result["exported"])
+            ):
                 status = 1
                 break
             init_from = Path(result["snapshots"][-1]["path"])
     finally:
-        (out / "gpu_train.json").write_text(json.dumps(summary, indent=1, default=str) + "\n")
-        with (out / "gpu_train.log").open("wb") as handle:
-            for log in sorted(work.glob("train_*.log")):
-                handle.write(f"==> {log.name} <==\n".encode() + log.read_bytes()[-LOG_TAIL_BYTES:])
+        _write_summary(out, summary, work)
         shutil.rmtree(work, ignore_errors=True)
     return status
+
+
+def stage_seconds(left: float, name: str, shading_share: float) -> float | None:
+    """The training time of stage ``name`` when ``left`` seconds remain for it and those after it
+    (each pays ``STARTUP_ALLOWANCE_S`` before its clock starts): stage 1 its share of what both
+    can train, stage 2 the rest; ``None`` when under ``MIN_STAGE_S`` would be left to train.
+
+    >>> stage_seconds(300.0, "shading", 0.5), stage_seconds(200.0, "full", 0.5)
+    (105.0, 155.0)
+    >>> stage_seconds(40.0, "full", 0.5) is None
+    True
+    """
+    if name == "shading":
+        seconds = shading_share * (left - 2 * STARTUP_ALLOWANCE_S)
+    else:
+        seconds = left - STARTUP_ALLOWANCE_S
+    return seconds if seconds >= MIN_STAGE_S else None
+
+
+def _write_summary(out: Path, summary: dict[str, Any], work: Path) -> None:
+    """``OUT/gpu_train.json`` and the tails of the stages' logs in ``OUT/gpu_train.log``, each
+    replaced whole (a call killed at its limit still brings back the last complete ones)."""
+    write_text_atomic(out / "gpu_train.json", json.dumps(summary, indent=1, default=str) + "\n")
+    tails = b"".join(
+        f"==> {log.name} <==\n".encode() + log.read_bytes()[-LOG_TAIL_BYTES:]
+        for log in sorted(work.glob("train_*.log"))
+    )
+    with atomic_replace(out / "gpu_train.log") as temp:
+        temp.write_bytes(tails)
 
 
 # One GPU: v5's generator at twice its width (4x the weights: the normals alone plateau from
@@ -389,11 +450,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     commands = parser.add_subparsers(dest="command", required=True)
     staging = commands.add_parser("stage", help="fill .device/ here")
-    staging.add_argument(
-        "--scans",
-        type=Path,
-        default=Path(os.environ.get("BRDFGAN_SCANS_DIR", ROOT.parent / "shared" / "scans")),
-    )
+    scans = Path(os.environ.get("BRDFGAN_SCANS_DIR", ROOT.parent / "shared" / "scans"))
+    staging.add_argument("--scans", type=Path, default=scans, help=f"the scan sets (default {scans})")
+    staging.add_argument("--to", type=Path, default=STAGED, help=f"the staging folder (default {STAGED})")
     running = commands.add_parser("run", help="train both stages (on the GPU machine)")
     running.add_argument("--budget", type=float, default=420.0, help="seconds for everything (default 420)")
     running.add_argument("--device", choices=("cuda", "cpu"), default="cuda")
@@ -402,6 +461,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     running.add_argument("--width", type=int, help="the generator's width (default: the plan's; v5's is 16)")
     running.add_argument("--out", type=Path, default=Path(os.environ.get("OUT", "gpu_train_out")))
     args = parser.parse_args(argv)
+    for name in ("budget", "batch", "width"):
+        value = getattr(args, name, None)
+        if value is not None and value <= 0:
+            raise UserError(f"--{name}={value}: must be positive")
     if args.command == "stage":
         stage(args.scans, args.to)
         return 0
@@ -411,8 +474,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         return 2
     plan = TINY_PLAN if args.tiny else GPU_PLAN
-    plan = Plan(**{**asdict(plan), "device": args.device, "batch": args.batch or plan.batch,
-                   "width": args.width or plan.width})  # fmt: skip
+    chosen = {"batch": args.batch, "width": args.width}
+    plan = Plan(
+        **{**asdict(plan), "device": args.device, **{k: v for k, v in chosen.items() if v is not None}}
+    )
     return run(plan, args.budget, args.out)
 
 

@@ -83,6 +83,20 @@ def test_timed_snapshots_follow_the_clock_and_stop_training(tmp_path: Path) -> N
     assert "optimizer_states" not in weights and "weight" in weights["state_dict"]
 
 
+def test_stage_seconds_split_what_is_left_and_skip_a_stage_without_time() -> None:
+    allowance = gpu_train.STARTUP_ALLOWANCE_S
+    assert gpu_train.stage_seconds(400.0, "shading", 0.45) == pytest.approx(0.45 * (400.0 - 2 * allowance))
+    assert gpu_train.stage_seconds(200.0, "full", 0.45) == 200.0 - allowance
+    assert gpu_train.stage_seconds(allowance + 1.0, "full", 0.45) is None
+
+
+def test_cli_refuses_a_non_positive_budget_in_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    from brdfgan.errors import run_reporting_errors
+
+    assert run_reporting_errors(lambda: gpu_train.main(["run", "--budget", "0"])) == 2
+    assert capsys.readouterr().err.strip() == "error: --budget=0.0: must be positive"
+
+
 def test_timed_snapshots_refuse_no_time() -> None:
     with pytest.raises(ValueError, match="seconds=0"):
         gpu_train.TimedSnapshots("x", seconds=0, count=3)
@@ -107,7 +121,7 @@ def test_staging_shrinks_the_training_scans_and_carries_the_environment_table(
         _scan_set(scans / name, 1024, ".png" if name == "Rock030" else ".jpg")
     monkeypatch.chdir(tmp_path)  # the bank of the composed config lands under ./data
     staged = tmp_path / "staged"
-    gpu_train.stage(scans, staged)
+    assert gpu_train.main(["stage", "--scans", str(scans), "--to", str(staged)]) == 0
     assert sorted(p.name for p in (staged / "scans").iterdir()) == sorted((*HELD_OUT, "Bark012", "Rock030"))
     for name, side in (("Bark012", 512), ("Fabric030", 16)):
         for path in (staged / "scans" / name).iterdir():
@@ -125,7 +139,7 @@ def test_staging_shrinks_the_training_scans_and_carries_the_environment_table(
 def test_cpu_smoke_mode_trains_both_stages_and_exports_their_snapshots(tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": f"{ROOT / 'src'}{os.pathsep}{ROOT}", "OMP_NUM_THREADS": "2"}
     command = [sys.executable, "-m", "scripts.gpu_train", "run", "--device", "cpu", "--tiny",
-               "--budget", "100", "--out", str(tmp_path / "out")]  # fmt: skip
+               "--budget", "200", "--out", str(tmp_path / "out")]  # fmt: skip
     result = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stdout + result.stderr[-3000:]
     out = tmp_path / "out"

@@ -204,6 +204,16 @@ def test_bank_keeps_a_complete_environment_table_and_retabulates_another_resolut
     MaterialBank(TINY_SPEC, tmp_path, environment_resolution=8).build(progress=False)
     with np.load(table) as data:
         assert {data[name].shape[0] for name in data.files if name.endswith("/radiance")} == {8}
+    # Nor does a table of other lighting settings (the bank's folder does not follow them).
+    (carried.root / "bank.json").unlink()
+    rooms = replace(TINY_SPEC, lighting=replace(TINY_SPEC.lighting, sunsky_fraction=0.0))
+    relit = MaterialBank(rooms, tmp_path, environment_resolution=8)
+    assert relit.root == carried.root
+    relit.build(progress=False)
+    with np.load(table) as data:
+        tabulated = {name.split("/")[0] for name in data.files if name.endswith("/radiance")}
+    assert tabulated == {spec.env_id for spec in relit.environments}
+    assert all(spec.kind == "room" for spec in relit.environments)
 
 
 def test_bank_rejects_no_paint_workers(tmp_path: Path) -> None:

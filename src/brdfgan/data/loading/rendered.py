@@ -37,6 +37,7 @@ import json
 import logging
 import multiprocessing
 import random
+import zipfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, replace
@@ -107,6 +108,7 @@ log = logging.getLogger(__name__)
 
 BANK_VERSION = 1
 INDEX_FILE = "bank.json"
+ENVIRONMENTS_IDENTITY = "identity"  # environments.npz's entry naming what it tabulates
 # What of a dataset spec decides its training materials (the rest — crops, capture, lighting,
 # flash — is drawn per photo here); a bank is identified by these alone.
 _MATERIAL_KEYS = (
@@ -244,13 +246,15 @@ class MaterialBank:
 
     def tabulate_environments(self, path: Path | None = None) -> Path:
         """Tabulate the training environments into ``path`` (default: the bank's
-        ``environments.npz``), unless a table of every one at this resolution is there already:
-        a killed build's, or one tabulated elsewhere and carried to a machine without Mitsuba,
-        which the sun-and-sky environments need."""
+        ``environments.npz``), unless the table there is of these very environments at this
+        resolution (its ``identity`` entry: every environment's spec and the resolution): a killed
+        build's, or one tabulated elsewhere and carried to a machine without Mitsuba, which the
+        sun-and-sky environments need. A table of other lighting settings is tabulated again."""
         path = path or self.root / "environments.npz"
-        if path.exists() and self._environments_complete(path):
+        identity = self._environments_identity()
+        if path.exists() and self._environments_table_identity(path) == identity:
             return path
-        arrays: dict[str, np.ndarray] = {}
+        arrays: dict[str, np.ndarray] = {ENVIRONMENTS_IDENTITY: np.frombuffer(identity, dtype=np.uint8)}
         for spec in self.environments:
             environment = load_environment(spec, self.environment_resolution)
             arrays[f"{spec.env_id}/radiance"] = environment.radiance
@@ -262,16 +266,20 @@ class MaterialBank:
             np.savez(temp, allow_pickle=False, **arrays)
         return path
 
-    def _environments_complete(self, path: Path) -> bool:
+    def _environments_identity(self) -> bytes:
+        specs = [spec.to_json() for spec in self.environments]
+        return json.dumps(
+            {"environments": specs, "resolution": self.environment_resolution}, sort_keys=True
+        ).encode()
+
+    @staticmethod
+    def _environments_table_identity(path: Path) -> bytes | None:
+        """The ``identity`` a table at ``path`` was written with (``None``: none, or unreadable)."""
         try:
             with np.load(path) as data:
-                return all(
-                    f"{spec.env_id}/radiance" in data.files
-                    and data[f"{spec.env_id}/radiance"].shape[0] == self.environment_resolution
-                    for spec in self.environments
-                )
-        except (OSError, ValueError):  # unreadable: tabulated again
-            return False
+                return bytes(data[ENVIRONMENTS_IDENTITY]) if ENVIRONMENTS_IDENTITY in data.files else None
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile):  # unreadable: tabulated again
+            return None
 
     # -- drawing --------------------------------------------------------------------------
 
