@@ -393,6 +393,25 @@ def run_training(
     log = work / f"train_{name}.log"
     start = time.perf_counter()
     error: str | None = None
+    code = run_train_py(overrides, log, env, timeout)
+    if code is None:
+        error = f"timed out after {timeout:.0f} s"
+    elif code != 0:
+        error = f"exit {code}: {last_error_line(log)}"
+    seconds = time.perf_counter() - start
+    timer = None
+    if error is None:
+        try:
+            timer = json.loads(timer_out.read_text())
+        except (OSError, ValueError):
+            error = f"no timings written: {last_error_line(log)}"
+    return RunResult(name, overrides, seconds, timer, error)
+
+
+def run_train_py(overrides: Sequence[str], log: Path, env: dict[str, str], timeout: float) -> int | None:
+    """``train.py overrides`` in a process group of its own, its output into ``log``; its exit
+    status, or ``None`` when it was killed at ``timeout`` seconds. The whole group (DDP ranks,
+    loader processes) is killed at the timeout and on any exception here, an interrupt included."""
     with log.open("w") as handle:
         process = subprocess.Popen(
             [sys.executable, str(ROOT / "train.py"), *overrides],
@@ -403,21 +422,13 @@ def run_training(
             start_new_session=True,  # its own group, so a timeout also ends the DDP ranks it starts
         )
         try:
-            code = process.wait(timeout=timeout)
-            if code != 0:
-                error = f"exit {code}: {last_error_line(log)}"
+            return process.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
-            error = f"timed out after {timeout:.0f} s"
-    seconds = time.perf_counter() - start
-    timer = None
-    if error is None:
-        try:
-            timer = json.loads(timer_out.read_text())
-        except (OSError, ValueError):
-            error = f"no timings written: {last_error_line(log)}"
-    return RunResult(name, overrides, seconds, timer, error)
+            return None
+        finally:
+            if process.returncode is None:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
 
 
 def last_error_line(log: Path) -> str:

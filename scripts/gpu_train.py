@@ -40,7 +40,6 @@ import argparse
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -58,7 +57,7 @@ from lightning.pytorch.callbacks import Callback
 from brdfgan.errors import UserError, run_reporting_errors
 from brdfgan.io.atomic import atomic_replace, write_text_atomic
 from scripts.gpu_check import TINY_PLAN as CHECK_PLAN
-from scripts.gpu_check import StepTimer, last_error_line, make_data
+from scripts.gpu_check import StepTimer, last_error_line, make_data, run_train_py, step_stats
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGED = ROOT / ".device"
@@ -68,6 +67,7 @@ STAGED_SCAN_SIDE = 512
 STAND_IN_SIDE = 16
 STAGES = (("shading", "experiment=v5_shading"), ("full", "experiment=v5"))
 MIN_STAGE_S = 5.0  # less training than this is not worth a stage's start
+STEP_WARMUP = 10  # batches a stage's step times leave out (the loaders starting, the first steps)
 LOG_TAIL_BYTES = 60_000  # of each stage's log, in OUT/gpu_train.log
 STARTUP_ALLOWANCE_S = (
     45.0  # a stage's imports, bank check and setup before its clock starts at on_train_start
@@ -273,23 +273,8 @@ def run_stage(
     log = work / f"train_{name}.log"
     overrides = stage_overrides(plan, work, name, seconds, init_from)
     start = time.perf_counter()
-    error = None
-    with log.open("w") as handle:
-        command = [sys.executable, str(ROOT / "train.py"), *overrides]
-        process = subprocess.Popen(command, cwd=ROOT, env=env, stdout=handle, stderr=subprocess.STDOUT,
-                                   start_new_session=True)  # fmt: skip
-        try:
-            code = process.wait(timeout=kill_after)
-            if code != 0:
-                error = f"exit {code}"
-        except subprocess.TimeoutExpired:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
-            error = "timed out"
-        except BaseException:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
-            raise
+    code = run_train_py(overrides, log, env, kill_after)
+    error = "timed out" if code is None else f"exit {code}" if code != 0 else None
     result: dict[str, Any] = {
         "stage": name,
         "overrides": overrides,
@@ -306,17 +291,15 @@ def run_stage(
 
 
 def _step_summary(timer: dict[str, Any]) -> dict[str, Any]:
-    """Median step and batch interval (seconds) past the first ten batches (compilation, loaders)."""
-    import statistics
-
-    compute, interval = timer.get("compute_s", [])[10:], timer.get("interval_s", [])[10:]
-    return {
-        "batches": len(timer.get("compute_s", [])),
-        "step_s": statistics.median(compute) if compute else None,
-        "interval_s": statistics.median(interval) if interval else None,
+    """The batches a stage trained, their shape and peak memory, and :func:`step_stats`' medians
+    past the first ten (the loaders starting, the first steps)."""
+    compute = timer.get("compute_s", [])
+    summary = {
+        "batches": len(compute),
         "batch_shape": timer.get("batch_shape"),
         "peak_bytes": timer.get("peak_bytes"),
     }
+    return {**summary, **(step_stats(timer, STEP_WARMUP) if len(compute) > STEP_WARMUP else {})}
 
 
 def export(

@@ -32,6 +32,7 @@ position)``: a resumed run sees the same photos as an uninterrupted one.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
@@ -205,26 +206,28 @@ class MaterialBank:
         if self.ready():
             return self.root
         self.root.mkdir(parents=True, exist_ok=True)
-        missing = [index for index in self.procedural if not self._painted(index)]
-        bar = tqdm(total=len(self.procedural), initial=len(self.procedural) - len(missing),
+        materials: dict[str, Any] = {}
+        for index in self.procedural:  # painted by a build that was killed later: kept
+            meta_path = self.material_path(index).with_suffix(".json")
+            if self.material_path(index).exists() and meta_path.exists():
+                materials[str(index)] = json.loads(meta_path.read_text())
+        missing = [index for index in self.procedural if str(index) not in materials]
+        paths = [self.material_path(index) for index in missing]
+        bar = tqdm(total=len(self.procedural), initial=len(materials),
                    desc="material bank", unit="material", disable=not progress)  # fmt: skip
-        with bar:
+        with bar, contextlib.ExitStack() as stack:
+            painted: Iterator[dict[str, Any]]
             if self.paint_workers == 1 or len(missing) <= 1:
-                for index in missing:
-                    paint_bank_material(self.spec, index, self.material_path(index))
-                    bar.update()
+                painted = map(paint_bank_material, [self.spec] * len(missing), missing, paths)
             else:
                 # spawn, not fork: the parent's torch thread pool may already be running.
                 context = multiprocessing.get_context("spawn")
                 workers = min(self.paint_workers, len(missing))
-                with ProcessPoolExecutor(workers, mp_context=context) as pool:
-                    paths = [self.material_path(index) for index in missing]
-                    for _ in pool.map(paint_bank_material, [self.spec] * len(missing), missing, paths):
-                        bar.update()
-        materials = {
-            str(index): json.loads(self.material_path(index).with_suffix(".json").read_text())
-            for index in self.procedural
-        }
+                pool = stack.enter_context(ProcessPoolExecutor(workers, mp_context=context))
+                painted = pool.map(paint_bank_material, [self.spec] * len(missing), missing, paths)
+            for index, meta in zip(missing, painted, strict=True):
+                materials[str(index)] = meta
+                bar.update()
         self.tabulate_environments()
         index_text = json.dumps(
             {
@@ -238,11 +241,6 @@ class MaterialBank:
         )
         write_text_atomic(self.root / INDEX_FILE, index_text)
         return self.root
-
-    def _painted(self, index: int) -> bool:
-        """Whether material ``index`` is on disk (painted by a build that was killed later)."""
-        path = self.material_path(index)
-        return path.exists() and path.with_suffix(".json").exists()
 
     def tabulate_environments(self, path: Path | None = None) -> Path:
         """Tabulate the training environments into ``path`` (default: the bank's
@@ -343,17 +341,19 @@ class MaterialBank:
         return PaintedMaterial(maps, f"scanned/{folder.name}", {}, extra, self.spec.scans.crop)
 
 
-def paint_bank_material(spec: DatasetSpec, index: int, path: Path) -> None:
+def paint_bank_material(spec: DatasetSpec, index: int, path: Path) -> dict[str, Any]:
     """Paint training material ``index`` of ``spec`` as generation paints it into ``path`` (a
     bank's ``m<index>.u16z``), its family, parameters and extras into the ``.json`` beside it
     first, each written atomically: a maps file on disk always has its metadata beside it. On one
-    torch thread, so the bytes do not depend on the core count."""
+    torch thread, so the bytes do not depend on the core count. Returns the metadata."""
     with single_torch_thread():
         generator = torch.Generator().manual_seed(material_seed(spec.seed, index))
         material = paint_material(spec, "train", index, generator)
-    write_text_atomic(path.with_suffix(".json"), json.dumps(_material_meta(material), sort_keys=True))
+    meta = _material_meta(material)
+    write_text_atomic(path.with_suffix(".json"), json.dumps(meta, sort_keys=True))
     with atomic_replace(path) as temp:
         temp.write_bytes(encode_maps(material.maps))
+    return meta
 
 
 def _material_meta(material: PaintedMaterial) -> dict[str, Any]:
@@ -835,22 +835,18 @@ class RenderedDataModule(ShardDataModule):
         device = batch["scene_maps"].device
         with torch.no_grad():
             photos, maps, scales = photograph_scenes(*scene_tensors(batch), self._render)
-        rendered = [
-            Sample(key, photo, aligned, {**meta, "exposure_scale": scale}, check=False)
-            for key, photo, aligned, scale, meta in zip(
-                batch["key"], photos.cpu(), maps.cpu(), scales.tolist(), batch["meta"], strict=True
-            )
-        ]
-        collated = collate_samples([self._phone_and_crop(sample) for sample in rendered])
+        samples = []
+        for key, photo, aligned, scale, meta in zip(
+            batch["key"], photos.cpu(), maps.cpu(), scales.tolist(), batch["meta"], strict=True
+        ):
+            sample = Sample(key, photo, aligned, {**meta, "exposure_scale": scale}, check=False)
+            seed = int(meta["render"]["seed"])
+            if self.sensor is not None and self.sensor.enabled:
+                sample = sensed_sample(sample, self.sensor, _mix(seed, "sensor"))
+            if self.train_crop is not None:
+                sample = random_crop(sample, self.train_crop, random.Random(_mix(seed, "crop")))
+            samples.append(sample)
+        collated = collate_samples(samples)
         for name in ("photo", "maps", "flash"):
             collated[name] = collated[name].to(device)
         return collated
-
-    def _phone_and_crop(self, sample: Sample) -> Sample:
-        """``sample`` through ``sensor`` and the train crop, seeded by its render's seed."""
-        seed = int(sample.meta["render"]["seed"])
-        if self.sensor is not None and self.sensor.enabled:
-            sample = sensed_sample(sample, self.sensor, _mix(seed, "sensor"))
-        if self.train_crop is not None:
-            sample = random_crop(sample, self.train_crop, random.Random(_mix(seed, "crop")))
-        return sample
