@@ -134,9 +134,13 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
     # harness learned relief best), then shading_first's photos from those weights.
     [shading_plain]="experiment=v5_shading data.relief.plain_albedo_probability=1.0"
     [shading_after_plain]="experiment=v5_shading init_from=$OUT/ablation/shading_plain$suffix/checkpoints/last.ckpt"
+    # Capacity: shading_first at twice the width (four times the weights; the GPU plan's
+    # network), the same 1 000 batches: whether a larger network reads more of the shading
+    # from the same photos.
+    [shading_wide]="experiment=v5_shading model.generator.width=32"
   )
   local run models="v4: $V4, mean_maps: $REF/mean_maps.safetensors"  # the shipped model and the flat, constant reference beside every row
-  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat rendered_height_invert rendered_height_invert_plain shading_first rendered_height_invert_after_shading v4_then_rendered v4_then_rendered_invert shading_plain shading_after_plain}; do
+  for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat rendered_height_invert rendered_height_invert_plain shading_first rendered_height_invert_after_shading v4_then_rendered v4_then_rendered_invert shading_plain shading_after_plain shading_wide}; do
     [ -f $OUT/ablation/$run$suffix/checkpoints/last.ckpt ] ||
       $PY train.py ${RUNS[$run]} $steps hydra.run.dir=$OUT/ablation/$run$suffix
     models="$models, $run$suffix: $OUT/ablation/$run$suffix/checkpoints/last.ckpt"
