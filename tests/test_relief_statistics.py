@@ -11,19 +11,25 @@ import torch
 from torch import Tensor
 
 import brdfgan.data.tools.relief as relief
+from brdfgan.core.delit import flash_render
 from brdfgan.core.exposure import log_luminance
+from brdfgan.core.flash_geometry import pixel_scale
+from brdfgan.core.height import slope_field
 from brdfgan.core.render import nominal_camera, view_grid
-from brdfgan.core.svbrdf import NORMAL, flat_maps
+from brdfgan.core.svbrdf import NORMAL, flat_maps, srgb_to_linear
 from brdfgan.data.loading.rendered import photograph_scenes
 from brdfgan.data.materials.base import height_to_normal
 from brdfgan.data.materials.noise import fbm
 from brdfgan.data.phone.sensor import SensorEffects
 from brdfgan.data.tools.relief import (
     delivered_noise_log,
+    fit_height_to_shading,
     flat_share,
     flat_window_share,
     observable_angle,
     observable_mask,
+    photo_relief_residual,
+    radial_slope,
     relief_share,
     scene_relief_shading,
     slope_band_energy,
@@ -31,6 +37,7 @@ from brdfgan.data.tools.relief import (
     steep_angle_share,
     tilt_deg,
 )
+from brdfgan.metrics import relief_shading, slope_agreement
 
 SIZE = 64
 
@@ -276,3 +283,81 @@ def test_dark_is_low_reads_the_sign_that_ties_the_base_colour_to_the_relief() ->
     plain = maps.clone()
     plain[0, :3] = 0.5
     assert relief.dark_is_low_cosine(plain).tolist() == [[0.0, 0.0]]
+
+
+# ----------------------------------------------------------------------------- shape from shading
+
+
+def centred_frame(size: int = SIZE, fov_deg: float = 50.0) -> Tensor:
+    return torch.tensor([[size / 2, size / 2, pixel_scale(fov_deg, size)]])
+
+
+def test_radial_slope_is_the_slope_away_from_the_hotspot() -> None:
+    maps = bumpy_maps()
+    frame = centred_frame()
+    radial = radial_slope(maps[:, NORMAL], frame)
+    slopes = slope_field(maps[:, NORMAL])
+    # Right of the hotspot on its row the radial slope is s_x; above it on its column, s_y.
+    row, column = SIZE // 2 - 1, SIZE // 2 - 1  # the pixel centres just up-left of the hotspot
+    assert torch.allclose(radial[0, 0, row, SIZE // 2 + 5 :], slopes[0, 0, row, SIZE // 2 + 5 :], atol=0.05)
+    assert torch.allclose(
+        radial[0, 0, : SIZE // 2 - 5, column], slopes[0, 1, : SIZE // 2 - 5, column], atol=0.05
+    )
+    assert radial_slope(flat_maps(SIZE, SIZE, batch=(1,))[:, NORMAL], frame).abs().max().item() == 0.0
+
+
+def test_the_fitted_height_shades_as_observed_and_reads_the_radial_slopes() -> None:
+    """Noise-free and with the rest of the surface known, the fit reproduces the shading, and its
+    slopes agree with the truth's, those along the light best."""
+    maps, frame = bumpy_maps(), centred_frame()
+    observed = relief_shading(maps, frame)
+    everywhere = torch.ones_like(observed, dtype=torch.bool)
+    fitted = maps.clone()
+    fitted[:, NORMAL] = fit_height_to_shading(maps, frame, observed, everywhere, steps=300)
+    residual = (relief_shading(fitted, frame) - observed).square().mean() / observed.square().mean()
+    assert residual.item() < 0.01
+    fitted_radial, true_radial = (radial_slope(m[:, NORMAL], frame).flatten() for m in (fitted, maps))
+    assert torch.nn.functional.cosine_similarity(fitted_radial, true_radial, dim=0).item() > 0.8
+    cosine = slope_agreement(fitted, maps)["normal_slope_cosine"].item()
+    assert cosine > 0.5
+
+
+def test_no_shading_fits_a_flat_surface_and_the_ridge_flattens() -> None:
+    maps, frame = bumpy_maps(), centred_frame()
+    observed = relief_shading(maps, frame)
+    everywhere = torch.ones_like(observed, dtype=torch.bool)
+    flat = fit_height_to_shading(maps, frame, torch.zeros_like(observed), everywhere, steps=50)
+    assert torch.allclose(flat, torch.tensor([0.0, 0.0, 1.0]).view(1, 3, 1, 1).expand_as(flat), atol=1e-6)
+    ratios = []
+    for ridge in (0.0, 1.0):
+        fitted = maps.clone()
+        fitted[:, NORMAL] = fit_height_to_shading(maps, frame, observed, everywhere, ridge=ridge, steps=100)
+        ratios.append(slope_agreement(fitted, maps)["normal_slope_ratio"].item())
+    assert ratios[1] < 0.5 * ratios[0]
+    # Pixels outside `valid` do not pull: a fit that sees none of the shading stays flat.
+    nowhere = torch.zeros_like(everywhere)
+    assert fit_height_to_shading(maps, frame, observed, nowhere, steps=20).sub(flat).abs().max().item() < 1e-6
+    with pytest.raises(ValueError, match="ridge"):
+        fit_height_to_shading(maps, frame, observed, everywhere, ridge=-1.0)
+
+
+def test_the_photo_residual_is_the_relief_shading_of_a_clean_flash_photo() -> None:
+    """A photo that is the flash render of the maps (exposed, through a gamma-like tone curve)
+    leaves exactly the relief shading once the flat render of its true maps is fitted away; the
+    clipped hotspot is left out."""
+    maps, frame = bumpy_maps(), centred_frame()
+    photo = flash_render(srgb_to_linear(maps[:, :3]), maps[:, NORMAL], maps[:, 6:7], maps[:, 7:8], frame)
+    residual, valid = photo_relief_residual(0.8 * photo / photo.max(), maps, frame)
+    assert valid.all()
+    toned, _ = photo_relief_residual((0.8 * photo / photo.max()).pow(0.8), maps, frame)
+    assert torch.allclose(toned, residual, atol=1e-4)  # the tone curve's slope is fitted away
+    # Up to the offset and the fit's slope, which the relief's chance correlation with the
+    # falloff moves by a little, it is the relief shading.
+    expected = relief_shading(maps, frame)
+    pair = torch.stack([residual.flatten(), expected.flatten()]).double()
+    assert torch.corrcoef(pair)[0, 1].item() > 0.99
+    assert 0.9 < residual.std().item() / expected.std().item() < 1.1
+    clipped = (1.2 * photo / photo.max()).clamp(max=1.0)
+    residual, valid = photo_relief_residual(clipped, maps, frame)
+    assert 0 < valid.logical_not().sum().item() < SIZE * SIZE / 4
+    assert residual[~valid].abs().max().item() == 0.0

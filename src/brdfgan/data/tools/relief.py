@@ -13,6 +13,10 @@ tables are in docs/data.md, "Relief: what the training data shows and what a pho
   rendered), :func:`delivered_noise_log` and :func:`srgb8_rounding_log` (the photo's noise in the
   same units), :func:`observable_mask` and :func:`observable_angle`.
 - **The sensor: how much of a photo's detail is relief.** :func:`relief_share`.
+- **Shape from shading with the rest known: what the shading can give at most.**
+  :func:`photo_relief_residual` (a photo over the flat render of its true maps) and
+  :func:`fit_height_to_shading` (the height whose relief shading matches it);
+  :func:`radial_slope` (the one slope component a flash at the lens shades).
 
 Everything is in photo pixels (a photo of ``(B, 3, H, W)``), or texels of a map, and takes
 ``(B, …)`` batches; nothing here draws random numbers.
@@ -28,14 +32,17 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.checks import check_shape
-from brdfgan.core.exposure import auto_exposure_scale, log_luminance
+from brdfgan.core.delit import flash_render, flat_flash_render
+from brdfgan.core.exposure import auto_exposure_scale, log_luminance, luminance
 from brdfgan.core.filtering import gaussian_blur
+from brdfgan.core.flash_geometry import flash_offset_channels
 from brdfgan.core.height import height_slope_channels, slope_field
-from brdfgan.core.svbrdf import BASECOLOR, NORMAL, srgb_to_linear
+from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, ROUGHNESS, srgb_to_linear
 from brdfgan.data.loading.rendered import render_scenes
 from brdfgan.metrics import observable_mask, srgb8_rounding_log  # their home: the evaluator grades with them
 
 __all__ = [
+    "CLIP_LEVEL",
     "FLAT_DEG",
     "FLAT_WINDOW",
     "FLAT_WINDOW_DEG",
@@ -45,11 +52,14 @@ __all__ = [
     "STEEP_DEG",
     "dark_is_low_cosine",
     "delivered_noise_log",
+    "fit_height_to_shading",
     "flat_share",
     "flat_window_share",
     "high_pass",
     "observable_angle",
     "observable_mask",
+    "photo_relief_residual",
+    "radial_slope",
     "relief_share",
     "scene_relief_shading",
     "slope_band_energy",
@@ -78,6 +88,8 @@ LOG_FLOOR = 1e-3
 # falloff and its specular lobe vary over a quarter of the side or more; 1/16 removes them and
 # keeps the relief's grout lines, cracks and grain.
 HIGH_PASS_FRACTION = 1.0 / 16.0
+# A photo's pixel is clipped (a hotspot shows no shading) at this linear luminance and above.
+CLIP_LEVEL = 0.98
 
 
 # ----------------------------------------------------------------------------- realism
@@ -474,3 +486,159 @@ def observable_angle(normal: Tensor, mask: Tensor) -> Tensor:
             f"mask must have shape {tuple(tilt.shape)} (the normals' texels), got {tuple(mask.shape)}"
         )
     return (tilt * mask.to(tilt.dtype)).mean(dim=(-2, -1))
+
+
+# ----------------------------------------------------------------------------- shape from shading
+
+
+def photo_relief_residual(
+    photo: Tensor, maps: Tensor, frame: Tensor, clip_level: float = CLIP_LEVEL
+) -> tuple[Tensor, Tensor]:
+    """What a photo shows of its relief when everything else is known: ``(r, valid)``, ``r`` the
+    photo's log luminance less an affine fit ``a·x + c`` of ``x``, the log luminance of the
+    flash render of its **true** maps with flat normals (:func:`~brdfgan.core.delit.flat_flash_render`),
+    divided by ``a``, so it is in the units of :func:`~brdfgan.metrics.relief_shading`. The fit (per
+    photo, least squares over the valid pixels) absorbs the exposure and, through ``a``, a tone
+    curve's slope; room light, the phone's processing, noise, JPEG and the renderers' differences
+    stay in ``r``. ``valid``: the photo's pixels below ``clip_level`` (a clipped hotspot shows no
+    shading) and above :data:`LOG_FLOOR`.
+
+    Shape:
+        - photo: ``(B, 3, H, W)`` linear, the maps' size; maps: ``(B, 8, H, W)``; frame: ``(B, 3)``
+        - output: ``(B, 1, H, W)`` float, ``(B, 1, H, W)`` bool
+
+    Example:
+        A grey surface's photo that is the flat render squared and exposed (a tone curve of slope 2
+        in log units) holds no relief:
+
+        >>> from brdfgan.core.svbrdf import flat_maps
+        >>> maps = flat_maps(8, 8, basecolor=(0.5, 0.5, 0.5), roughness=0.6, batch=(1,))
+        >>> frame = torch.tensor([[4.0, 4.0, 0.1]])
+        >>> linear = srgb_to_linear(maps[:, BASECOLOR])
+        >>> flat = flat_flash_render(linear, maps[:, ROUGHNESS], maps[:, METALLIC], frame)
+        >>> residual, valid = photo_relief_residual(0.9 * flat.square() / flat.max() ** 2, maps, frame)
+        >>> bool(residual.abs().max() < 1e-4), bool(valid.all())
+        (True, True)
+    """
+    dims = check_shape(photo, "B 3 H W", name="photo")
+    check_shape(maps, "B 8 H W", name="maps", dims=dims)
+    flat = flat_flash_render(srgb_to_linear(maps[:, BASECOLOR]), maps[:, ROUGHNESS], maps[:, METALLIC], frame)
+    x, y = _log_luminance(flat).double(), _log_luminance(photo).double()
+    level = luminance(photo)
+    valid = (level < clip_level) & (level > LOG_FLOOR)
+    weight = valid.double()
+    count = weight.sum(dim=(-2, -1), keepdim=True).clamp_min(1.0)
+    mean_x = (x * weight).sum(dim=(-2, -1), keepdim=True) / count
+    mean_y = (y * weight).sum(dim=(-2, -1), keepdim=True) / count
+    covariance = ((x - mean_x) * (y - mean_y) * weight).sum(dim=(-2, -1), keepdim=True)
+    variance = ((x - mean_x).square() * weight).sum(dim=(-2, -1), keepdim=True)
+    # A photo of constant flat render (no falloff to fit a slope on) keeps a = 1.
+    gain = torch.where(variance > 1e-9, covariance / variance.clamp_min(1e-9), torch.ones_like(variance))
+    gain = gain.clamp_min(0.1)
+    residual = (y - mean_y - gain * (x - mean_x)) / gain
+    return (residual * weight).to(photo.dtype), valid
+
+
+def radial_slope(normal: Tensor, frame: Tensor) -> Tensor:
+    """The slope along the direction away from the flash hotspot, ``s · ô`` (``s`` the
+    :func:`~brdfgan.core.height.slope_field`, ``ô`` the unit offset of each pixel from the hotspot,
+    :func:`~brdfgan.core.flash_geometry.flash_offset_channels`; 0 at the hotspot itself): the one
+    component of a slope that a flash at the lens shades to first order (``n·l ≈ (1 − s·o) /
+    √(1 + |o|²)``); the slope across it changes the shading only through ``|s|²``.
+
+    Shape:
+        - normal: ``(B, 3, H, W)``; frame: ``(B, 3)``
+        - output: ``(B, 1, H, W)``
+
+    Example:
+        A surface tilted towards +x (falling along +x, slope −0.75): in line with the hotspot
+        along x its radial slope is −0.75; straight below it 0, and a pixel further right part of
+        −0.75 (its offset is mostly downward):
+
+        >>> normal = torch.tensor([0.6, 0.0, 0.8]).view(1, 3, 1, 1).expand(1, 3, 1, 2)
+        >>> [round(v, 2) for v in radial_slope(normal, torch.tensor([[0.0, 0.5, 1.0]])).flatten().tolist()]
+        [-0.75, -0.75]
+        >>> below = radial_slope(normal, torch.tensor([[0.5, -3.0, 1.0]]))
+        >>> [round(v, 2) + 0.0 for v in below.flatten().tolist()]
+        [0.0, -0.21]
+    """
+    dims = check_shape(normal, "B 3 H W", name="normal")
+    offsets = flash_offset_channels(frame.to(normal.dtype), dims["H"], dims["W"])
+    length = offsets.norm(dim=1, keepdim=True)
+    away = torch.where(length > 0, offsets / length.clamp_min(1e-12), torch.zeros_like(offsets))
+    return (slope_field(normal) * away).sum(dim=1, keepdim=True)
+
+
+def fit_height_to_shading(
+    maps: Tensor,
+    frame: Tensor,
+    observed: Tensor,
+    valid: Tensor,
+    *,
+    ridge: float = 0.0,
+    steps: int = 300,
+    learning_rate: float = 1.0,
+    levels: int = 6,
+) -> Tensor:
+    """Shape from shading with the rest of the surface known: the normals of the height ``h`` that
+    minimise ``mean_valid (S(h) − observed)² + ridge · mean |s(h)|²``, ``S`` the flash relief shading
+    (:func:`~brdfgan.metrics.relief_shading`) of ``maps`` with ``h``'s normals
+    (:func:`~brdfgan.core.height.height_slope_channels`, slopes ``s``) in place of theirs, ``observed``
+    e.g. :func:`photo_relief_residual` or the true maps' own shading. L-BFGS (``steps``
+    iterations) from a flat ``h``, made of ``levels`` grids of halving resolution enlarged
+    bilinearly and summed (a broad rise moves as fast as a fine groove). An upper bound on what
+    reading the photo's shading can give a model that does not know the base colour, roughness
+    and metallic: one flash gives one equation per pixel, which leaves the slope across the
+    light's direction (:func:`radial_slope`) to the height's integrability and the ridge's pull to
+    flat. Runs with gradients on even under ``torch.no_grad``.
+
+    Shape:
+        - maps: ``(B, 8, H, W)``; frame: ``(B, 3)``
+        - observed: ``(B, 1, H, W)``; valid: ``(B, 1, H, W)`` bool
+        - output: ``(B, 3, H, W)`` unit normals
+    """
+    dims = check_shape(maps, "B 8 H W", name="maps")
+    check_shape(observed, "B 1 H W", name="observed", dims=dims)
+    check_shape(valid, "B 1 H W", name="valid", dims=dims)
+    if ridge < 0 or steps < 0 or not learning_rate > 0 or levels < 1:
+        raise ValueError(f"need ridge ≥ 0, steps ≥ 0, learning_rate > 0, levels ≥ 1; got {ridge=}, "
+                         f"{steps=}, {learning_rate=}, {levels=}")  # fmt: skip
+    batch, height, width = dims["B"], dims["H"], dims["W"]
+    maps, observed = maps.detach().float(), observed.detach().float()
+    # relief_shading's two renders, the flat one made once: log Y(R_n) − log Y(R_flat).
+    basecolor, roughness, metallic = srgb_to_linear(maps[:, BASECOLOR]), maps[:, ROUGHNESS], maps[:, METALLIC]
+    plain = _log_luminance(flat_flash_render(basecolor, roughness, metallic, frame))
+    weight = valid.float() / valid.float().sum(dim=(-2, -1), keepdim=True).clamp_min(1.0)
+    grids = [
+        torch.zeros(batch, 1, max(1, height >> level), max(1, width >> level), requires_grad=True)
+        for level in range(levels)
+    ]
+    # L-BFGS, not Adam: Adam's steps are ~learning_rate whatever the gradient's scale, which
+    # draws noise over a near-flat surface; the problem is a smooth least squares.
+    optimizer = torch.optim.LBFGS(
+        grids, lr=learning_rate, max_iter=steps, history_size=20, tolerance_grad=1e-12,
+        tolerance_change=1e-15, line_search_fn="strong_wolfe",
+    )  # fmt: skip
+
+    def normals() -> tuple[Tensor, Tensor]:  # unnormalised normals, slopes
+        surface = sum(
+            torch.nn.functional.interpolate(grid, size=(height, width), mode="bilinear", align_corners=False)
+            for grid in grids
+        )
+        slopes = height_slope_channels(surface)  # type: ignore[arg-type]
+        return torch.cat([slopes, torch.ones_like(slopes[:, :1])], dim=1), slopes
+
+    def closure() -> Tensor:
+        unnormalised, slopes = normals()
+        photo = flash_render(basecolor, unnormalised, roughness, metallic, frame)
+        error = (_log_luminance(photo) - plain - observed).square() * weight
+        loss = error.sum() + ridge * slopes.square().sum(dim=1).mean(dim=(-2, -1)).sum()
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        return loss
+
+    with torch.enable_grad():
+        if steps > 0:
+            optimizer.step(closure)
+        unnormalised, _ = normals()
+    return (unnormalised / unnormalised.norm(dim=1, keepdim=True)).detach()

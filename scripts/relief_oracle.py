@@ -1,0 +1,159 @@
+"""Shape from shading with the rest of the surface known: how much of the normals the shading of
+these photos can give at most (issue 46, item 1b).
+
+For every photo of a set (an ``evaluate.py`` data config), the height whose flash relief shading
+best matches an observation is fitted with the photo's **true** base colour, roughness and
+metallic (:func:`brdfgan.data.tools.relief.fit_height_to_shading`), and its normals are scored as
+the evaluator scores a model's: angle and observable angle over the flat map's, slope cosine and
+ratio (pooled over texels), and the cosine of the slope along the direction away from the hotspot
+(:func:`~brdfgan.data.tools.relief.radial_slope`, the one component a flash at the lens shades)
+with the truth's share of it, and the fit's misfit (the share of the observation's energy its
+shading leaves unexplained: not converged, or more than a height can shade) and the cosine of
+the observation with the true relief shading over the valid pixels. Two observations:
+
+- ``shading``: the true maps' own relief shading (:func:`brdfgan.metrics.relief_shading`): no
+  noise, no room light, the fit's renderer — the single flash's own limit;
+- ``photo``: the photo over a flat render of its true maps
+  (:func:`~brdfgan.data.tools.relief.photo_relief_residual`): its room light, phone processing,
+  noise and JPEG, and the renderers' differences, besides.
+
+A model that must also tell the base colour from the shading can at best match it. Writes
+``OUT.json``; prints one line per observation and ridge.
+
+    python -m scripts.relief_oracle --out outputs/oracle/val_procedural \\
+        data=procedural_and_scans data.data_dir=data/procedural_and_scans_val_procedural \\
+        data.prepare=null split=val
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import hydra
+import torch
+from torch import Tensor
+
+from brdfgan.core.height import slope_field
+from brdfgan.core.svbrdf import NORMAL
+from brdfgan.data.tools.relief import (
+    fit_height_to_shading,
+    observable_mask,
+    photo_relief_residual,
+    radial_slope,
+    srgb8_rounding_log,
+)
+from brdfgan.evaluation.config import register_configs
+from brdfgan.io.atomic import write_text_atomic
+from brdfgan.metrics import SlopeAgreement, relief_shading
+from scripts.relief_learnability import normal_scores, summarize
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+OBSERVATIONS = ("shading", "photo")
+
+
+def radial_sums(pred: Tensor, true: Tensor, frame: Tensor) -> Tensor:
+    """``(Σ p_r t_r, Σ p_r², Σ t_r², Σ |t|²)`` over a batch: the radial slopes' (:func:`radial_slope`)
+    pooled products and the truth's whole slope energy, float64.
+
+    Shape:
+        - pred, true: ``(B, 3, H, W)`` unit normals; frame: ``(B, 3)``
+        - output: ``(4,)``
+    """
+    p, t = radial_slope(pred, frame).double(), radial_slope(true, frame).double()
+    return torch.stack(
+        [(p * t).sum(), p.square().sum(), t.square().sum(), slope_field(true).double().square().sum()]
+    )
+
+
+def radial_scores(sums: Tensor) -> dict[str, float]:
+    """The radial slopes' cosine (prediction against truth) and the truth's radial share of its
+    slope energy, from :func:`radial_sums`."""
+    dot, pred_sq, true_sq, total = (float(v) for v in sums)
+    return {
+        "radial_cosine": dot / max((pred_sq * true_sq) ** 0.5, 1e-300),
+        "radial_share": true_sq / max(total, 1e-300),
+    }
+
+
+def observation(name: str, batch: dict[str, Any]) -> tuple[Tensor, Tensor]:
+    """What the fit matches, and where: the true shading everywhere, or the photo's residual over
+    its unclipped pixels."""
+    if name == "shading":
+        shading = relief_shading(batch["maps"], batch["flash"])
+        return shading, torch.ones_like(shading, dtype=torch.bool)
+    return photo_relief_residual(batch["photo"], batch["maps"], batch["flash"])
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "overrides", nargs="*", help="Hydra overrides of conf/evaluate.yaml (data=…, split=…)"
+    )
+    parser.add_argument("--out", type=Path, required=True, help="writes OUT.json")
+    parser.add_argument("--ridge", type=float, nargs="+", default=[0.0, 0.01])
+    parser.add_argument("--observations", nargs="+", choices=OBSERVATIONS, default=list(OBSERVATIONS))
+    parser.add_argument("--steps", type=int, default=400, help="L-BFGS iterations (400: a 1-3 %% misfit)")
+    parser.add_argument("--limit", type=int, default=None, help="the first N photos only")
+    args = parser.parse_args(argv)
+
+    register_configs()
+    with hydra.initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = hydra.compose(config_name="evaluate", overrides=list(args.overrides))
+    datamodule = hydra.utils.instantiate(cfg.data, _convert_="all")
+    datamodule.prepare_data()
+    datamodule.splits["test"] = cfg.split
+    datamodule.setup("test")
+    results: dict[str, dict[str, float]] = {}
+    start = time.perf_counter()
+    for name in args.observations:
+        for ridge in args.ridge:
+            sums: dict[str, float] = {}
+            slopes, radial, photos = SlopeAgreement(), torch.zeros(4, dtype=torch.float64), 0
+            fit = torch.zeros(4, dtype=torch.float64)
+            for batch in datamodule.test_dataloader():
+                if args.limit is not None and photos >= args.limit:
+                    break
+                batch = {key: batch[key][: None if args.limit is None else args.limit - photos]
+                         for key in ("photo", "maps", "flash")}  # fmt: skip
+                photos += len(batch["maps"])
+                observed, valid = observation(name, batch)
+                fitted = batch["maps"].clone()
+                fitted[:, NORMAL] = fit_height_to_shading(
+                    batch["maps"], batch["flash"], observed, valid, ridge=ridge, steps=args.steps
+                )
+                # How far the fit is from reproducing what it matched (its convergence, or more
+                # than a height can shade).
+                misfit = (relief_shading(fitted, batch["flash"]) - observed).square() * valid
+                shading = relief_shading(batch["maps"], batch["flash"])
+                terms = [misfit, observed.square(), observed * shading, shading.square()]
+                fit += torch.stack([(term * valid).sum() for term in terms]).double()
+                # The evaluator's observable texels: the true shading above the photo's 8-bit rounding.
+                observable = observable_mask(shading, srgb8_rounding_log(batch["photo"]))
+                for key, value in normal_scores(
+                    fitted[:, NORMAL], batch["maps"][:, NORMAL], observable
+                ).items():
+                    sums[key] = sums.get(key, 0.0) + float(value)
+                slopes.update(fitted, batch["maps"])
+                radial += radial_sums(fitted[:, NORMAL], batch["maps"][:, NORMAL], batch["flash"])
+            agreement = {key: float(value) for key, value in slopes.compute().items()}
+            row = {**summarize(sums), **agreement, **radial_scores(radial),
+                   "misfit_share": float(fit[0] / fit[1].clamp_min(1e-300)),
+                   "shading_cosine": float(fit[2] / (fit[1] * fit[3]).sqrt().clamp_min(1e-300)),
+                   "photos": photos,
+                   "seconds": time.perf_counter() - start}  # fmt: skip
+            results[f"{name}/ridge={ridge:g}"] = row
+            print(json.dumps({"observation": name, "ridge": ridge, **row}), flush=True)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    payload = {"overrides": list(args.overrides), "steps": args.steps, "results": results}
+    write_text_atomic(args.out.with_suffix(".json"), json.dumps(payload, indent=1))
+
+
+if __name__ == "__main__":
+    main()
