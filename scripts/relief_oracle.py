@@ -1,28 +1,32 @@
-"""Shape from shading with the rest of the surface known: how much of the normals the shading of
-these photos can give at most (issue 46, item 1b).
+"""Shape from shading with the rest of the surface known: what a least-squares reading of these
+photos' shading gives the normals (issue 46, item 1b).
 
 For every photo of a set (an ``evaluate.py`` data config), the height whose flash relief shading
 best matches an observation is fitted with the photo's **true** base colour, roughness and
 metallic (:func:`brdfgan.data.tools.relief.fit_height_to_shading`), and its normals are scored as
 the evaluator scores a model's: angle and observable angle over the flat map's, slope cosine and
-ratio (pooled over texels), and the cosine of the slope along the direction away from the hotspot
-(:func:`~brdfgan.data.tools.relief.radial_slope`, the one component a flash at the lens shades)
-with the truth's share of it, and the fit's misfit (the share of the observation's energy its
-shading leaves unexplained: not converged, or more than a height can shade) and the cosine of
-the observation with the true relief shading over the valid pixels. Two observations:
+ratio (pooled over texels); the cosine of the slope along the direction away from the hotspot
+(:func:`~brdfgan.data.tools.relief.radial_slope`, the one component a flash at the lens shades to
+first order) with the truth's share of it; the fit's misfit (the share of the observation's
+energy its shading leaves unexplained: not converged, or more than a height can shade); and the
+correlation of the observation with the true relief shading over the valid pixels. Two
+observations:
 
 - ``shading``: the true maps' own relief shading (:func:`brdfgan.metrics.relief_shading`): no
-  noise, no room light, the fit's renderer — the single flash's own limit;
-- ``photo``: the photo over a flat render of its true maps
+  noise, no room light, the fit's own renderer;
+- ``photo``: the photo over a flat render of its true maps, known up to a constant
   (:func:`~brdfgan.data.tools.relief.photo_relief_residual`): its room light, phone processing,
   noise and JPEG, and the renderers' differences, besides.
 
-A model that must also tell the base colour from the shading can at best match it. Writes
-``OUT.json``; prints one line per observation and ridge.
+The fit is given what a model must find (base colour, roughness, metallic) and has no learned
+prior of relief. Writes ``OUT.json``; prints one line per observation and ridge. The tables of
+docs/data.md ("(g)"):
 
-    python -m scripts.relief_oracle --out outputs/oracle/val_procedural \\
+    python -m scripts.relief_oracle --out logs/v5/oracle/val_procedural_shading \\
         data=procedural_and_scans data.data_dir=data/procedural_and_scans_val_procedural \\
-        data.prepare=null split=val
+        data.prepare=null --observations shading --ridge 0
+    python -m scripts.relief_oracle --out logs/v5/oracle/ood_photo data=ood \\
+        --observations photo --ridge 1 10
 """
 
 from __future__ import annotations
@@ -80,6 +84,21 @@ def radial_scores(sums: Tensor) -> dict[str, float]:
     }
 
 
+def fit_scores(sums: Tensor, pixels: int, *, centred: bool) -> dict[str, float]:
+    """From the valid pixels' ``(Σ misfit², Σ o, Σ o², Σ t, Σ t², Σ o t)`` (``o`` the observation,
+    ``t`` the true relief shading): the misfit's share of the observation's energy about its mean
+    when ``centred`` (the fit then had a free offset) or else about 0, and the correlation of the
+    observation with the true shading (about their means), NaN without variance."""
+    misfit, o, oo, t, tt, ot = (float(v) for v in sums)
+    n = max(pixels, 1)
+    o_energy = oo - o * o / n if centred else oo
+    o_var, t_var, cov = oo - o * o / n, tt - t * t / n, ot - o * t / n
+    return {
+        "misfit_share": misfit / o_energy if o_energy > 0 else float("nan"),
+        "shading_correlation": cov / (o_var * t_var) ** 0.5 if o_var > 0 and t_var > 0 else float("nan"),
+    }
+
+
 def observation(name: str, batch: dict[str, Any]) -> tuple[Tensor, Tensor]:
     """What the fit matches, and where: the true shading everywhere, or the photo's residual over
     its unclipped pixels."""
@@ -87,6 +106,58 @@ def observation(name: str, batch: dict[str, Any]) -> tuple[Tensor, Tensor]:
         shading = relief_shading(batch["maps"], batch["flash"])
         return shading, torch.ones_like(shading, dtype=torch.bool)
     return photo_relief_residual(batch["photo"], batch["maps"], batch["flash"])
+
+
+def oracle_scores(
+    name: str, ridge: float, steps: int, batches: Sequence[dict[str, Tensor]]
+) -> dict[str, float]:
+    """One row: every photo's fit to observation ``name`` at ``ridge``, scored (module docstring)."""
+    sums: dict[str, float] = {}
+    slopes, radial = SlopeAgreement(), torch.zeros(4, dtype=torch.float64)
+    fit, pixels = torch.zeros(6, dtype=torch.float64), 0
+    for batch in batches:
+        observed, valid = observation(name, batch)
+        fitted = batch["maps"].clone()
+        # The photo's residual is known up to a constant (its mean was fitted away).
+        fitted[:, NORMAL] = fit_height_to_shading(
+            batch["maps"],
+            batch["flash"],
+            observed,
+            valid,
+            ridge=ridge,
+            steps=steps,
+            free_offset=name == "photo",
+        )
+        # How far the fit is from reproducing what it matched (its convergence, or more than a
+        # height can shade).
+        difference = relief_shading(fitted, batch["flash"]) - observed
+        if name == "photo":  # fitted with a free offset
+            mean = (difference * valid).sum(dim=(-2, -1), keepdim=True)
+            difference = difference - mean / valid.sum(dim=(-2, -1), keepdim=True).clamp_min(1)
+        shading = relief_shading(batch["maps"], batch["flash"])
+        terms = [
+            difference.square(),
+            observed,
+            observed.square(),
+            shading,
+            shading.square(),
+            observed * shading,
+        ]
+        fit += torch.stack([(term.double() * valid).sum() for term in terms])
+        pixels += int(valid.sum())
+        # The evaluator's observable texels: the true shading above the photo's 8-bit rounding.
+        observable = observable_mask(shading, srgb8_rounding_log(batch["photo"]))
+        for key, value in normal_scores(fitted[:, NORMAL], batch["maps"][:, NORMAL], observable).items():
+            sums[key] = sums.get(key, 0.0) + float(value)
+        slopes.update(fitted, batch["maps"])
+        radial += radial_sums(fitted[:, NORMAL], batch["maps"][:, NORMAL], batch["flash"])
+    agreement = {key: float(value) for key, value in slopes.compute().items()}
+    return {
+        **summarize(sums),
+        **agreement,
+        **radial_scores(radial),
+        **fit_scores(fit, pixels, centred=name == "photo"),
+    }
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -97,11 +168,15 @@ def main(argv: Sequence[str] | None = None) -> None:
         "overrides", nargs="*", help="Hydra overrides of conf/evaluate.yaml (data=…, split=…)"
     )
     parser.add_argument("--out", type=Path, required=True, help="writes OUT.json")
-    parser.add_argument("--ridge", type=float, nargs="+", default=[0.0, 0.01])
+    parser.add_argument("--ridge", type=float, nargs="+", default=[0.0])
     parser.add_argument("--observations", nargs="+", choices=OBSERVATIONS, default=list(OBSERVATIONS))
-    parser.add_argument("--steps", type=int, default=400, help="L-BFGS iterations (400: a 1-3 %% misfit)")
+    parser.add_argument("--steps", type=int, default=400, help="L-BFGS iterations at most")
     parser.add_argument("--limit", type=int, default=None, help="the first N photos only")
     args = parser.parse_args(argv)
+    if args.limit is not None and args.limit < 1:
+        parser.error(f"--limit must be at least 1, got {args.limit}")
+    if args.steps < 1 or any(ridge < 0 for ridge in args.ridge):
+        parser.error("--steps must be at least 1 and every --ridge at least 0")
 
     register_configs()
     with hydra.initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
@@ -110,43 +185,18 @@ def main(argv: Sequence[str] | None = None) -> None:
     datamodule.prepare_data()
     datamodule.splits["test"] = cfg.split
     datamodule.setup("test")
+    batches, photos = [], 0
+    for batch in datamodule.test_dataloader():
+        if args.limit is not None and photos >= args.limit:
+            break
+        keep = None if args.limit is None else args.limit - photos
+        batches.append({key: batch[key][:keep] for key in ("photo", "maps", "flash")})
+        photos += len(batches[-1]["maps"])
     results: dict[str, dict[str, float]] = {}
-    start = time.perf_counter()
     for name in args.observations:
         for ridge in args.ridge:
-            sums: dict[str, float] = {}
-            slopes, radial, photos = SlopeAgreement(), torch.zeros(4, dtype=torch.float64), 0
-            fit = torch.zeros(4, dtype=torch.float64)
-            for batch in datamodule.test_dataloader():
-                if args.limit is not None and photos >= args.limit:
-                    break
-                batch = {key: batch[key][: None if args.limit is None else args.limit - photos]
-                         for key in ("photo", "maps", "flash")}  # fmt: skip
-                photos += len(batch["maps"])
-                observed, valid = observation(name, batch)
-                fitted = batch["maps"].clone()
-                fitted[:, NORMAL] = fit_height_to_shading(
-                    batch["maps"], batch["flash"], observed, valid, ridge=ridge, steps=args.steps
-                )
-                # How far the fit is from reproducing what it matched (its convergence, or more
-                # than a height can shade).
-                misfit = (relief_shading(fitted, batch["flash"]) - observed).square() * valid
-                shading = relief_shading(batch["maps"], batch["flash"])
-                terms = [misfit, observed.square(), observed * shading, shading.square()]
-                fit += torch.stack([(term * valid).sum() for term in terms]).double()
-                # The evaluator's observable texels: the true shading above the photo's 8-bit rounding.
-                observable = observable_mask(shading, srgb8_rounding_log(batch["photo"]))
-                for key, value in normal_scores(
-                    fitted[:, NORMAL], batch["maps"][:, NORMAL], observable
-                ).items():
-                    sums[key] = sums.get(key, 0.0) + float(value)
-                slopes.update(fitted, batch["maps"])
-                radial += radial_sums(fitted[:, NORMAL], batch["maps"][:, NORMAL], batch["flash"])
-            agreement = {key: float(value) for key, value in slopes.compute().items()}
-            row = {**summarize(sums), **agreement, **radial_scores(radial),
-                   "misfit_share": float(fit[0] / fit[1].clamp_min(1e-300)),
-                   "shading_cosine": float(fit[2] / (fit[1] * fit[3]).sqrt().clamp_min(1e-300)),
-                   "photos": photos,
+            start = time.perf_counter()
+            row = {**oracle_scores(name, ridge, args.steps, batches), "photos": photos,
                    "seconds": time.perf_counter() - start}  # fmt: skip
             results[f"{name}/ridge={ridge:g}"] = row
             print(json.dumps({"observation": name, "ridge": ridge, **row}), flush=True)

@@ -39,7 +39,7 @@ def test_the_oracle_reads_the_tiny_sets_relief_from_its_own_shading(tiny_data: P
     assert exact["normal_slope_cosine"] > 0.0 and exact["radial_cosine"] > 0.0
     assert flattened["normal_slope_ratio"] < exact["normal_slope_ratio"]
     assert exact["misfit_share"] < flattened["misfit_share"] <= 1.0 + 1e-9
-    assert exact["shading_cosine"] == pytest.approx(1.0)
+    assert exact["shading_correlation"] == pytest.approx(1.0)  # the observation is the true shading
     assert flattened["angle_deg"] == pytest.approx(flattened["flat_angle_deg"], rel=0.05)
     # Without a ridge the photo's noise is fitted as relief.
     assert (

@@ -341,6 +341,27 @@ def test_no_shading_fits_a_flat_surface_and_the_ridge_flattens() -> None:
         fit_height_to_shading(maps, frame, observed, everywhere, ridge=-1.0)
 
 
+def test_each_photo_is_fitted_alone_and_only_its_valid_pixels_pull() -> None:
+    """A photo's fit is the same in any batch; garbage in its invalid pixels changes nothing; with
+    a free offset, a constant added to the observation changes nothing."""
+    maps = torch.cat([bumpy_maps(seed=0), bumpy_maps(seed=1)])
+    frame = centred_frame().expand(2, 3)
+    observed = relief_shading(maps, frame)
+    valid = torch.ones_like(observed, dtype=torch.bool)
+    valid[:, :, :8] = False
+    both = fit_height_to_shading(maps, frame, observed, valid, steps=40)
+    alone = fit_height_to_shading(maps[1:], frame[1:], observed[1:], valid[1:], steps=40)
+    assert torch.allclose(both[1:], alone, atol=1e-5)
+    garbage = torch.where(valid, observed, torch.full_like(observed, 5.0))
+    assert torch.allclose(fit_height_to_shading(maps, frame, garbage, valid, steps=40), both, atol=1e-5)
+    offset = fit_height_to_shading(maps, frame, observed, valid, free_offset=True, steps=40)
+    shifted = fit_height_to_shading(maps, frame, observed + 0.3, valid, free_offset=True, steps=40)
+    assert torch.allclose(shifted, offset, atol=1e-3)
+    assert not torch.allclose(
+        fit_height_to_shading(maps, frame, observed + 0.3, valid, steps=40), both, atol=1e-2
+    )
+
+
 def test_the_photo_residual_is_the_relief_shading_of_a_clean_flash_photo() -> None:
     """A photo that is the flash render of the maps (exposed, through a gamma-like tone curve)
     leaves exactly the relief shading once the flat render of its true maps is fitted away; the
@@ -361,3 +382,8 @@ def test_the_photo_residual_is_the_relief_shading_of_a_clean_flash_photo() -> No
     residual, valid = photo_relief_residual(clipped, maps, frame)
     assert 0 < valid.logical_not().sum().item() < SIZE * SIZE / 4
     assert residual[~valid].abs().max().item() == 0.0
+    # One channel at the clip level is enough: a saturated red hotspot shows no shading either.
+    red = photo / photo.max() * 0.6
+    red[:, 0] = (3.0 * red[:, 0]).clamp(max=1.0)
+    _, valid = photo_relief_residual(red, maps, frame)
+    assert valid.logical_not().sum().item() == (red[:, 0] >= relief.CLIP_LEVEL).sum().item() > 0

@@ -39,7 +39,11 @@ from brdfgan.core.flash_geometry import flash_offset_channels
 from brdfgan.core.height import height_slope_channels, slope_field
 from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, ROUGHNESS, srgb_to_linear
 from brdfgan.data.loading.rendered import render_scenes
-from brdfgan.metrics import observable_mask, srgb8_rounding_log  # their home: the evaluator grades with them
+from brdfgan.metrics import (  # their home: the evaluator grades with them
+    RELIEF_LOG_FLOOR,
+    observable_mask,
+    srgb8_rounding_log,
+)
 
 __all__ = [
     "CLIP_LEVEL",
@@ -88,7 +92,8 @@ LOG_FLOOR = 1e-3
 # falloff and its specular lobe vary over a quarter of the side or more; 1/16 removes them and
 # keeps the relief's grout lines, cracks and grain.
 HIGH_PASS_FRACTION = 1.0 / 16.0
-# A photo's pixel is clipped (a hotspot shows no shading) at this linear luminance and above.
+# A photo's pixel is clipped (a hotspot shows no shading) when a channel is at this linear level or
+# above: predict's refinement and the views' fit default (RefineConfig.clip_level, ViewsConfig.clip_level).
 CLIP_LEVEL = 0.98
 
 
@@ -500,8 +505,10 @@ def photo_relief_residual(
     divided by ``a``, so it is in the units of :func:`~brdfgan.metrics.relief_shading`. The fit (per
     photo, least squares over the valid pixels) absorbs the exposure and, through ``a``, a tone
     curve's slope; room light, the phone's processing, noise, JPEG and the renderers' differences
-    stay in ``r``. ``valid``: the photo's pixels below ``clip_level`` (a clipped hotspot shows no
-    shading) and above :data:`LOG_FLOOR`.
+    stay in ``r``, which has mean 0 over the valid pixels (the true shading's mean went with ``c``:
+    fit it with ``free_offset``). ``a`` is clamped at 0.1 (a photo unrelated to its render).
+    ``valid``: the pixels with no channel at ``clip_level`` or above (a clipped hotspot shows no
+    shading) and a luminance above the floor of :func:`~brdfgan.metrics.relief_shading`.
 
     Shape:
         - photo: ``(B, 3, H, W)`` linear, the maps' size; maps: ``(B, 8, H, W)``; frame: ``(B, 3)``
@@ -523,9 +530,10 @@ def photo_relief_residual(
     dims = check_shape(photo, "B 3 H W", name="photo")
     check_shape(maps, "B 8 H W", name="maps", dims=dims)
     flat = flat_flash_render(srgb_to_linear(maps[:, BASECOLOR]), maps[:, ROUGHNESS], maps[:, METALLIC], frame)
-    x, y = _log_luminance(flat).double(), _log_luminance(photo).double()
-    level = luminance(photo)
-    valid = (level < clip_level) & (level > LOG_FLOOR)
+    x = log_luminance(flat, RELIEF_LOG_FLOOR).double()
+    y = log_luminance(photo, RELIEF_LOG_FLOOR).double()
+    # Clipped where any channel is (as predict's refinement and the views' fit take it).
+    valid = (photo < clip_level).all(dim=1, keepdim=True) & (luminance(photo) > RELIEF_LOG_FLOOR)
     weight = valid.double()
     count = weight.sum(dim=(-2, -1), keepdim=True).clamp_min(1.0)
     mean_x = (x * weight).sum(dim=(-2, -1), keepdim=True) / count
@@ -543,8 +551,9 @@ def radial_slope(normal: Tensor, frame: Tensor) -> Tensor:
     """The slope along the direction away from the flash hotspot, ``s · ô`` (``s`` the
     :func:`~brdfgan.core.height.slope_field`, ``ô`` the unit offset of each pixel from the hotspot,
     :func:`~brdfgan.core.flash_geometry.flash_offset_channels`; 0 at the hotspot itself): the one
-    component of a slope that a flash at the lens shades to first order (``n·l ≈ (1 − s·o) /
-    √(1 + |o|²)``); the slope across it changes the shading only through ``|s|²``.
+    component of a slope that a flash at the lens shades to first order (``n·l = (1 + s·o) /
+    √((1 + |s|²)(1 + |o|²))``, ``o`` the offset); the slope across it changes the shading only
+    through ``|s|²``.
 
     Shape:
         - normal: ``(B, 3, H, W)``; frame: ``(B, 3)``
@@ -576,21 +585,27 @@ def fit_height_to_shading(
     valid: Tensor,
     *,
     ridge: float = 0.0,
-    steps: int = 300,
+    free_offset: bool = False,
+    steps: int = 400,
     learning_rate: float = 1.0,
     levels: int = 6,
 ) -> Tensor:
-    """Shape from shading with the rest of the surface known: the normals of the height ``h`` that
-    minimise ``mean_valid (S(h) − observed)² + ridge · mean |s(h)|²``, ``S`` the flash relief shading
-    (:func:`~brdfgan.metrics.relief_shading`) of ``maps`` with ``h``'s normals
-    (:func:`~brdfgan.core.height.height_slope_channels`, slopes ``s``) in place of theirs, ``observed``
-    e.g. :func:`photo_relief_residual` or the true maps' own shading. L-BFGS (``steps``
-    iterations) from a flat ``h``, made of ``levels`` grids of halving resolution enlarged
-    bilinearly and summed (a broad rise moves as fast as a fine groove). An upper bound on what
-    reading the photo's shading can give a model that does not know the base colour, roughness
-    and metallic: one flash gives one equation per pixel, which leaves the slope across the
-    light's direction (:func:`radial_slope`) to the height's integrability and the ridge's pull to
-    flat. Runs with gradients on even under ``torch.no_grad``.
+    """Shape from shading with the rest of the surface known: per photo, the normals of the height
+    ``h`` that minimise ``mean_valid (S(h) − observed − c)² + ridge · mean |∇h|²``, ``S`` the flash
+    relief shading (:func:`~brdfgan.metrics.relief_shading`) of ``maps`` with ``h``'s normals
+    (:func:`~brdfgan.core.height.height_slope_channels`) in place of theirs, ``observed`` e.g. the
+    true maps' own shading or :func:`photo_relief_residual`, and ``c`` 0 or, ``free_offset``, the
+    mean difference over the valid pixels (an observation known up to a constant, as a residual
+    whose mean was fitted away). L-BFGS (at most ``steps`` iterations, ``2 · steps`` evaluations)
+    from a flat ``h`` made of ``levels`` grids of halving resolution enlarged bilinearly and summed
+    (a broad rise moves as fast as a fine groove); each photo on its own, so the result does not
+    depend on the batch.
+
+    An oracle without a learned prior: it is given the base colour, roughness and metallic a model
+    must find, and reads the relief by least squares alone. One flash at the lens shades a pixel
+    by ``n·l`` only (``l = v``), one number for two slopes; the height's integrability and the
+    ridge's pull to flat decide the rest (:func:`radial_slope`). Runs with gradients on even under
+    ``torch.no_grad``.
 
     Shape:
         - maps: ``(B, 8, H, W)``; frame: ``(B, 3)``
@@ -603,36 +618,70 @@ def fit_height_to_shading(
     if ridge < 0 or steps < 0 or not learning_rate > 0 or levels < 1:
         raise ValueError(f"need ridge ≥ 0, steps ≥ 0, learning_rate > 0, levels ≥ 1; got {ridge=}, "
                          f"{steps=}, {learning_rate=}, {levels=}")  # fmt: skip
-    batch, height, width = dims["B"], dims["H"], dims["W"]
+    fitted = [
+        _fit_one_height(
+            maps[k : k + 1],
+            frame[k : k + 1],
+            observed[k : k + 1],
+            valid[k : k + 1],
+            ridge=ridge,
+            free_offset=free_offset,
+            steps=steps,
+            learning_rate=learning_rate,
+            levels=levels,
+        )
+        for k in range(dims["B"])
+    ]
+    return torch.cat(fitted) if fitted else maps[:, NORMAL].detach().clone()
+
+
+def _fit_one_height(
+    maps: Tensor,
+    frame: Tensor,
+    observed: Tensor,
+    valid: Tensor,
+    *,
+    ridge: float,
+    free_offset: bool,
+    steps: int,
+    learning_rate: float,
+    levels: int,
+) -> Tensor:
+    """:func:`fit_height_to_shading` of one photo (``B = 1``)."""
+    height, width = maps.shape[-2:]
     maps, observed = maps.detach().float(), observed.detach().float()
-    # relief_shading's two renders, the flat one made once: log Y(R_n) − log Y(R_flat).
+    # relief_shading's two renders and floor, the flat render made once: log Y(R_n) − log Y(R_flat).
     basecolor, roughness, metallic = srgb_to_linear(maps[:, BASECOLOR]), maps[:, ROUGHNESS], maps[:, METALLIC]
-    plain = _log_luminance(flat_flash_render(basecolor, roughness, metallic, frame))
-    weight = valid.float() / valid.float().sum(dim=(-2, -1), keepdim=True).clamp_min(1.0)
+    plain = log_luminance(flat_flash_render(basecolor, roughness, metallic, frame), RELIEF_LOG_FLOOR)
+    weight = valid.float() / valid.float().sum().clamp_min(1.0)
     grids = [
-        torch.zeros(batch, 1, max(1, height >> level), max(1, width >> level), requires_grad=True)
+        torch.zeros(
+            1, 1, max(1, height >> level), max(1, width >> level), device=maps.device, requires_grad=True
+        )
         for level in range(levels)
     ]
     # L-BFGS, not Adam: Adam's steps are ~learning_rate whatever the gradient's scale, which
     # draws noise over a near-flat surface; the problem is a smooth least squares.
     optimizer = torch.optim.LBFGS(
-        grids, lr=learning_rate, max_iter=steps, history_size=20, tolerance_grad=1e-12,
-        tolerance_change=1e-15, line_search_fn="strong_wolfe",
+        grids, lr=learning_rate, max_iter=steps, max_eval=2 * steps, history_size=20,
+        tolerance_grad=1e-12, tolerance_change=1e-15, line_search_fn="strong_wolfe",
     )  # fmt: skip
 
-    def normals() -> tuple[Tensor, Tensor]:  # unnormalised normals, slopes
+    def unnormalised_normals() -> tuple[Tensor, Tensor]:  # (−∇h, 1) and −∇h
         surface = sum(
             torch.nn.functional.interpolate(grid, size=(height, width), mode="bilinear", align_corners=False)
             for grid in grids
         )
-        slopes = height_slope_channels(surface)  # type: ignore[arg-type]
-        return torch.cat([slopes, torch.ones_like(slopes[:, :1])], dim=1), slopes
+        normal_xy = height_slope_channels(surface)  # type: ignore[arg-type]
+        return torch.cat([normal_xy, torch.ones_like(normal_xy[:, :1])], dim=1), normal_xy
 
     def closure() -> Tensor:
-        unnormalised, slopes = normals()
-        photo = flash_render(basecolor, unnormalised, roughness, metallic, frame)
-        error = (_log_luminance(photo) - plain - observed).square() * weight
-        loss = error.sum() + ridge * slopes.square().sum(dim=1).mean(dim=(-2, -1)).sum()
+        normal, normal_xy = unnormalised_normals()
+        photo = flash_render(basecolor, normal, roughness, metallic, frame)
+        difference = log_luminance(photo, RELIEF_LOG_FLOOR) - plain - observed
+        if free_offset:
+            difference = difference - (difference * weight).sum()
+        loss = (difference.square() * weight).sum() + ridge * normal_xy.square().sum(dim=1).mean()
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         return loss
@@ -640,5 +689,5 @@ def fit_height_to_shading(
     with torch.enable_grad():
         if steps > 0:
             optimizer.step(closure)
-        unnormalised, _ = normals()
-    return (unnormalised / unnormalised.norm(dim=1, keepdim=True)).detach()
+        normal, _ = unnormalised_normals()
+    return (normal / normal.norm(dim=1, keepdim=True)).detach()
