@@ -99,11 +99,10 @@ def fit_scores(sums: Tensor, pixels: int, *, centred: bool) -> dict[str, float]:
     }
 
 
-def observation(name: str, batch: dict[str, Any]) -> tuple[Tensor, Tensor]:
-    """What the fit matches, and where: the true shading everywhere, or the photo's residual over
-    its unclipped pixels."""
+def observation(name: str, batch: dict[str, Any], shading: Tensor) -> tuple[Tensor, Tensor]:
+    """What the fit matches, and where: the true shading (``shading``, the maps' own relief
+    shading) everywhere, or the photo's residual over its unclipped pixels."""
     if name == "shading":
-        shading = relief_shading(batch["maps"], batch["flash"])
         return shading, torch.ones_like(shading, dtype=torch.bool)
     return photo_relief_residual(batch["photo"], batch["maps"], batch["flash"])
 
@@ -116,7 +115,8 @@ def oracle_scores(
     slopes, radial = SlopeAgreement(), torch.zeros(4, dtype=torch.float64)
     fit, pixels = torch.zeros(6, dtype=torch.float64), 0
     for batch in batches:
-        observed, valid = observation(name, batch)
+        shading = relief_shading(batch["maps"], batch["flash"])  # the truth's, made once
+        observed, valid = observation(name, batch, shading)
         fitted = batch["maps"].clone()
         # The photo's residual is known up to a constant (its mean was fitted away).
         fitted[:, NORMAL] = fit_height_to_shading(
@@ -134,7 +134,6 @@ def oracle_scores(
         if name == "photo":  # fitted with a free offset
             mean = (difference * valid).sum(dim=(-2, -1), keepdim=True)
             difference = difference - mean / valid.sum(dim=(-2, -1), keepdim=True).clamp_min(1)
-        shading = relief_shading(batch["maps"], batch["flash"])
         terms = [
             difference.square(),
             observed,
