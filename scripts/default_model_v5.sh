@@ -5,7 +5,7 @@
 # split's two parts, the procedural and scan test sets and both OOD variants beside v4 and the
 # trivial references; export_weights ships it. One training at a time on the two threads.
 #
-#   scripts/default_model_v5.sh [final|fixres|normal_curve|evaluate|ablation|shading_curve|export_weights]...
+#   scripts/default_model_v5.sh [final|fixres|normal_curve|evaluate|ablation|shading_curve|relief_light|export_weights]...
 #   (default: final fixres normal_curve evaluate, in order; SEEDS="1" runs one seed per session)
 #
 # Long trainings resume: rerunning a stage continues each unfinished run from its last.ckpt.
@@ -162,6 +162,43 @@ shading_curve() {  # the normals alone (experiment=v5_shading) 8x as long: 8 000
   }
   score "v4: $V4, mean_maps: $REF/mean_maps.safetensors, shading_curve: $run/checkpoints/last.ckpt" \
     $OUT/shading_curve_ "" "${HELD_OUT:-}" val ${HELD_OUT:+test}
+}
+
+relief_light() {  # docs/data.md "(h)": what hides the flash's relief shading. The validation split and
+  # the standard OOD variant re-generated without room light (and once with the camera square on),
+  # each read with and without the evaluation sensor; relief_oracle --steps 0 scores only the
+  # observation's correlation with the true relief shading (~5 min); then the fit on the photos
+  # without room light (~20 min).
+  local noenv="dataset_spec.lighting.env_to_flash_min=1e-6 dataset_spec.lighting.env_to_flash_max=1e-6"
+  local square="dataset_spec.capture.tilt_max_deg=0 dataset_spec.capture.distance_min=1 dataset_spec.capture.distance_max=1"
+  local shards part out=$OUT/relief_light
+  shards=$($PY generate.py dataset_spec=procedural_and_scans plan=true | awk '$2 == "val" {printf "%s%s", sep, $1; sep=","}')
+  [ -d data/pas_noenv_val_scans ] || {
+    $PY generate.py dataset_spec=procedural_and_scans $noenv out_dir=data/pas_noenv progress=false contact_sheet=0 "shard=[$shards]"
+    $PY -m scripts.source_subsets data/pas_noenv --split val; }
+  [ -d data/pas_aligned_val_scans ] || {
+    $PY generate.py dataset_spec=procedural_and_scans $noenv $square out_dir=data/pas_aligned progress=false \
+      contact_sheet=0 "shard=[$shards]"
+    $PY -m scripts.source_subsets data/pas_aligned --split val; }
+  [ -d data/ood_noenv/test ] || $PY generate.py dataset_spec=ood $noenv out_dir=data/ood_noenv progress=false contact_sheet=0
+  row() { $PY -m scripts.relief_oracle --out $out/$1 --observations photo --ridge 1 --steps 0 "${@:2}"; }
+  for part in procedural scans; do
+    local scored="data=procedural_and_scans data.prepare=null"
+    row val_${part}_photo $scored data.data_dir=data/procedural_and_scans_val_$part
+    row val_${part}_nosensor $scored data.data_dir=data/procedural_and_scans_val_$part data.eval_sensor=null
+    row val_${part}_noenv $scored data.data_dir=data/pas_noenv_val_$part
+    row val_${part}_noenv_nosensor $scored data.data_dir=data/pas_noenv_val_$part data.eval_sensor=null
+    row val_${part}_aligned_nosensor $scored data.data_dir=data/pas_aligned_val_$part data.eval_sensor=null
+    # the fit of "(g)" on the photos without room light, the evaluation sensor kept
+    $PY -m scripts.relief_oracle --out $out/val_${part}_noenv_fit $scored data.data_dir=data/pas_noenv_val_$part \
+      --observations photo --ridge 1 --steps 200
+  done
+  row ood_photo data=ood
+  row ood_nosensor data=ood data.eval_sensor=null
+  row ood_noenv data=ood data.data_dir=data/ood_noenv data.prepare=null
+  row ood_noenv_nosensor data=ood data.data_dir=data/ood_noenv data.prepare=null data.eval_sensor=null
+  $PY -m scripts.relief_oracle --out $out/ood_noenv_fit data=ood data.data_dir=data/ood_noenv data.prepare=null \
+    --observations photo --ridge 1 --steps 200  # ~15 min
 }
 
 # v4, the model v5 is measured against, from the history (the release before v5).

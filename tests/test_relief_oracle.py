@@ -48,3 +48,22 @@ def test_the_oracle_reads_the_tiny_sets_relief_from_its_own_shading(tiny_data: P
     )
     for row in results.values():
         assert 0.0 <= row["radial_share"] <= 1.0 and all(math.isfinite(v) for v in row.values())
+
+
+def test_no_steps_scores_the_flat_start_and_the_observations_correlation(
+    tiny_data: Path, tmp_path: Path
+) -> None:
+    data = ["data=tiny", f"data.data_dir={tiny_data / 'data' / 'tiny'}", "--limit", "2", "--ridge", "1"]
+    main([*data, "--out", str(tmp_path / "none"), "--steps", "0", "--observations", "photo"])
+    main([*data, "--out", str(tmp_path / "fit"), "--steps", "20", "--observations", "photo"])
+    none, fit = (
+        json.loads((tmp_path / name).with_suffix(".json").read_text())["results"]["photo/ridge=1"]
+        for name in ("none", "fit")
+    )
+    # No iteration: the flat start, which leaves all of the observation's variation unexplained.
+    assert none["angle_deg"] == pytest.approx(none["flat_angle_deg"])
+    assert none["misfit_share"] == pytest.approx(1.0)
+    assert fit["misfit_share"] < 1.0
+    # The correlation is the observation's, whatever the fit.
+    assert none["shading_correlation"] == pytest.approx(fit["shading_correlation"])
+    assert 0.0 < abs(none["shading_correlation"]) < 1.0
