@@ -122,6 +122,9 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
     # read some relief from the shading where the full recipe reads none; then the inverted row's
     # recipe starting from its weights, so the whole generator learns on with that reading.
     [shading_first]="experiment=v5_shading"
+    # The same on photos without room light, validated on the validation split re-generated
+    # without it (relief_light makes it and scores this row; docs/data.md "(h)").
+    [shading_noenv]="experiment=v5_shading data.data_dir=data/pas_noenv data.prepare.spec.lighting.env_to_flash_min=1e-6 data.prepare.spec.lighting.env_to_flash_max=1e-6"
     [rendered_height_invert_after_shading]="experiment=v5 loss.normal_tilt_weight=0 data.relief.invert_probability=0.5 init_from=$OUT/ablation/shading_first$suffix/checkpoints/last.ckpt"
     # v4 itself (both stages) trained on for 1 000 batches of rendered photos at stage 2's rate:
     # whether the fresh light of every draw (room light, exposure, the phone) teaches v4's
@@ -181,7 +184,9 @@ relief_light() {  # docs/data.md "(h)": what hides the flash's relief shading. T
       contact_sheet=0 "shard=[$shards]"
     $PY -m scripts.source_subsets data/pas_aligned --split val; }
   [ -d data/ood_noenv/test ] || $PY generate.py dataset_spec=ood $noenv out_dir=data/ood_noenv progress=false contact_sheet=0
-  row() { $PY -m scripts.relief_oracle --out $out/$1 --observations photo --ridge 1 --steps 0 "${@:2}"; }
+  # oracle NAME STEPS OVERRIDES...: one relief_oracle photo row at ridge 1 (kept if already there)
+  oracle() { [ -f $out/$1.json ] || $PY -m scripts.relief_oracle --out $out/$1 --observations photo --ridge 1 --steps $2 "${@:3}"; }
+  row() { oracle $1 0 "${@:2}"; }
   for part in procedural scans; do
     local scored="data=procedural_and_scans data.prepare=null"
     row val_${part}_photo $scored data.data_dir=data/procedural_and_scans_val_$part
@@ -190,15 +195,28 @@ relief_light() {  # docs/data.md "(h)": what hides the flash's relief shading. T
     row val_${part}_noenv_nosensor $scored data.data_dir=data/pas_noenv_val_$part data.eval_sensor=null
     row val_${part}_aligned_nosensor $scored data.data_dir=data/pas_aligned_val_$part data.eval_sensor=null
     # the fit of "(g)" on the photos without room light, the evaluation sensor kept
-    $PY -m scripts.relief_oracle --out $out/val_${part}_noenv_fit $scored data.data_dir=data/pas_noenv_val_$part \
-      --observations photo --ridge 1 --steps 200
+    oracle val_${part}_noenv_fit 200 $scored data.data_dir=data/pas_noenv_val_$part
   done
   row ood_photo data=ood
   row ood_nosensor data=ood data.eval_sensor=null
   row ood_noenv data=ood data.data_dir=data/ood_noenv data.prepare=null
   row ood_noenv_nosensor data=ood data.data_dir=data/ood_noenv data.prepare=null data.eval_sensor=null
-  $PY -m scripts.relief_oracle --out $out/ood_noenv_fit data=ood data.data_dir=data/ood_noenv data.prepare=null \
-    --observations photo --ridge 1 --steps 200  # ~15 min
+  oracle ood_noenv_fit 200 data=ood data.data_dir=data/ood_noenv data.prepare=null  # ~15 min
+  # The networks on the photos without room light: those of ROWS="shading_first shading_noenv"
+  # ablation there are (shading_noenv trains on this stage's data: run the stage, then the ablation,
+  # then the stage again to score it).
+  local models="v4: $V4, mean_maps: $REF/mean_maps.safetensors" run
+  for run in shading_first shading_noenv; do
+    if [ -f $OUT/ablation/$run/checkpoints/last.ckpt ]; then
+      models="$models, $run: $OUT/ablation/$run/checkpoints/last.ckpt"
+    fi
+  done
+  for part in procedural scans; do
+    $PY evaluate.py data=procedural_and_scans data.data_dir=data/pas_noenv_val_$part data.prepare=null grid_samples=0 \
+      hydra.run.dir=$out/eval_val_${part}_noenv "ckpt={$models}"
+  done
+  $PY evaluate.py data=ood data.data_dir=data/ood_noenv data.prepare=null grid_samples=0 \
+    hydra.run.dir=$out/eval_ood_standard_noenv "ckpt={$models}"
 }
 
 # v4, the model v5 is measured against, from the history (the release before v5).
