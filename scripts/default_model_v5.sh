@@ -174,21 +174,22 @@ relief_light() {  # docs/data.md "(h)": what hides the flash's relief shading. T
   # without room light (~20 min).
   local noenv="dataset_spec.lighting.env_to_flash_min=1e-6 dataset_spec.lighting.env_to_flash_max=1e-6"
   local square="dataset_spec.capture.tilt_max_deg=0 dataset_spec.capture.distance_min=1 dataset_spec.capture.distance_max=1"
-  local shards part out=$OUT/relief_light
-  shards=$($PY generate.py dataset_spec=procedural_and_scans plan=true | awk '$2 == "val" {printf "%s%s", sep, $1; sep=","}')
-  [ -d data/pas_noenv_val_scans ] || {
-    $PY generate.py dataset_spec=procedural_and_scans $noenv out_dir=data/pas_noenv progress=false contact_sheet=0 "shard=[$shards]"
-    $PY -m scripts.source_subsets data/pas_noenv --split val; }
-  [ -d data/pas_aligned_val_scans ] || {
-    $PY generate.py dataset_spec=procedural_and_scans $noenv $square out_dir=data/pas_aligned progress=false \
-      contact_sheet=0 "shard=[$shards]"
-    $PY -m scripts.source_subsets data/pas_aligned --split val; }
+  local part out=$OUT/relief_light scored="data=procedural_and_scans data.prepare=null"
+  # validation_variant DIR OVERRIDES...: the validation split generated with OVERRIDES into DIR,
+  # its two parts apart (DIR_val_procedural, DIR_val_scans)
+  validation_variant() {
+    [ -d $1_val_scans ] || {
+      $PY generate.py dataset_spec=procedural_and_scans "${@:2}" out_dir=$1 progress=false contact_sheet=0 \
+        "shard=[$(split_shards val)]"
+      $PY -m scripts.source_subsets $1 --split val; }
+  }
+  validation_variant data/pas_noenv $noenv
+  validation_variant data/pas_aligned $noenv $square
   [ -d data/ood_noenv/test ] || $PY generate.py dataset_spec=ood $noenv out_dir=data/ood_noenv progress=false contact_sheet=0
   # oracle NAME STEPS OVERRIDES...: one relief_oracle photo row at ridge 1 (kept if already there)
   oracle() { [ -f $out/$1.json ] || $PY -m scripts.relief_oracle --out $out/$1 --observations photo --ridge 1 --steps $2 "${@:3}"; }
   row() { oracle $1 0 "${@:2}"; }
   for part in procedural scans; do
-    local scored="data=procedural_and_scans data.prepare=null"
     row val_${part}_photo $scored data.data_dir=data/procedural_and_scans_val_$part
     row val_${part}_nosensor $scored data.data_dir=data/procedural_and_scans_val_$part data.eval_sensor=null
     row val_${part}_noenv $scored data.data_dir=data/pas_noenv_val_$part
@@ -223,13 +224,14 @@ relief_light() {  # docs/data.md "(h)": what hides the flash's relief shading. T
 V4=$OUT/v4.safetensors
 mkdir -p $OUT
 [ -f $V4 ] || git show 716491c:src/brdfgan/weights/default.safetensors > $V4
+split_shards() {  # SPLIT: its shards' positions in generate.py's plan, comma-separated (only they are made)
+  $PY generate.py dataset_spec=procedural_and_scans plan=true | awk -v s=$1 '$2 == s {printf "%s%s", sep, $1; sep=","}'
+}
 prepare() {  # the validation and test splits' Mitsuba photos (no training split), their two parts apart
-  local split shards
+  local split
   for split in ${SPLITS:-val test}; do
     if [ -z "$(ls data/procedural_and_scans/$split 2>/dev/null)" ]; then
-      # generate.py's plan lists each shard's position and split: only this split's are made.
-      shards=$($PY generate.py dataset_spec=procedural_and_scans plan=true | awk -v s=$split '$2 == s {printf "%s%s", sep, $1; sep=","}')
-      $PY generate.py dataset_spec=procedural_and_scans progress=false "shard=[$shards]"
+      $PY generate.py dataset_spec=procedural_and_scans progress=false "shard=[$(split_shards $split)]"
     fi
     [ -d data/procedural_and_scans_${split}_scans ] || $PY -m scripts.source_subsets data/procedural_and_scans --split $split
   done
