@@ -165,16 +165,26 @@ def test_predict_refuses_a_crafted_weights_file_in_one_line(tmp_path: Path) -> N
 
 
 def test_the_generator_like_classes_follow_the_protocol() -> None:
+    from brdfgan.core.flash_geometry import centred_flash_frame
+    from brdfgan.models import AnchoredUNet
     from brdfgan.models.deschaintre2018 import Deschaintre2018
     from brdfgan.models.reference import ConstantMaps, PhotoAsBasecolor
     from brdfgan.runs import GeneratorLike
 
     photo = torch.rand(1, 3, 32, 32)
-    networks = (Generator(**SMALL), Deschaintre2018(width=4, levels=2), ConstantMaps(), PhotoAsBasecolor())
+    flash = centred_flash_frame(1, 32, 32)
+    networks = (
+        Generator(**SMALL),
+        Deschaintre2018(width=4, levels=2),
+        AnchoredUNet(width=4, depth=2),
+        ConstantMaps(),
+        PhotoAsBasecolor(),
+    )
     for network in networks:
         assert isinstance(network, GeneratorLike)
         assert isinstance(network.size_multiple, int) and isinstance(network.config(), dict)
-        assert network(photo).shape == (1, 8, 32, 32)
+        # Every generator is called as the protocol says: the photo and its flash frame, or none.
+        assert network(photo, flash).shape == network(photo).shape == (1, 8, 32, 32)
         # config() rebuilds the same architecture through the one allowlisted builder
         target = f"{type(network).__module__}.{type(network).__name__}"
         rebuilt = network_from_config({"_target_": target, **network.config()}, "test")

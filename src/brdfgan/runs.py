@@ -77,8 +77,10 @@ class GeneratorLike(Protocol):
         """The constructor arguments (plain values) that rebuild this network."""
         ...
 
-    def __call__(self, photo: Tensor) -> Tensor:
-        """Photo ``(B, 3, H, W)`` linear LDR → maps ``(B, 8, H, W)`` in the stored encodings."""
+    def __call__(self, photo: Tensor, flash: Tensor | None = None) -> Tensor:
+        """Photo ``(B, 3, H, W)`` linear LDR and its flash frame ``(B, 3)``
+        (:mod:`brdfgan.core.flash_geometry`; ``None``: the hotspot at the centre, or not read by a
+        network blind to it) → maps ``(B, 8, H, W)`` in the stored encodings."""
         ...
 
 

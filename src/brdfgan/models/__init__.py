@@ -1,10 +1,12 @@
-"""The networks: the conditional GAN of the paper (§4.3) — generator and multi-scale PatchGAN
-discriminators — and the Deschaintre et al. 2018 baseline generator.
+"""The networks: the photo-anchored U-Net the shipped model is (:class:`AnchoredUNet`), the
+conditional GAN of the paper (§4.3) — generator and multi-scale PatchGAN discriminators — and the
+Deschaintre et al. 2018 baseline generator.
 
 Plain ``nn.Module``s with int-only constructor arguments (``Model(**model.config())`` rebuilds one);
 nothing here imports Lightning or Hydra.
 """
 
+from brdfgan.models.anchored import AnchoredUNet
 from brdfgan.models.deschaintre2018 import Deschaintre2018
 from brdfgan.models.discriminator import (
     DISCRIMINATOR_CHANNELS,
@@ -19,6 +21,7 @@ from brdfgan.models.heads import PHOTO_CHANNELS, encode_photo, init_weights, map
 __all__ = [
     "DISCRIMINATOR_CHANNELS",
     "PHOTO_CHANNELS",
+    "AnchoredUNet",
     "Deschaintre2018",
     "Generator",
     "MultiScaleDiscriminator",
