@@ -1,7 +1,7 @@
 """``brdfgan predict --views`` end to end: seconds for 2, 3 and 5 photos at 512² beside one photo
 (issue 47's budget: 5 photos at 512² in at most 60 s on the 2-core machine), and where the time goes.
 
-The photos are a synthetic handheld capture (:mod:`brdfgan.evaluation.synthetic_captures`: Mitsuba,
+The photos are a synthetic handheld capture (:mod:`research.synthetic_captures`: Mitsuba,
 the evaluation sensor, cameras drawn as a hand holds them) of a textured surface, 512 × 512 each,
 rendered once before the clock starts. Each case is one in-process call of
 :func:`brdfgan.inference.views.pipeline.predict_views` with the shipped weights, maps at 512²
@@ -23,13 +23,12 @@ from pathlib import Path
 
 
 def _photos(folder: Path, views: int) -> list[Path]:
-    from tests.test_synthetic_captures import centre_of, eval_sensor, textured_surface
-
-    from brdfgan.evaluation.synthetic_captures import (
+    from research.synthetic_captures import (
         HandheldSettings,
         render_synthetic_capture,
         write_synthetic_capture,
     )
+    from research.tests.test_synthetic_captures import centre_of, eval_sensor, textured_surface
 
     surface = textured_surface(256)
     settings = HandheldSettings(views=views, width=512, height=512, fill=0.7)

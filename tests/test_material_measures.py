@@ -361,8 +361,6 @@ def flash_photo(truth: Tensor, frame: Tensor, peak: float = 0.8) -> Tensor:
 
 
 def test_observable_angle_golden_values_and_invariants() -> None:
-    from brdfgan.data.tools.relief import observable_angle
-
     truth, frame = bumpy_truth(batch=3, seed=6), frames(3)
     photo = flash_photo(truth, frame)
     mask = observable_mask(relief_shading(truth, frame), srgb8_rounding_log(photo))[:, 0]
@@ -376,8 +374,11 @@ def test_observable_angle_golden_values_and_invariants() -> None:
         out = metric.compute()
         return out["normal_angle_deg/observable"].item(), out["normal_angle_deg/observable_flat"].item()
 
-    # The flat map's part of the angle the photo shows: Σ θ·mask / N, as the data tables count it.
-    expected_flat = observable_angle(truth[:, 3:6], mask).mean().item()
+    # The flat map's part of the angle the photo shows: Σ θ·mask / N, as the data tables count it
+    # (research/relief.py's observable_angle): θ the tilt of each true normal from +Z.
+    x, y, z = truth[:, 3:6].unbind(dim=1)
+    tilt = torch.rad2deg(torch.atan2(torch.hypot(x, y), z))
+    expected_flat = (tilt * mask.to(tilt.dtype)).mean(dim=(-2, -1)).mean().item()
     assert scores(flat) == pytest.approx((expected_flat, expected_flat), rel=1e-12)
     assert scores(truth)[0] == pytest.approx(0.0, abs=1e-4)
     # Half the relief (slopes halved): in between.

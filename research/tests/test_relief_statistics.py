@@ -1,4 +1,4 @@
-"""Relief statistics and what a photo shows of the relief (brdfgan.data.tools.relief): golden values,
+"""Relief statistics and what a photo shows of the relief (research.relief): golden values,
 invariants and input checks. Fast, no Mitsuba."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 import torch
 from torch import Tensor
 
-import brdfgan.data.tools.relief as relief
+import research.relief as relief
 from brdfgan.core.delit import flash_render
 from brdfgan.core.exposure import log_luminance
 from brdfgan.core.flash_geometry import pixel_scale
@@ -21,7 +21,8 @@ from brdfgan.data.loading.rendered import photograph_scenes
 from brdfgan.data.materials.base import height_to_normal
 from brdfgan.data.materials.noise import fbm
 from brdfgan.data.phone.sensor import SensorEffects
-from brdfgan.data.tools.relief import (
+from brdfgan.metrics import relief_shading, slope_agreement
+from research.relief import (
     delivered_noise_log,
     fit_height_to_shading,
     flat_share,
@@ -37,7 +38,6 @@ from brdfgan.data.tools.relief import (
     steep_angle_share,
     tilt_deg,
 )
-from brdfgan.metrics import relief_shading, slope_agreement
 
 SIZE = 64
 

@@ -1,5 +1,5 @@
 """The "before" tables of issue 46, item 1 (a)–(c): the relief of the training data and what a
-photo shows of it (definitions in :mod:`brdfgan.data.tools.relief`; the tables in docs/data.md).
+photo shows of it (definitions in :mod:`research.relief`; the tables in docs/data.md).
 
 (a) **Realism**: per procedural family (a few training materials each, painted at the spec's
 material resolution as the bank paints them, cut into training crops as the bank cuts them) and
@@ -15,9 +15,9 @@ environment draws, the torch renderer), delivered by no sensor, the evaluation s
 training sensor without its noise and/or JPEG, plus a phone-calibrated proposal; for each the
 relief share (all photos, and split by environment-to-flash ratio) and the observable angle.
 
-    python -m scripts.relief_tables                            # paints what it needs (~4 min, 1 thread)
-    python -m scripts.relief_tables --bank data/banks          # photos from a built bank (data=rendered)
-    python -m scripts.relief_tables data.relief.bump_probability=0.5   # Hydra overrides of data=rendered
+    python -m research.relief_tables                            # paints what it needs (~4 min, 1 thread)
+    python -m research.relief_tables --bank data/banks          # photos from a built bank (data=rendered)
+    python -m research.relief_tables data.relief.bump_probability=0.5   # Hydra overrides of data=rendered
 
 Every draw is seeded (``--seed``); the output is markdown on stdout, progress on stderr. Only the
 training split is read: the held-out scans and ``../shared/ood`` are never touched.
@@ -65,7 +65,8 @@ from brdfgan.data.storage.generation import (
     single_torch_thread,
     split_materials,
 )
-from brdfgan.data.tools.relief import (
+from brdfgan.training.config import register_configs
+from research.relief import (
     FLAT_DEG,
     FLAT_WINDOW,
     FLAT_WINDOW_DEG,
@@ -84,7 +85,6 @@ from brdfgan.data.tools.relief import (
     steep_angle_share,
     tilt_deg,
 )
-from brdfgan.training.config import register_configs
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 ENVIRONMENT_SPLIT = 0.5  # environment-to-flash irradiance ratio splitting the photos in two
@@ -286,7 +286,7 @@ def realism_table(rows: Sequence[ReliefRow]) -> str:
 
 def dark_is_low_table(bank: HandfulBank, materials: dict[str, list[PaintedMaterial]]) -> str:
     """Per procedural family (its painted materials, whole) and per training scan set (whole, as
-    the bank reads it): :func:`~brdfgan.data.tools.relief.dark_is_low_cosine`, x / y, with the
+    the bank reads it): :func:`~research.relief.dark_is_low_cosine`, x / y, with the
     flat map's angle beside it; the scans sorted by the cosine."""
     lines = ["| material | dark is low, cosine x / y | flat map's angle ° |", "|---|---|---|"]
 

@@ -1,4 +1,4 @@
-"""scripts/gpu_train.py: its stages' overrides compose to v5's two stages on a GPU, its snapshots
+"""research/gpu_train.py: its stages' overrides compose to v5's two stages on a GPU, its snapshots
 follow the clock and stop training, staging shrinks the scans and carries the environment table,
 and (slow) its CPU smoke mode trains both stages and exports their snapshots."""
 
@@ -17,14 +17,14 @@ import numpy as np
 import pytest
 import torch
 from lightning.pytorch import LightningModule, Trainer
-from scripts import gpu_train
+from tests.conftest import compose_train
 from torch.utils.data import DataLoader
 
 from brdfgan.config_check import check_config
 from brdfgan.training.run import CHECKED_GROUPS
-from tests.conftest import compose_train
+from research import gpu_train
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 HELD_OUT = ("Fabric030", "Metal012", "Tiles036", "Marble017", "Metal004", "Wood048")
 
 
@@ -138,7 +138,7 @@ def test_staging_shrinks_the_training_scans_and_carries_the_environment_table(
 @pytest.mark.slow
 def test_cpu_smoke_mode_trains_both_stages_and_exports_their_snapshots(tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": f"{ROOT / 'src'}{os.pathsep}{ROOT}", "OMP_NUM_THREADS": "2"}
-    command = [sys.executable, "-m", "scripts.gpu_train", "run", "--device", "cpu", "--tiny",
+    command = [sys.executable, "-m", "research.gpu_train", "run", "--device", "cpu", "--tiny",
                "--budget", "200", "--out", str(tmp_path / "out")]  # fmt: skip
     result = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stdout + result.stderr[-3000:]

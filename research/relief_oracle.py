@@ -3,10 +3,10 @@ photos' shading gives the normals (issue 46, item 1b).
 
 For every photo of a set (an ``evaluate.py`` data config), the height whose flash relief shading
 best matches an observation is fitted with the photo's **true** base colour, roughness and
-metallic (:func:`brdfgan.data.tools.relief.fit_height_to_shading`), and its normals are scored as
+metallic (:func:`research.relief.fit_height_to_shading`), and its normals are scored as
 the evaluator scores a model's: angle and observable angle over the flat map's, slope cosine and
 ratio (pooled over texels); the cosine of the slope along the direction away from the hotspot
-(:func:`~brdfgan.data.tools.relief.radial_slope`, the one component a flash at the lens shades to
+(:func:`~research.relief.radial_slope`, the one component a flash at the lens shades to
 first order) with the truth's share of it; the fit's misfit (the share of the observation's
 energy its shading leaves unexplained: not converged, or more than a height can shade); and the
 correlation of the observation with the true relief shading over the valid pixels. Two
@@ -15,21 +15,21 @@ observations:
 - ``shading``: the true maps' own relief shading (:func:`brdfgan.metrics.relief_shading`): no
   noise, no room light, the fit's own renderer;
 - ``photo``: the photo over a flat render of its true maps, known up to a constant
-  (:func:`~brdfgan.data.tools.relief.photo_relief_residual`): its room light, phone processing,
+  (:func:`~research.relief.photo_relief_residual`): its room light, phone processing,
   noise and JPEG, and the renderers' differences, besides.
 
 The fit is given what a model must find (base colour, roughness, metallic) and has no learned
 prior of relief. Writes ``OUT.json``; prints one line per observation and ridge. The tables of
 docs/data.md ("(g)"):
 
-    python -m scripts.relief_oracle --out logs/v5/oracle/val_procedural_shading \\
+    python -m research.relief_oracle --out logs/v5/oracle/val_procedural_shading \\
         data=procedural_and_scans data.data_dir=data/procedural_and_scans_val_procedural \\
         data.prepare=null --observations shading --ridge 0
-    python -m scripts.relief_oracle --out logs/v5/oracle/ood_photo data=ood \\
+    python -m research.relief_oracle --out logs/v5/oracle/ood_photo data=ood \\
         --observations photo --ridge 1 10 --steps 200
 
 ``--steps 0`` scores the flat start: only the observation's correlation with the true shading
-counts. ``scripts/default_model_v5.sh relief_light`` measures that way what hides the shading
+counts. ``research/default_model_v5.sh relief_light`` measures that way what hides the shading
 ("(h)" there: the same photos re-generated without room light, read with and without the
 evaluation sensor).
 """
@@ -49,17 +49,17 @@ from torch import Tensor
 
 from brdfgan.core.height import slope_field
 from brdfgan.core.svbrdf import NORMAL
-from brdfgan.data.tools.relief import (
+from brdfgan.evaluation.config import register_configs
+from brdfgan.io.atomic import write_text_atomic
+from brdfgan.metrics import SlopeAgreement, relief_shading
+from research.relief import (
     fit_height_to_shading,
     observable_mask,
     photo_relief_residual,
     radial_slope,
     srgb8_rounding_log,
 )
-from brdfgan.evaluation.config import register_configs
-from brdfgan.io.atomic import write_text_atomic
-from brdfgan.metrics import SlopeAgreement, relief_shading
-from scripts.relief_learnability import normal_scores, summarize
+from research.relief_learnability import normal_scores, summarize
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 OBSERVATIONS = ("shading", "photo")

@@ -3,7 +3,7 @@ fit's settings"): synthetic handheld captures of the first 4 procedural and 2 sc
 validation split, the shipped model's prediction of view 0 fitted to K = 2, 3, 5 views with each
 variant, scored on views 5–8 (one gain fitted on view 0) and against the truth.
 
-    python -m scripts.views_settings --out logs/views_settings [variant …]
+    python -m research.views_settings --out logs/views_settings [variant …]
 """
 
 from __future__ import annotations
@@ -21,14 +21,14 @@ from brdfgan.evaluation.real_captures import (
     read_capture,
     read_views,
 )
-from brdfgan.evaluation.synthetic_captures import (
+from brdfgan.inference.views.config import ViewFitConfig
+from research.synthetic_captures import (
     HandheldSettings,
     locked_phone,
     render_synthetic_capture,
     write_synthetic_capture,
 )
-from brdfgan.inference.views.config import ViewFitConfig
-from scripts.views_table import held_out_errors, map_errors, materials
+from research.views_table import held_out_errors, map_errors, materials
 
 MATERIALS = (
     ("vproc", "data/procedural_and_scans_val_procedural", 4),

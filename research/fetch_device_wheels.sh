@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Fetch into .whl/ (git-ignored) the wheels that scripts/gpu_check.sh needs on the lent GPU machine
+# Fetch into .whl/ (git-ignored) the wheels that research/gpu_check.sh needs on the lent GPU machine
 # (kind nvidia-h200: Python 3.12, x86-64, torch 2.11, Lightning 2.6.6, cv2, numpy, PyYAML, …, and
 # no network). These are the packages that `train.py experiment=paper` imports and that machine
 # lacks (see /work/.library/device/KINDS.md), with the ones they need that it also lacks, at the
@@ -7,7 +7,7 @@
 # one version per package (two would stop the install there). Prints the folder's size: the wheels
 # travel with the working tree (64 MiB a call, carry: [".whl"]).
 #
-# There, before scripts/gpu_check.sh (the exact command is in that script's top comment):
+# There, before research/gpu_check.sh (the exact command is in that script's top comment):
 #   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
 #       --target /tmp/site .whl/*.whl && export PYTHONPATH=/tmp/site || exit
 set -euo pipefail

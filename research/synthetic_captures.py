@@ -2,7 +2,7 @@
 
 The ground truth of the multi-view path (``brdfgan predict --views``, ``brdfgan eval-captures
 --fit-views``; docs/views.md). For a map set it draws handheld cameras (:func:`handheld_cameras`),
-renders each photo with Mitsuba (:func:`~brdfgan.mitsuba_render.handheld.render_handheld`), delivers
+renders each photo with Mitsuba (:func:`~research.handheld.render_handheld`), delivers
 it through a phone (:class:`~brdfgan.data.phone.sensor.SensorEffects`, the same draws for every view: one
 phone, its exposure and white balance locked as a capture protocol asks) and writes one folder:
 
@@ -48,7 +48,7 @@ from brdfgan.inference.views.register import MATERIALGAN_BOARD, MarkerBoard
 from brdfgan.inference.views.warp import warp_to_reference
 from brdfgan.io.images import write_image
 from brdfgan.io.maps import write_maps
-from brdfgan.mitsuba_render.handheld import SURROUND_TILES, render_handheld, surrounded_maps
+from research.handheld import SURROUND_TILES, render_handheld, surrounded_maps
 
 TRUTH_FILE = "truth.json"
 
@@ -382,7 +382,7 @@ def write_synthetic_capture(
             write_image(staging / "handheld" / f"{index:02d}.png", photo)
         power = settings.flash_intensity * capture.exposure_scale
         parameters = {
-            "_comment": "in cm unit; a synthetic handheld capture (brdfgan.evaluation.synthetic_captures)",
+            "_comment": "in cm unit; a synthetic handheld capture (research.synthetic_captures)",
             "image_size": settings.sample_cm,
             "camera_pos": [_vector(camera.origin) for camera in capture.cameras],
             "light_pos": [_vector(flash) for flash in capture.flash_positions],

@@ -1,6 +1,6 @@
 """GPU readiness check: the paper configuration's training step on CUDA, unattended, in minutes.
 
-Run ``scripts/gpu_check.sh`` (GPU) or ``scripts/gpu_check.sh --device cpu --tiny`` (a CPU smoke
+Run ``research/gpu_check.sh`` (GPU) or ``research/gpu_check.sh --device cpu --tiny`` (a CPU smoke
 run of the same path at toy sizes, seconds). Nothing is downloaded and Mitsuba is not needed:
 
 1. Data: a small dataset (10 materials → 32 train, 2 val, 2 test samples at 512²) made by the
@@ -226,7 +226,7 @@ def _timed_run_overrides(
         "trainer.enable_progress_bar=false",
         "test=false",
         "callbacks=none",
-        "+callbacks.gpu_check_timer._target_=scripts.gpu_check.StepTimer",
+        "+callbacks.gpu_check_timer._target_=research.gpu_check.StepTimer",
         f"+callbacks.gpu_check_timer.out={timer_out}",
     ]
 

@@ -17,7 +17,7 @@ the two stages give learning curves; each snapshot is exported (fp16, ``brdfgan
 export-weights``) to ``OUT/<stage>_<k>.safetensors``, to be scored on the CPU machine
 (``evaluate.py "ckpt={…}"``). ``OUT/gpu_train.json`` holds the plan, the steps and photos of
 every snapshot and the stages' step times
-(:class:`scripts.gpu_check.StepTimer`); ``OUT/gpu_train.log`` the tails of the runs' logs.
+(:class:`research.gpu_check.StepTimer`); ``OUT/gpu_train.log`` the tails of the runs' logs.
 
 The device machine has no Mitsuba and no ``../shared``, and a call carries at most 64 MiB, so
 :func:`stage` first fills ``.device/`` here (git-ignored; ``carry: [".device", ".whl"]``):
@@ -29,9 +29,9 @@ The device machine has no Mitsuba and no ``../shared``, and a call carries at mo
 - ``.device/environments.npz``: the training environments tabulated here (the sun and sky need
   Mitsuba), which :meth:`MaterialBank.build` keeps instead of tabulating them again.
 
-  python -m scripts.gpu_train stage                                  # here, once
-  python -m scripts.gpu_train run --budget 420                       # there ($OUT set)
-  python -m scripts.gpu_train run --device cpu --tiny --budget 200 --out /tmp/gt  # CPU smoke, ~2 min
+  python -m research.gpu_train stage                                  # here, once
+  python -m research.gpu_train run --budget 420                       # there ($OUT set)
+  python -m research.gpu_train run --device cpu --tiny --budget 200 --out /tmp/gt  # CPU smoke, ~2 min
 """
 
 from __future__ import annotations
@@ -56,8 +56,8 @@ from lightning.pytorch.callbacks import Callback
 
 from brdfgan.errors import UserError, run_reporting_errors
 from brdfgan.io.atomic import atomic_replace, write_text_atomic
-from scripts.gpu_check import TINY_PLAN as CHECK_PLAN
-from scripts.gpu_check import StepTimer, last_error_line, make_data, run_train_py, step_stats
+from research.gpu_check import TINY_PLAN as CHECK_PLAN
+from research.gpu_check import StepTimer, last_error_line, make_data, run_train_py, step_stats
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGED = ROOT / ".device"
@@ -186,7 +186,7 @@ class Plan:
 
 
 def _compose(overrides: Sequence[str]) -> Any:
-    from scripts.relief_tables import compose_config
+    from research.relief_tables import compose_config
 
     return compose_config(overrides)
 
@@ -231,7 +231,7 @@ def stage_overrides(plan: Plan, work: Path, name: str, seconds: float, init_from
         "trainer.log_every_n_steps=50",
         "test=false",
         "callbacks=none",
-        "+callbacks.snapshots._target_=scripts.gpu_train.TimedSnapshots",
+        "+callbacks.snapshots._target_=research.gpu_train.TimedSnapshots",
         f"+callbacks.snapshots.dirpath={run_dir / 'snapshots'}",
         f"+callbacks.snapshots.seconds={seconds:.0f}",
         f"+callbacks.snapshots.count={plan.snapshots}",

@@ -1,4 +1,4 @@
-"""scripts/gpu_check.py: the overrides it gives train.py compose to the paper configuration, its
+"""research/gpu_check.py: the overrides it gives train.py compose to the paper configuration, its
 statistics, its no-CUDA exit, and (slow) its CPU smoke mode end to end."""
 
 from __future__ import annotations
@@ -9,13 +9,13 @@ from pathlib import Path
 
 import pytest
 import torch
-from scripts import gpu_check
+from tests.conftest import compose_train
 
 from brdfgan.config_check import check_config
 from brdfgan.training.run import CHECKED_GROUPS
-from tests.conftest import compose_train
+from research import gpu_check
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.integration
@@ -116,7 +116,7 @@ def test_gpu_mode_without_cuda_is_one_line_and_exit_2(
 def test_cpu_smoke_mode_prints_the_table_and_writes_out(tmp_path: Path) -> None:
     env = {**os.environ, "OUT": str(tmp_path / "out")}
     result = subprocess.run(
-        ["bash", str(ROOT / "scripts" / "gpu_check.sh"), "--device", "cpu", "--tiny"],
+        ["bash", str(ROOT / "research" / "gpu_check.sh"), "--device", "cpu", "--tiny"],
         env=env, capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert result.returncode == 0, result.stdout + result.stderr[-3000:]

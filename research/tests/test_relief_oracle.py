@@ -1,4 +1,4 @@
-"""scripts.relief_oracle: shape from shading with the rest of the surface known, scored as the
+"""research.relief_oracle: shape from shading with the rest of the surface known, scored as the
 evaluator scores a model's normals, on the tiny Mitsuba dataset."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 import torch
-from scripts.relief_oracle import main, radial_scores, radial_sums
 
 from brdfgan.core.svbrdf import NORMAL, flat_maps
+from research.relief_oracle import main, radial_scores, radial_sums
 
 
 def test_radial_scores_are_one_for_the_truth_and_zero_without_relief() -> None:

@@ -9,12 +9,12 @@ cosine between predicted and true slope fields; 0 for flat or unrelated normals,
 relief up to scale).
 The observable angle counts only the texels whose relief the photo shows (the flash's relief
 shading, :func:`brdfgan.metrics.relief_shading`, above the photo's 8-bit rounding,
-:func:`brdfgan.data.tools.relief.observable_mask`). Each change to the data is judged by this run at
+:func:`research.relief.observable_mask`). Each change to the data is judged by this run at
 equal steps (issue 46, item 1d). Writes
 ``OUT.json`` (the curve and the final scores).
 
-    python -m scripts.relief_learnability --out outputs/learnability/base
-    python -m scripts.relief_learnability --out outputs/learnability/bumps \\
+    python -m research.relief_learnability --out outputs/learnability/base
+    python -m research.relief_learnability --out outputs/learnability/bumps \\
         data.relief.bump_probability=0.5
 """
 
@@ -33,12 +33,12 @@ from torch import Tensor, nn
 
 from brdfgan.core.svbrdf import NORMAL
 from brdfgan.data.loading.rendered import RenderedDataModule
-from brdfgan.data.tools.relief import observable_mask, srgb8_rounding_log
 from brdfgan.io.atomic import write_text_atomic
 from brdfgan.losses.parameter import angular_distance
 from brdfgan.metrics import SlopeAgreement
 from brdfgan.metrics import relief_shading as flash_relief_shading
 from brdfgan.training.config import register_configs
+from research.relief import observable_mask, srgb8_rounding_log
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 

@@ -1,7 +1,7 @@
 """What a model reads of relief, material by material: the per-material table of
 docs/default_model.md ("What the network reads of relief").
 
-    python -m scripts.relief_by_material data/procedural_and_scans_test_scans \
+    python -m research.relief_by_material data/procedural_and_scans_test_scans \
         v4=logs/v5/v4.safetensors height=logs/v5/ablation/rendered_height/checkpoints/last.ckpt
 
 Each sample of the folder's ``test`` split (Mitsuba photos through the evaluation sensor, as

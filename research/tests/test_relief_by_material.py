@@ -1,9 +1,9 @@
-"""scripts/relief_by_material: its table (the slope agreement it reports per material is the
+"""research/relief_by_material: its table (the slope agreement it reports per material is the
 evaluator's, tested in test_material_measures)."""
 
 from __future__ import annotations
 
-from scripts.relief_by_material import FLAT, markdown
+from research.relief_by_material import FLAT, markdown
 
 
 def test_the_table_puts_each_model_beside_the_flat_map() -> None:

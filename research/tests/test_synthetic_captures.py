@@ -1,4 +1,4 @@
-"""Synthetic handheld captures (brdfgan.evaluation.synthetic_captures): Mitsuba photos of a known
+"""Synthetic handheld captures (research.synthetic_captures): Mitsuba photos of a known
 material from drawn handheld cameras — the cameras frame the sample, the capture folder reads back
 as eval-captures reads it and relights as the project's renderer says at the calibration, and
 feature registration recovers the true homographies of the photos."""
@@ -13,6 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from tests.conftest import random_maps
+from tests.test_views_fit import FAST, corrupted, map_errors, truth_maps
+from tests.test_views_register import smooth_texture
 from torch import Tensor
 
 from brdfgan.cli import main
@@ -31,7 +34,12 @@ from brdfgan.evaluation.real_captures import (
     score_capture,
     srgb_rmse,
 )
-from brdfgan.evaluation.synthetic_captures import (
+from brdfgan.inference.intake.photo import Photo
+from brdfgan.inference.views.register import feature_homography, highlight_mask
+from brdfgan.io.images import write_image
+from brdfgan.io.maps import read_maps
+from research.handheld import SURROUND_TILES
+from research.synthetic_captures import (
     TRUTH_FILE,
     HandheldSettings,
     handheld_cameras,
@@ -41,17 +49,9 @@ from brdfgan.evaluation.synthetic_captures import (
     with_marker_board,
     write_synthetic_capture,
 )
-from brdfgan.inference.intake.photo import Photo
-from brdfgan.inference.views.register import feature_homography, highlight_mask
-from brdfgan.io.images import write_image
-from brdfgan.io.maps import read_maps
-from brdfgan.mitsuba_render.handheld import SURROUND_TILES
-from tests.conftest import random_maps
-from tests.test_views_fit import FAST, corrupted, map_errors, truth_maps
-from tests.test_views_register import smooth_texture
 
 pytestmark = [pytest.mark.mitsuba, pytest.mark.integration]
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def textured_surface(side: int, seed: int = 0) -> Tensor:

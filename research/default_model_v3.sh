@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Reproduces the shipped default model (brdfgan-default-v3) and its measurements (docs/default_model_v3.md):
+# Reproduces brdfgan-default-v3, the default model shipped before v4 (research/ keeps it as history;
+# scripts/default_model_v4.sh reproduces the shipped one), and its measurements (docs/default_model_v3.md):
 # the v3 dataset, v3, a second seed of its recipe, the same-budget baseline, the trivial references, the evaluation on the
 # procedural test split and on the out-of-distribution benchmark, the export into the package.
 # One training at a time on the two threads (two side by side each ran at 40-60 % speed).

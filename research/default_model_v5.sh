@@ -5,7 +5,7 @@
 # split's two parts, the procedural and scan test sets and both OOD variants beside v4 and the
 # trivial references; export_weights ships it. One training at a time on the two threads.
 #
-#   scripts/default_model_v5.sh [final|fixres|normal_curve|evaluate|ablation|shading_curve|relief_light|export_weights]...
+#   research/default_model_v5.sh [final|fixres|normal_curve|evaluate|ablation|shading_curve|relief_light|export_weights]...
 #   (default: final fixres normal_curve evaluate, in order; SEEDS="1" runs one seed per session)
 #
 # Long trainings resume: rerunning a stage continues each unfinished run from its last.ckpt.
@@ -187,7 +187,7 @@ relief_light() {  # docs/data.md "(h)": what hides the flash's relief shading. T
   validation_variant data/pas_aligned $noenv $square
   [ -d data/ood_noenv/test ] || $PY generate.py dataset_spec=ood $noenv out_dir=data/ood_noenv progress=false contact_sheet=0
   # oracle NAME STEPS OVERRIDES...: one relief_oracle photo row at ridge 1 (kept if already there)
-  oracle() { [ -f $out/$1.json ] || $PY -m scripts.relief_oracle --out $out/$1 --observations photo --ridge 1 --steps $2 "${@:3}"; }
+  oracle() { [ -f $out/$1.json ] || $PY -m research.relief_oracle --out $out/$1 --observations photo --ridge 1 --steps $2 "${@:3}"; }
   row() { oracle $1 0 "${@:2}"; }
   for part in procedural scans; do
     row val_${part}_photo $scored data.data_dir=data/procedural_and_scans_val_$part

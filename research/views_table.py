@@ -1,11 +1,11 @@
 """The multi-view table of docs/views.md: synthetic handheld Mitsuba captures of held-out materials,
 the shipped model fitted to the first K views, scored on views it never saw and against the truth.
 
-    python -m scripts.views_table --out logs/views [--per-set 4] [--fit 1,2,3,5]
+    python -m research.views_table --out logs/views [--per-set 4] [--fit 1,2,3,5]
 
 Materials: the first ``--per-set`` samples of the procedural test split, the scan test sets and the
 OOD benchmark (data/procedural_and_scans_test_procedural, …_test_scans, data/ood; never trained
-on). Each is photographed 9 times (brdfgan.evaluation.synthetic_captures, default settings, the
+on). Each is photographed 9 times (research.synthetic_captures, default settings, the
 evaluation sensor, exposure and white balance locked) into OUT/captures/<set>_<n>/, which
 ``brdfgan eval-captures --fit-views K`` reads too. For each K the shipped model predicts from view 0
 and is fitted to views 0…K−1 (K = 1: the prediction alone); every K is scored on the same
@@ -45,16 +45,16 @@ from brdfgan.evaluation.real_captures import (
     relight,
     score_capture,
 )
-from brdfgan.evaluation.synthetic_captures import (
+from brdfgan.figures import caption, with_column_header
+from brdfgan.inference.intake.photo import Photo
+from brdfgan.io.images import write_image
+from brdfgan.metrics.svbrdf_metrics import MapRMSE, NormalAngularError
+from research.synthetic_captures import (
     HandheldSettings,
     locked_phone,
     render_synthetic_capture,
     write_synthetic_capture,
 )
-from brdfgan.figures import caption, with_column_header
-from brdfgan.inference.intake.photo import Photo
-from brdfgan.io.images import write_image
-from brdfgan.metrics.svbrdf_metrics import MapRMSE, NormalAngularError
 
 SETS = {  # each folder's shards of split "test"
     "procedural": "data/procedural_and_scans_test_procedural",
