@@ -8,11 +8,12 @@
   divided by the flash's falloff on a flat surface for the photo's field of view and hotspot, the
   hotspot clipped) times an exposure gain fitted on a training split, as base colour; a flat
   normal; constant roughness and metallic (the training medians). A physics heuristic with no
-  learning: on real phone captures it relit better than the v3 network (issue 31).
+  learning: what the flash's falloff alone explains of a photo, the bar a network's relighting
+  has to clear to show that it learnt more than that.
 
-Both behave like generators (``forward(photo) -> maps``, ``config()``, ``size_multiple``), so the
-evaluator, :mod:`brdfgan.runs` and ``brdfgan predict`` take them unchanged. Build
-their weight files from a dataset with::
+All three behave like generators (``forward(photo, flash) -> maps``, ``config()``,
+``size_multiple``; :class:`brdfgan.runs.GeneratorLike`), so the evaluator, :mod:`brdfgan.runs` and
+``brdfgan predict`` take them unchanged. Build their weight files from a dataset with::
 
     brdfgan references DATA_DIR --out DIR      # DIR/{mean_maps,photo_basecolor,de_lit}.safetensors
 """

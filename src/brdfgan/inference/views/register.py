@@ -303,9 +303,9 @@ def _fit_registration(
         return None
     inliers = inlier_flags.ravel().astype(bool)
     if inliers.sum() >= 4:
-        # MAGSAC++ weights points by their residual; all inliers at equal weight, refined by
-        # Levenberg-Marquardt, do better on whole-pixel ORB corners (0.98 → 0.70 px on the test's
-        # worst view) and no worse for SIFT.
+        # MAGSAC++ weights points by their residual, and the residuals of ORB's whole-pixel corners
+        # are mostly their rounding: all inliers at equal weight, refined by Levenberg-Marquardt,
+        # average the rounding out (SIFT's sub-pixel corners lose nothing by it).
         refit, _ = cv2.findHomography(source[inliers], target[inliers], 0)
         homography = refit if refit is not None else homography
     residual = np.linalg.norm(apply_homography(homography, source[inliers]) - target[inliers], axis=1)
