@@ -1,19 +1,23 @@
 """The package layout keeps its promises: pure maths stays pure, the renderer bridge does not
-depend on the data pipeline, and commands live in one console (issue: one home per concept)."""
+depend on the data pipeline, commands live in one console (issue: one home per concept), and the
+product never depends on the lab (``research/``, issue 58)."""
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
 
-PACKAGE = Path(__file__).resolve().parents[1] / "src" / "brdfgan"
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "src" / "brdfgan"
 
 
-def _imports(path: Path) -> set[str]:
-    """Every module a file imports (absolute names; relative imports resolved), lazily or not."""
-    package = ".".join(path.relative_to(PACKAGE.parent).with_suffix("").parts[:-1])
+def _imports(path: Path, root: Path = PACKAGE.parent) -> set[str]:
+    """Every module a file imports (absolute names; relative imports resolved against its package
+    under ``root``), lazily or not."""
+    package = ".".join(path.relative_to(root).with_suffix("").parts[:-1])
     found: set[str] = set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Import):
@@ -78,3 +82,32 @@ def test_module_names_do_not_collide() -> None:
             seen.setdefault(path.name, []).append(str(path.relative_to(PACKAGE)))
     collisions = {name: paths for name, paths in seen.items() if len(paths) > 1}
     assert not collisions, collisions
+
+
+RESEARCH = "research"
+# A Hydra target in a config: `_target_: research.x.Y` (the product's configs instantiate only brdfgan).
+_RESEARCH_TARGET = re.compile(r"_target_\s*[:=]\s*['\"]?research\.", re.M)
+
+
+def _research_imports(files: list[Path], root: Path) -> list[str]:
+    return [
+        f"{path.relative_to(ROOT)} imports {name}"
+        for path in files
+        for name in sorted(_imports(path, root))
+        if name == RESEARCH or name.startswith(RESEARCH + ".")
+    ]
+
+
+def test_the_product_never_imports_research() -> None:
+    """``research/`` (the lab's one-offs, the modules only they use, their tests) may import the
+    package; nothing the product ships or runs imports research: the package, its configs and the
+    product's scripts (installers, figures, the shipped model's reproduction)."""
+    assert (ROOT / RESEARCH / "__init__.py").is_file()
+    offending = _research_imports(sorted(PACKAGE.rglob("*.py")), PACKAGE.parent)
+    offending += _research_imports(sorted((ROOT / "scripts").rglob("*.py")), ROOT)
+    offending += [
+        f"{path.relative_to(ROOT)} targets research"
+        for path in sorted((ROOT / "conf").rglob("*.yaml"))
+        if _RESEARCH_TARGET.search(path.read_text())
+    ]
+    assert not offending, "; ".join(offending)
