@@ -11,7 +11,7 @@ ifneq ($(LIBLLVM),)
 export DRJIT_LIBLLVM_PATH ?= $(LIBLLVM)
 endif
 
-.PHONY: setup test test-fast test-slow faults demo demo-renderer lint format bench data ood clean
+.PHONY: setup test test-research test-fast test-slow faults demo demo-renderer lint format bench data ood clean
 
 setup: $(STAMP)
 
@@ -36,8 +36,14 @@ $(STAMP): pyproject.toml Makefile scripts/install_gltf_validator.sh scripts/inst
 	@bash scripts/vendor_three.sh
 	@touch $(STAMP)
 
+# The product's tests (tests/, the package's doctests), then the research tier (research/tests: the
+# lab's one-offs and the modules only they use, docs in research/README.md), each its own session.
 test: setup
 	$(PY) -m pytest -q
+	$(PY) -m pytest -q research/tests
+
+test-research: setup
+	$(PY) -m pytest -q research/tests
 
 # The unit tier, ~1.5 min on 2 cores: no subprocesses (train/evaluate/generate, the CLI, DDP workers,
 # Chromium), Lightning Trainer, Hydra composition or Mitsuba; those are marked integration.
@@ -63,14 +69,16 @@ demo: setup
 demo-renderer: setup
 	$(PY) -m brdfgan.renderer_demo
 
+LINTED := src tests research scripts benchmarks faults *.py
+
 lint: setup
-	$(PY) -m ruff check src tests benchmarks faults *.py
-	$(PY) -m ruff format --check src tests benchmarks faults *.py
+	$(PY) -m ruff check $(LINTED)
+	$(PY) -m ruff format --check $(LINTED)
 	$(PY) -m mypy
 
 format: setup
-	$(PY) -m ruff format src tests benchmarks faults *.py
-	$(PY) -m ruff check --fix src tests benchmarks faults *.py
+	$(PY) -m ruff format $(LINTED)
+	$(PY) -m ruff check --fix $(LINTED)
 
 bench: setup
 	$(PY) -m benchmarks.bench_renderer

@@ -76,6 +76,8 @@ def main() -> None:
                 check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=180,
             )  # fmt: skip
             image = cv2.imread(str(shot), cv2.IMREAD_COLOR)
+            if image is None:
+                raise SystemExit(f"error: chromium wrote no readable screenshot {shot}")
             small = cv2.resize(image, None, fx=0.6, fy=0.6, interpolation=cv2.INTER_AREA)
             cv2.imwrite(str(args.out / name), small, [cv2.IMWRITE_PNG_COMPRESSION, 9])
             print(f"{args.out / name}: {small.shape[1]}×{small.shape[0]}")

@@ -29,10 +29,12 @@ def main() -> None:
     parser.add_argument("--models", nargs="+", default=["gan", "baseline"])
     parser.add_argument("--panel", type=int, default=96)
     args = parser.parse_args()
-    read = {m: cv2.imread(str(args.eval_dir / f"grid_{m}.png"), cv2.IMREAD_COLOR) for m in args.models}
-    if any(g is None for g in read.values()):
-        raise SystemExit(f"error: missing grid_<model>.png in {args.eval_dir}")
-    grids = {m: g[HEADER_HEIGHT:] for m, g in read.items()}  # panels only, below the column labels
+    grids = {}
+    for m in args.models:
+        grid = cv2.imread(str(args.eval_dir / f"grid_{m}.png"), cv2.IMREAD_COLOR)
+        if grid is None:
+            raise SystemExit(f"error: missing grid_<model>.png in {args.eval_dir}")
+        grids[m] = grid[HEADER_HEIGHT:]  # panels only, below the column labels
     first = grids[args.models[0]]
 
     def panel(image: np.ndarray, column: int) -> np.ndarray:
