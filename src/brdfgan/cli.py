@@ -31,15 +31,14 @@ from brdfgan.inference import DEFAULT_REFINE_STEPS
 if TYPE_CHECKING:  # imported lazily below: --help must not wait for torch
     import torch
 
+    from brdfgan.capture import CaptureKind
+    from brdfgan.inference.dispatch import Capture
     from brdfgan.inference.intake.preprocess import Crop
     from brdfgan.inference.pipeline import BatchResult, PhotoFailure, PhotoResult, PredictOptions, Predictor
 
     # What ``add_subparsers`` returns: each ``_add_<command>`` adds its subcommand to it.
     Commands = argparse._SubParsersAction[argparse.ArgumentParser]
 
-# predict --views: the most photos of one surface fitted together (the issue's 2-12; each view adds
-# a render to every fit step).
-MAX_VIEWS = 12
 # Exit status when the command ran but at least one photo of the batch failed.
 PARTIAL_FAILURE_EXIT_CODE = 1
 PREDICT_INTERRUPTED = "interrupted: finished photos are complete; the one in progress was not written"
@@ -488,9 +487,11 @@ def _add_eval_captures(commands: Commands) -> None:
 
 
 def predict_command(args: argparse.Namespace) -> int:
+    from brdfgan.inference.dispatch import group_captures
     from brdfgan.inference.pipeline import collect_photos
 
-    options, device = _predict_options(args)
+    kind = _capture_kind(args)
+    options, device = _predict_options(args, kind)
     if args.quiet:  # errors only: library warnings (logging) are not errors
         logging.getLogger("brdfgan").setLevel(logging.ERROR)
     predictor = _load_predictor(args.weights, options, device)
@@ -498,8 +499,7 @@ def predict_command(args: argparse.Namespace) -> int:
     if not photos:
         print("error: no photos to process", file=sys.stderr)
         return USER_ERROR_EXIT_CODE
-    if args.views and len(photos) > MAX_VIEWS:
-        raise UserError(f"--views takes at most {MAX_VIEWS} photos of one surface, got {len(photos)}")
+    captures = group_captures(kind, photos)
     if not args.quiet:
         model = predictor.model
         print(
@@ -507,13 +507,26 @@ def predict_command(args: argparse.Namespace) -> int:
             f"{len(photos)} photo(s) at {predictor.describe_resolution()}",
             file=sys.stderr,
         )
-    if args.views:
-        return _predict_views(args, photos, predictor)
-    outcome = _predict_batch(args, photos, predictor)
-    return _batch_exit_code(outcome, len(photos), out=args.out, quiet=args.quiet)
+    outcome = _predict_batch(args, captures, predictor)
+    return _batch_exit_code(outcome, len(captures), kind, out=args.out, quiet=args.quiet)
 
 
-def _predict_options(args: argparse.Namespace) -> tuple[PredictOptions, torch.device]:
+def _capture_kind(args: argparse.Namespace) -> CaptureKind:
+    """The kind of capture predict's flags select (brdfgan.capture.CAPTURE_KINDS); the default
+    is one capture per photo."""
+    from brdfgan.capture import CAPTURE_KINDS, SINGLE_PHOTO
+
+    chosen = [kind for kind in CAPTURE_KINDS.values() if kind.flag and getattr(args, _flag_dest(kind.flag))]
+    if len(chosen) > 1:
+        raise UserError(f"choose one kind of capture: {' or '.join(str(kind.flag) for kind in chosen)}")
+    return chosen[0] if chosen else SINGLE_PHOTO
+
+
+def _flag_dest(flag: str) -> str:
+    return flag.lstrip("-").replace("-", "_")
+
+
+def _predict_options(args: argparse.Namespace, kind: CaptureKind) -> tuple[PredictOptions, torch.device]:
     """predict's options checked against each other and resolved into the pipeline's options and
     the device, before any model or photo is loaded."""
     from brdfgan.inference.intake.lens import FieldOfView
@@ -522,8 +535,8 @@ def _predict_options(args: argparse.Namespace) -> tuple[PredictOptions, torch.de
     from brdfgan.inference.pipeline import PredictOptions
     from brdfgan.inference.refine import RefineConfig
 
-    if args.views and args.refine is not None:
-        raise UserError("--refine cannot be combined with --views (the multi-view fit refines the maps)")
+    if args.refine is not None and not kind.refines:
+        raise UserError(f"--refine cannot be combined with {kind.flag} ({kind.no_refine_reason})")
     device = _predict_device(args.device)
     options = PredictOptions(
         resolution=args.resolution,
@@ -561,45 +574,44 @@ def _load_predictor(weights: Path | None, options: PredictOptions, device: torch
     return predictor
 
 
-def _predict_batch(args: argparse.Namespace, photos: list[Path], predictor: Predictor) -> BatchResult:
-    """Every photo into ``OUT/<name>/``, with the batch's progress on stderr."""
+def _predict_batch(args: argparse.Namespace, captures: list[Capture], predictor: Predictor) -> BatchResult:
+    """Every capture into ``OUT/<name>/``, with the batch's progress on stderr."""
     from brdfgan.errors import interrupts_raise
-    from brdfgan.inference.pipeline import predict_batch
+    from brdfgan.inference.dispatch import predict_batch
 
-    progress = _BatchProgress(
-        len(photos), quiet=args.quiet, verbose=args.verbose, refining=args.refine is not None
-    )
+    fits = args.refine is not None or any(not capture.kind.refines for capture in captures)
+    progress = _BatchProgress(len(captures), quiet=args.quiet, verbose=args.verbose, fits=fits)
     try:
-        # SIGTERM too: the photo in progress then leaves no hidden staging folder behind.
+        # SIGTERM too: the capture in progress then leaves no hidden staging folder behind.
         with interrupts_raise():
             return predict_batch(
-                photos, args.out, predictor, on_result=progress.report, on_refine_step=progress.refine_step
+                captures, args.out, predictor, on_result=progress.report, on_step=progress.fit_step
             )
     finally:
         progress.close()
 
 
 class _BatchProgress:
-    """predict's progress on stderr: a bar over the batch's photos, each photo's error, warnings
-    and (``--verbose``) stage times written above it, and under it the refinement steps of the
-    photo in progress. ``quiet``: errors only."""
+    """predict's progress on stderr: a bar over the batch's captures, each one's error, warnings
+    and (``--verbose``) stage times written above it, and under it the steps of the fit in
+    progress (``--refine``, a multi-view fit). ``quiet``: errors only."""
 
-    def __init__(self, photo_count: int, *, quiet: bool, verbose: bool, refining: bool) -> None:
+    def __init__(self, capture_count: int, *, quiet: bool, verbose: bool, fits: bool) -> None:
         from tqdm import tqdm
 
         self.quiet = quiet
         self.verbose = verbose
         # disable=None: tqdm draws only on a terminal.
-        self.bar = tqdm(total=photo_count, unit="photo", disable=quiet or None, file=sys.stderr)
-        quiet_steps = quiet or not refining
+        self.bar = tqdm(total=capture_count, unit="photo", disable=quiet or None, file=sys.stderr)
+        quiet_steps = quiet or not fits
         self.steps_bar = tqdm(
             unit="step", leave=False, position=1, disable=quiet_steps or None, file=sys.stderr
         )
 
-    def refine_step(self, photo: Path, step: int, steps: int) -> None:
+    def fit_step(self, description: str, step: int, steps: int) -> None:
         if step == 1:
             self.steps_bar.reset(total=steps)
-            self.steps_bar.set_description(f"refining {photo.name}")
+            self.steps_bar.set_description(description)
         self.steps_bar.update(1)
 
     def report(self, result: PhotoResult | PhotoFailure) -> None:
@@ -609,7 +621,7 @@ class _BatchProgress:
             self.bar.write(f"error: {result.message}", file=sys.stderr)
         else:
             for warning in () if self.quiet else result.warnings:
-                self.bar.write(f"warning: {result.photo}: {warning}", file=sys.stderr)
+                self.bar.write(f"warning: {warning}", file=sys.stderr)  # each names its file
             if self.verbose:
                 self.bar.write(_describe_timings(result.photo, result.timings), file=sys.stderr)
         self.bar.update(1)
@@ -625,59 +637,28 @@ def _describe_timings(photo: Path, timings: dict[str, float]) -> str:
     return f"{photo.name}: {stages}"
 
 
-def _batch_exit_code(outcome: BatchResult, photo_count: int, *, out: Path, quiet: bool) -> int:
+def _batch_exit_code(
+    outcome: BatchResult, capture_count: int, kind: CaptureKind, *, out: Path, quiet: bool
+) -> int:
     """Print the batch's outputs (stdout) and its summary (stderr); the exit status: a full disk,
-    some photos failed, or 0."""
+    some captures failed, or 0."""
+    unit = "photo(s)" if len(kind.photos) == 1 and kind.more_views is None else "capture(s)"
     for result in outcome.succeeded:  # stdout is the result, also with --quiet (scripts read it)
         print(result.output)
     if outcome.stopped is not None:  # a full disk; its error line was printed as it happened
         print(
-            f"stopped: {len(outcome.succeeded)} of {photo_count} photo(s) written; free some space and "
+            f"stopped: {len(outcome.succeeded)} of {capture_count} {unit} written; free some space and "
             "run again",
             file=sys.stderr,
         )
         return DISK_FULL_EXIT_CODE
     if outcome.failed:
-        print(f"{len(outcome.failed)} of {photo_count} photo(s) failed:", file=sys.stderr)
+        print(f"{len(outcome.failed)} of {capture_count} {unit} failed:", file=sys.stderr)
         for failure in outcome.failed:
             print(f"  {failure.message}", file=sys.stderr)
         return PARTIAL_FAILURE_EXIT_CODE
     if not quiet:
         print(f"done: {len(outcome.succeeded)} material(s) in {out}", file=sys.stderr)
-    return 0
-
-
-def _predict_views(args: argparse.Namespace, photos: list[Path], predictor: Predictor) -> int:
-    """``predict --views``: one material from every photo, in ``OUT/<first photo's name>/``."""
-    from tqdm import tqdm
-
-    from brdfgan.errors import interrupts_raise
-    from brdfgan.inference.pipeline import clean_up_outputs, output_names
-    from brdfgan.inference.views.pipeline import predict_views
-
-    steps_bar = tqdm(unit="step", leave=False, disable=args.quiet or None, file=sys.stderr)
-
-    def fit_step(step: int, steps: int) -> None:
-        if step == 1:
-            steps_bar.reset(total=steps)
-            steps_bar.set_description(f"fitting {len(photos)} views")
-        steps_bar.update(1)
-
-    out_dir = args.out / output_names(photos[:1])[0]
-    clean_up_outputs(args.out)
-    try:
-        # SIGTERM too: the material in progress then leaves no hidden staging folder behind.
-        with interrupts_raise():
-            result = predict_views(photos, out_dir, predictor, on_fit_step=fit_step)
-    finally:
-        steps_bar.close()
-    for warning in () if args.quiet else result.warnings:  # each names its file
-        print(f"warning: {warning}", file=sys.stderr)
-    if args.verbose:
-        print(_describe_timings(result.photo, result.timings), file=sys.stderr)
-    print(result.output)
-    if not args.quiet:
-        print(f"done: 1 material from {len(photos)} view(s) in {args.out}", file=sys.stderr)
     return 0
 
 

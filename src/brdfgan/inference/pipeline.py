@@ -11,12 +11,9 @@ For each photo::
       → write_material (textures, material.glb, material.json, preview.png [, preview.gif/mp4],
                         index.html: the material viewer)                                   outputs
 
-A batch keeps going when one photo fails: :func:`predict_batch` returns what succeeded and, for
-each failure, the one-line reason; only a full disk stops it (every later photo would fail the
-same way). Before writing it cleans up after killed runs into the same folder
-(:func:`~brdfgan.inference.outputs.export.recover_outputs`), and while it runs SIGTERM interrupts
-it like Ctrl-C when run inside :func:`brdfgan.errors.interrupts_raise`, so that the staging folder
-of the photo in progress is removed.
+This is the single-photo capture's pipeline, and the write-out every kind of capture ends in
+(:func:`write_prediction`). A batch of captures of any kind, each by its kind's pipeline, is
+:func:`brdfgan.inference.dispatch.predict_batch`.
 """
 
 from __future__ import annotations
@@ -46,7 +43,6 @@ from brdfgan.core.seamless import (
     wrap_ratios,
 )
 from brdfgan.core.svbrdf import NUM_CHANNELS
-from brdfgan.errors import UserError, disk_full_message, is_disk_full, one_line
 from brdfgan.inference.intake.lens import FieldOfView, crop_field_of_view
 from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, Photo, read_photo
 from brdfgan.inference.intake.preprocess import Crop, CropSized, Preprocessed, preprocess
@@ -64,7 +60,6 @@ from brdfgan.inference.outputs.export import ExportOptions, recover_outputs, wri
 from brdfgan.inference.outputs.preview import write_animation, write_preview
 from brdfgan.inference.outputs.viewer import write_viewer
 from brdfgan.inference.refine import RefineConfig, refine_maps
-from brdfgan.inference.views.config import ViewFitConfig
 
 log = logging.getLogger(__name__)
 
@@ -92,7 +87,6 @@ class PredictOptions:
     tileable: bool = False  # cut the maps into a seamless tile (make_tileable)
     prefix_files: bool = False  # texture files named <material>_<map>.<ext> for engines' importers
     field_of_view: FieldOfView = field(default_factory=FieldOfView)  # --fov / --focal-length-35mm
-    view_fit: ViewFitConfig = field(default_factory=ViewFitConfig)  # the multi-view fit (--views)
     # The largest side an anchored network runs at for the default (crop-sized) output; larger
     # outputs are carried up guided by the photo (inference/model/guided.py). None: never.
     network_cap: int | None = DEFAULT_NETWORK_CAP
@@ -488,52 +482,3 @@ def clean_up_outputs(out_root: Path) -> None:
         recover_outputs(out_root)
     except OSError as error:
         log.warning("%s: cannot clean up after earlier runs (%s)", out_root, error.strerror or error)
-
-
-def predict_batch(
-    photos: Sequence[Path],
-    out_root: Path,
-    predictor: Predictor,
-    *,
-    on_result: Callable[[PhotoResult | PhotoFailure], None] | None = None,
-    on_refine_step: RefineProgress | None = None,
-) -> BatchResult:
-    """Predict every photo into ``out_root/<name>/``; a failure is recorded and the batch goes on.
-
-    User errors (:class:`~brdfgan.errors.UserError`: unreadable or unsupported files, bad crops,
-    unwritable outputs) and OS errors are reported with their one-line message; anything else
-    with its exception type, so a bug in one photo
-    never loses the rest of the batch. A full disk ends the batch: the result then says so in
-    ``stopped`` (``<path>: no space left on device``). Hidden folders left by killed runs in
-    ``out_root`` are cleaned up first. Interrupts (``KeyboardInterrupt``) propagate; run inside
-    :func:`brdfgan.errors.interrupts_raise` to get the same for SIGTERM.
-    """
-    succeeded: list[PhotoResult] = []
-    failed: list[PhotoFailure] = []
-    clean_up_outputs(out_root)
-    for photo, name in zip(photos, output_names(photos), strict=True):
-        result: PhotoResult | PhotoFailure
-        try:
-            result = predict_photo(photo, out_root / name, predictor, on_refine_step)
-            succeeded.append(result)
-        except (UserError, OSError) as error:
-            result = PhotoFailure(photo, _failure_message(photo, error))
-            failed.append(result)
-            if is_disk_full(error):
-                if on_result is not None:
-                    on_result(result)
-                return BatchResult(succeeded=succeeded, failed=failed, stopped=result.message)
-        except Exception as error:  # keep the batch alive and report the bug
-            log.debug("internal error on %s", photo, exc_info=True)
-            result = PhotoFailure(photo, f"{photo}: internal error {type(error).__name__}: {one_line(error)}")
-            failed.append(result)
-        if on_result is not None:
-            on_result(result)
-    return BatchResult(succeeded=succeeded, failed=failed)
-
-
-def _failure_message(photo: Path, error: Exception) -> str:
-    if is_disk_full(error):
-        return disk_full_message(error)
-    message = one_line(error)
-    return message if str(photo) in message else f"{photo}: {message}"

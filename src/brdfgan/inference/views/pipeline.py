@@ -173,9 +173,11 @@ def predict_views(
     out_dir: Path,
     predictor: Predictor,
     on_fit_step: FitProgress | None = None,
+    config: ViewFitConfig | None = None,
 ) -> PhotoResult:
     """Fit one material to every usable photo of ``paths`` (views of one flat surface, the first
-    readable one the reference) and write it to ``out_dir`` (replaced atomically; module docstring).
+    readable one the reference) and write it to ``out_dir`` (replaced atomically; module docstring),
+    with the fit's settings ``config`` (default: ``ViewFitConfig()``).
 
     The result's warnings are one line each and name their file.
 
@@ -208,7 +210,7 @@ def predict_views(
             "photo (glossy surfaces); 3-5 photos are what it needs"
         )
     camera = reference_camera(reference.flash_frame, reference.side)
-    config = predictor.options.view_fit
+    config = config or ViewFitConfig()
     fitted = _fit_registered(reference, camera, registered, config, clock, on_fit_step)
     _record_fit(log, reference_index, reference, camera, registered, fitted)
     records = {
