@@ -4,8 +4,8 @@ For each case, materials go through the whole production path of
 :func:`brdfgan.data.storage.generation.material_samples` — family maps at the material resolution,
 crops, captures per crop (environment + flash, Mitsuba, auto exposure) — and every sample is
 encoded as it would be written to a shard. The first two cases are the paper-like protocol
-(7 crops × 3 captures per material); the last is the default model's v3 recipe
-(``conf/dataset_spec/default_model.yaml``: 512² materials, 2 crops × 1 capture, mixing,
+(7 crops × 3 captures per material); the last is the procedural dataset (v3's recipe)
+(``conf/dataset_spec/procedural.yaml``: 512² materials, 2 crops × 1 capture, mixing,
 recolouring, randomised capture), composed from its config file. The time inside
 ``mi.render`` is Mitsuba's; the rest (material painting, crops, environment building, scene
 updates, exposure; PNG encoding, which overlaps the next render on a second thread; the tar
@@ -37,7 +37,7 @@ def _recipe_spec() -> Any:
 
     register_configs()
     with initialize_config_dir(str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
-        cfg = compose("generate", overrides=["dataset_spec=default_model"])
+        cfg = compose("generate", overrides=["dataset_spec=procedural"])
     return spec_from_config(cfg.dataset_spec)
 
 

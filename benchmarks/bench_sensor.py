@@ -31,7 +31,7 @@ CONF = Path(__file__).resolve().parents[1] / "conf"
 BATCH = 4
 # name -> (data config, which sensor)
 SENSORS = {
-    "v3 recipe (data=default_model), train": ("default_model", "sensor"),
+    "v3 recipe (data=procedural), train": ("procedural", "sensor"),
     "phone-delivered (data=procedural_and_scans), train": ("procedural_and_scans", "sensor"),
     "phone-delivered, val/test (conf/sensor/phone_eval)": ("procedural_and_scans", "eval_sensor"),
 }

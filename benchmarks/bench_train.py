@@ -51,9 +51,9 @@ class Case:
 
 
 # The GAN step (full loss) at the default model's size: width 16, 4 blocks, 128² crops, batch 4.
-DEFAULT_RECIPE = ("experiment=default_model", "loss=full")
+DEFAULT_RECIPE = ("experiment=procedural", "loss=full")
 # The step v3 was trained with: the same without discriminators (loss=supervised).
-V3_RECIPE = ("experiment=default_model",)
+V3_RECIPE = ("experiment=procedural",)
 # v4's step: the photo-anchored two-decoder U-Net (model=anchored), supervised, same crops and batch.
 V4_RECIPE = ("experiment=anchored",)
 # The same without the surface decoder's shading image (issue 32's ablation: it bought no normals).
@@ -61,7 +61,7 @@ V4_NO_SHADING_RECIPE = (*V4_RECIPE, "model.generator.shading=none")
 # v4's second stage: the same networks fine-tuned on whole 256² photos, two a batch (init_from is
 # the warm start's file, not read by a benchmark).
 V4_STAGE2_RECIPE = ("experiment=anchored_fixres", "init_from=null")
-PAPER_WIDTH = ("experiment=default_model", "loss=full", "model=paper")  # the paper's networks (45.6 M + 2 D)
+PAPER_WIDTH = ("experiment=procedural", "loss=full", "model=paper")  # the paper's networks (45.6 M + 2 D)
 
 VARIANT_OVERRIDES: dict[str, tuple[str, ...]] = {
     "before": ("loss.compile=false", "model.optimizer.fused=false"),

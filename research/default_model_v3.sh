@@ -17,19 +17,19 @@ BASELINE=(model=deschaintre2018 model.generator.levels=7)
 GRID='[test-m000003-c0-r0,test-m000005-c0-r0,test-m000007-c0-r0,test-m000016-c0-r0,test-m000027-c0-r0,test-m000038-c0-r0,test-m000049-c0-r0,test-m000061-c0-r0]'
 REF=src/brdfgan/weights/references
 
-$PY generate.py dataset_spec=default_model                               # 1 200 materials, ~19 min
+$PY generate.py dataset_spec=procedural                               # 1 200 materials, ~19 min
 # v3: one stage, parameter + rendering losses (cross-entropy metallic, unit-z normal head),
 # 30 epochs × 400 batches of 4 × 128² crops = 12 000 batches, ~75 min.
-$PY train.py experiment=default_model test=false hydra.run.dir=$OUT/v3
+$PY train.py experiment=procedural test=false hydra.run.dir=$OUT/v3
 # The baseline, Deschaintre et al. 2018 (width 16, 7 levels), same data, loss, crops, batches.
-$PY train.py experiment=default_model seed=1 data.seed=1 test=false hydra.run.dir=$OUT/v3_seed1   # the spread
-$PY train.py experiment=default_model "${BASELINE[@]}" test=false hydra.run.dir=$OUT/baseline
+$PY train.py experiment=procedural seed=1 data.seed=1 test=false hydra.run.dir=$OUT/v3_seed1   # the spread
+$PY train.py experiment=procedural "${BASELINE[@]}" test=false hydra.run.dir=$OUT/baseline
 # v2, the previous shipped model, from the history, to compare against.
 git show fb60550:src/brdfgan/weights/default.safetensors > $OUT/v2.safetensors
 MODELS="v3: $OUT/v3/checkpoints/last.ckpt, v3_seed1: $OUT/v3_seed1/checkpoints/last.ckpt, v2: $OUT/v2.safetensors"
 MODELS="$MODELS, baseline: $OUT/baseline/checkpoints/last.ckpt"
 MODELS="$MODELS, mean_maps: $REF/mean_maps.safetensors, photo_basecolor: $REF/photo_basecolor.safetensors"
-$PY evaluate.py data=default_model split=test grid_keys="$GRID" hydra.run.dir=$OUT/eval_test "ckpt={$MODELS}"
+$PY evaluate.py data=procedural split=test grid_keys="$GRID" hydra.run.dir=$OUT/eval_test "ckpt={$MODELS}"
 $PY generate.py dataset_spec=ood progress=false                          # the OOD photos (make ood)
 $PY evaluate.py data=ood hydra.run.dir=$OUT/eval_ood "ckpt={$MODELS}"
 $PY scripts/grid_figure.py $OUT/eval_test docs/default_model_grid.png --models v3 v2 baseline --panel 80

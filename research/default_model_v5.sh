@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Reproduces the v5 candidate (issue 46) and its measurements (docs/default_model.md): stage 1
-# (experiment=v5: photos rendered on the fly, no training set to generate), stage 2 on whole 256²
-# photos (experiment=v5_fixres), the normals' learning curve, and the evaluation on the validation
-# split's two parts, the procedural and scan test sets and both OOD variants beside v4 and the
-# trivial references; export_weights ships it. One training at a time on the two threads.
+# (experiment=anchored_rendered: photos rendered on the fly, no training set to generate), stage 2
+# on whole 256² photos (experiment=anchored_rendered_fixres), the normals' learning curve, and the
+# evaluation on the validation split's two parts, the procedural and scan test sets and both OOD
+# variants beside v4 and the trivial references; export_weights ships it. One training at a time on the two threads.
 #
 #   research/default_model_v5.sh [final|fixres|normal_curve|evaluate|ablation|shading_curve|relief_light|export_weights]...
 #   (default: final fixres normal_curve evaluate, in order; SEEDS="1" runs one seed per session)
@@ -22,16 +22,16 @@ resume() {  # the checkpoint to resume a run folder from, if any
   [ -f "$1/checkpoints/last.ckpt" ] && echo "ckpt_path=$1/checkpoints/last.ckpt" || true
 }
 
-final() {  # stage 1 (conf/experiment/v5.yaml), 6 000 batches of 4 rendered 128² crops, ~85 min each
+final() {  # stage 1 (conf/experiment/anchored_rendered.yaml), 6 000 batches of 4 rendered 128² crops, ~85 min each
   for seed in ${SEEDS:-0 1}; do
-    $PY train.py experiment=v5 test=false seed=$seed hydra.run.dir=$RUNS_OUT/final_seed$seed \
+    $PY train.py experiment=anchored_rendered test=false seed=$seed hydra.run.dir=$RUNS_OUT/final_seed$seed \
       $(resume $RUNS_OUT/final_seed$seed)
   done
 }
 
-fixres() {  # stage 2 (conf/experiment/v5_fixres.yaml): each stage-1 run on whole 256² photos
+fixres() {  # stage 2 (conf/experiment/anchored_rendered_fixres.yaml): each stage-1 run on whole 256² photos
   for seed in ${SEEDS:-0 1}; do
-    $PY train.py experiment=v5_fixres init_from=$RUNS_OUT/final_seed$seed/checkpoints/last.ckpt test=false \
+    $PY train.py experiment=anchored_rendered_fixres init_from=$RUNS_OUT/final_seed$seed/checkpoints/last.ckpt test=false \
       seed=$seed hydra.run.dir=$RUNS_OUT/fixres_seed$seed $(resume $RUNS_OUT/fixres_seed$seed)
   done
 }
@@ -88,15 +88,15 @@ export_weights() {
 
 ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's changes added at a time
   # (rendered photos with the calibrated sensor; + relief sampling; + no shading image = the first
-  # v5 recipe), then the height head and the slope term (today's experiment=v5), 1 000
+  # v5 recipe), then the height head and the slope term (today's experiment=anchored_rendered), 1 000
   # batches each, scored on the validation split's two parts (docs/default_model.md). ROWS picks
   # rows (default all), SEED another seed (its runs are <row>_seed<SEED>), EVAL the scores' folders.
   local seed=${SEED:-0} suffix=""
   [ "$seed" = 0 ] || suffix=_seed$seed
   local steps="data.epoch_samples=2000 trainer.max_epochs=2 trainer.check_val_every_n_epoch=2 test=false seed=$seed"
-  # Each row in today's experiment=v5 and explicit overrides, so the rows stay what they were
+  # Each row in today's experiment=anchored_rendered and explicit overrides, so the rows stay what they were
   # when the recipe moves on.
-  local slopes="experiment=v5 model.generator.normal_head=slopes loss.normal_tilt_weight=0"
+  local slopes="experiment=anchored_rendered model.generator.normal_head=slopes loss.normal_tilt_weight=0"
   local relief="data.relief.swap_probability=0.25 data.relief.bump_probability=0.5"
   declare -A RUNS=(
     [v4_recipe]="experiment=anchored data.prepare=null"  # the training shards there are (a session cannot wait for all 63)
@@ -104,28 +104,28 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
     [rendered_relief]="$slopes $relief"
     [v5_recipe]="$slopes $relief model.generator.shading=none"  # the first v5 recipe
     # The normals as a height's differences (integrable slopes; docs/data.md, "(e)"),
-    [rendered_height]="experiment=v5 loss.normal_tilt_weight=0"
+    [rendered_height]="experiment=anchored_rendered loss.normal_tilt_weight=0"
     # and a squared slope error beside the angle (the angle alone is minimised by a flat map
-    # where a tilt is uncertain; docs/default_model_v3.md): today's experiment=v5.
-    [rendered_height_tilt]="experiment=v5"
+    # where a tilt is uncertain; docs/default_model_v3.md): today's experiment=anchored_rendered.
+    [rendered_height_tilt]="experiment=anchored_rendered"
     # Each with a quarter of the crops' own relief removed: a texture over a flat surface, where
     # every model drew relief on the near-flat held-out scans (docs/default_model.md).
-    [rendered_height_flat]="experiment=v5 loss.normal_tilt_weight=0 data.relief.flat_probability=0.25"
-    [rendered_height_tilt_flat]="experiment=v5 data.relief.flat_probability=0.25"
+    [rendered_height_flat]="experiment=anchored_rendered loss.normal_tilt_weight=0 data.relief.flat_probability=0.25"
+    [rendered_height_tilt_flat]="experiment=anchored_rendered data.relief.flat_probability=0.25"
     # Half of the crops' relief turned inside out: whether dark is low is then not in the base
     # colour (the training scans disagree on it; docs/data.md), only in the photo's shading.
-    [rendered_height_invert]="experiment=v5 loss.normal_tilt_weight=0 data.relief.invert_probability=0.5"
+    [rendered_height_invert]="experiment=anchored_rendered loss.normal_tilt_weight=0 data.relief.invert_probability=0.5"
     # and with half of the base colours faded besides: relief shading under a plain albedo, which
     # the issue's scratch harness learned from (docs/data.md, "(d)").
-    [rendered_height_invert_plain]="experiment=v5 loss.normal_tilt_weight=0 data.relief.invert_probability=0.5 data.relief.plain_albedo_probability=0.5"
-    # Shading first: the normals trained alone on those photos (experiment=v5_shading), which
+    [rendered_height_invert_plain]="experiment=anchored_rendered loss.normal_tilt_weight=0 data.relief.invert_probability=0.5 data.relief.plain_albedo_probability=0.5"
+    # Shading first: the normals trained alone on those photos (experiment=anchored_rendered_normals), which
     # read some relief from the shading where the full recipe reads none; then the inverted row's
     # recipe starting from its weights, so the whole generator learns on with that reading.
-    [shading_first]="experiment=v5_shading"
+    [shading_first]="experiment=anchored_rendered_normals"
     # The same on photos without room light, validated on the validation split re-generated
     # without it (relief_light makes it and scores this row; docs/data.md "(h)").
-    [shading_noenv]="experiment=v5_shading data.data_dir=data/pas_noenv data.prepare.spec.lighting.env_to_flash_min=1e-6 data.prepare.spec.lighting.env_to_flash_max=1e-6"
-    [rendered_height_invert_after_shading]="experiment=v5 loss.normal_tilt_weight=0 data.relief.invert_probability=0.5 init_from=$OUT/ablation/shading_first$suffix/checkpoints/last.ckpt"
+    [shading_noenv]="experiment=anchored_rendered_normals data.data_dir=data/pas_noenv data.prepare.spec.lighting.env_to_flash_min=1e-6 data.prepare.spec.lighting.env_to_flash_max=1e-6"
+    [rendered_height_invert_after_shading]="experiment=anchored_rendered loss.normal_tilt_weight=0 data.relief.invert_probability=0.5 init_from=$OUT/ablation/shading_first$suffix/checkpoints/last.ckpt"
     # v4 itself (both stages) trained on for 1 000 batches of rendered photos at stage 2's rate:
     # whether the fresh light of every draw (room light, exposure, the phone) teaches v4's
     # roughness and metal without costing the base colour it learned from the Mitsuba shards,
@@ -135,12 +135,12 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
     # A curriculum for reading relief from shading: the normals alone first on photos whose base
     # colour is faded on every crop (contrast uniform in [0, 1): mostly plain, where the issue's
     # harness learned relief best), then shading_first's photos from those weights.
-    [shading_plain]="experiment=v5_shading data.relief.plain_albedo_probability=1.0"
-    [shading_after_plain]="experiment=v5_shading init_from=$OUT/ablation/shading_plain$suffix/checkpoints/last.ckpt"
+    [shading_plain]="experiment=anchored_rendered_normals data.relief.plain_albedo_probability=1.0"
+    [shading_after_plain]="experiment=anchored_rendered_normals init_from=$OUT/ablation/shading_plain$suffix/checkpoints/last.ckpt"
     # Capacity: shading_first at twice the width (four times the weights; the GPU plan's
     # network), the same 1 000 batches: whether a larger network reads more of the shading
     # from the same photos.
-    [shading_wide]="experiment=v5_shading model.generator.width=32"
+    [shading_wide]="experiment=anchored_rendered_normals model.generator.width=32"
   )
   local run models="v4: $V4, mean_maps: $REF/mean_maps.safetensors"  # the shipped model and the flat, constant reference beside every row
   for run in ${ROWS:-v4_recipe rendered rendered_relief v5_recipe rendered_height rendered_height_tilt rendered_height_flat rendered_height_tilt_flat rendered_height_invert rendered_height_invert_plain shading_first rendered_height_invert_after_shading v4_then_rendered v4_then_rendered_invert shading_plain shading_after_plain shading_wide}; do
@@ -154,12 +154,12 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
   score "$models" $OUT/ablation/${EVAL:-eval}_ "$suffix" "${HELD_OUT:-}" val ${HELD_OUT:+test}
 }
 
-shading_curve() {  # the normals alone (experiment=v5_shading) 8x as long: 8 000 batches of 4, 61 min,
+shading_curve() {  # the normals alone (experiment=anchored_rendered_normals) 8x as long: 8 000 batches of 4, 61 min,
   # validated every 2 000: whether more photos lift the slope cosine past the 1 000-2 000-batch
   # plateau (docs/default_model.md, "More photos"); scored beside v4 like an ablation row.
   local run=$OUT/shading_curve
   [ -f $run/.done ] || {
-    $PY train.py experiment=v5_shading data.epoch_samples=8000 trainer.max_epochs=4 \
+    $PY train.py experiment=anchored_rendered_normals data.epoch_samples=8000 trainer.max_epochs=4 \
       trainer.check_val_every_n_epoch=1 test=false hydra.run.dir=$run $(resume $run)
     touch $run/.done
   }

@@ -15,9 +15,10 @@ run of the same path at toy sizes, seconds). Nothing is downloaded and Mitsuba i
 3. The rendering loss alone (the loss config's :class:`~brdfgan.losses.rendering.RenderingLoss`,
    compiled or not as configured), forward + backward on a batch of the same data, under the
    same autocast: its share of the step.
-4. ``train.py experiment=v5`` on photos rendered on the fly (``data=rendered``): a material bank
-   painted by the CPU (the tiny spec's families at the plan's sizes, room environments only, so no
-   Mitsuba), the photos rendered on the device in every batch's transfer hook; its batch interval.
+4. ``train.py experiment=anchored_rendered`` on photos rendered on the fly (``data=rendered``): a
+   material bank painted by the CPU (the tiny spec's families at the plan's sizes, room
+   environments only, so no Mitsuba), the photos rendered on the device in every batch's transfer
+   hook; its batch interval.
 5. With two or more GPUs: ``trainer=ddp trainer.devices=2`` for a few steps.
 
 The Markdown table goes to stdout and, when ``$OUT`` is set (the GPU tool copies it back), to
@@ -258,10 +259,10 @@ def training_overrides(
 def rendered_overrides(
     plan: Plan, data_dir: Path, bank_dir: Path, timer_out: Path, *, precision: str, batches: int
 ) -> list[str]:
-    """The ``train.py`` overrides of the on-the-fly run: ``experiment=v5`` (photos rendered each
-    step from a material bank, ``data=rendered``) on the device, the bank painted by the CPU from
-    the tiny spec's families at the plan's sizes with room environments only (sun and sky need
-    Mitsuba), ``data_dir``'s shards for validation (unused here: validation is off)."""
+    """The ``train.py`` overrides of the on-the-fly run: ``experiment=anchored_rendered`` (photos
+    rendered each step from a material bank, ``data=rendered``) on the device, the bank painted by
+    the CPU from the tiny spec's families at the plan's sizes with room environments only (sun and
+    sky need Mitsuba), ``data_dir``'s shards for validation (unused here: validation is off)."""
     cuda = plan.device == "cuda"
     timed = _timed_run_overrides(
         plan, timer_out, precision=precision, optimizer_steps=batches, name="rendered",
@@ -270,7 +271,7 @@ def rendered_overrides(
     spec = "data.bank.spec"
     toy = ["model.generator.width=8", EAGER_LOSS] if plan.overrides else []
     return [
-        "experiment=v5",
+        "experiment=anchored_rendered",
         *timed,
         f"data.data_dir={data_dir}",
         "data.prepare=null",
@@ -834,7 +835,7 @@ def compare_row(result: RunResult, main_run: RunResult, plan: Plan, raw: dict[st
 
 def rendered_row(result: RunResult, plan: Plan, raw: dict[str, Any]) -> Row:
     """The on-the-fly run: its batch interval (the CPU's draws, the device's renders, the step)."""
-    label = f"experiment=v5 on rendered photos, {plan.precision}"
+    label = f"experiment=anchored_rendered on rendered photos, {plan.precision}"
     if result.timer is None:
         return (label, "FAILED", str(result.error))
     stats = raw[result.name]["stats"]

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # GPU readiness check (research/gpu_check.py): the paper configuration's training step on CUDA in
-# bf16-mixed and fp32, the rendering loss's share, peak memory, throughput, experiment=v5 on photos
-# rendered on the GPU each batch (data=rendered), DDP with 2+ GPUs.
+# bf16-mixed and fp32, the rendering loss's share, peak memory, throughput,
+# experiment=anchored_rendered on photos rendered on the GPU each batch (data=rendered), DDP with
+# 2+ GPUs.
 # Unattended, under 8 minutes, no network, no Mitsuba. The table goes to stdout and $OUT/gpu_check.md.
 #
 #   research/gpu_check.sh                      # on a CUDA machine

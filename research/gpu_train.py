@@ -6,9 +6,9 @@ asks whether a larger network moves them: two ``train.py`` stages under one wall
 ``data=rendered`` (the photos rendered on the GPU every batch, the material bank painted by
 the plan's CPU processes):
 
-1. ``experiment=v5_shading``: the normals alone, half the relief inverted, half the base colours
-   faded (the shading-first stage);
-2. ``experiment=v5`` from stage 1's last weights: the full recipe.
+1. ``experiment=anchored_rendered_normals``: the normals alone, half the relief inverted, half the
+   base colours faded (the shading-first stage);
+2. ``experiment=anchored_rendered`` from stage 1's last weights: the full recipe.
 
 Both with the plan's generator width (``--width``; twice v5's by default), photos a batch
 (``--batch``) and loader processes, ``trainer=gpu`` (bf16-mixed), validation and checkpoints
@@ -65,7 +65,7 @@ STAGED_SCANS = STAGED / "scans"
 STAGED_ENVIRONMENTS = STAGED / "environments.npz"
 STAGED_SCAN_SIDE = 512
 STAND_IN_SIDE = 16
-STAGES = (("shading", "experiment=v5_shading"), ("full", "experiment=v5"))
+STAGES = (("shading", "experiment=anchored_rendered_normals"), ("full", "experiment=anchored_rendered"))
 MIN_STAGE_S = 5.0  # less training than this is not worth a stage's start
 STEP_WARMUP = 10  # batches a stage's step times leave out (the loaders starting, the first steps)
 LOG_TAIL_BYTES = 60_000  # of each stage's log, in OUT/gpu_train.log
@@ -196,7 +196,7 @@ def _bank_overrides(work: Path, paint_workers: int) -> list[str]:
     own bank build and both stages, so all three find the same bank (with the same
     ``BRDFGAN_SCANS_DIR``)."""
     return [
-        "experiment=v5",
+        "experiment=anchored_rendered",
         "data.prepare=null",
         "+dataset_spec@data.bank.spec=procedural_and_scans",
         f"data.bank.folder={work / 'banks'}",

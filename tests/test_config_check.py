@@ -63,10 +63,12 @@ def test_a_wrong_value_names_the_key_before_anything_is_built(
 @pytest.mark.parametrize(
     "overrides",
     [[], ["debug=default"], ["debug=fdr"], ["debug=overfit"], ["debug=limit"],
-     ["experiment=paper", "debug=default"], ["experiment=paper"], ["experiment=default_model_finetune"],
+     ["experiment=paper", "debug=default"], ["experiment=paper"], ["experiment=procedural_finetune"],
      ["model=deschaintre2018"], ["model=anchored"], ["loss=no_adv"], ["loss=supervised"], ["trainer=gpu"],
      ["trainer=ddp"], ["logger=many"], ["data=deschaintre"], ["callbacks=none"], ["data=rendered"],
-     ["experiment=v5"], ["experiment=v5_fixres", "init_from=x"], ["experiment=v5_shading"]],
+     ["experiment=anchored_rendered"], ["experiment=anchored_rendered_fixres", "init_from=x"],
+     ["experiment=anchored_rendered_normals"], ["experiment=procedural"], ["experiment=anchored"],
+     ["experiment=anchored_fixres", "init_from=x"], ["experiment=cpu"]],
 )  # fmt: skip
 def test_every_shipped_config_passes_the_check(tmp_path: Path, overrides: list[str]) -> None:
     check_config(compose_train(overrides, tmp_path), CHECKED_GROUPS)
@@ -122,3 +124,50 @@ def test_train_and_evaluate_print_one_line_and_exit_2(tmp_path: Path) -> None:
         assert len(lines) == 1 and lines[0].startswith(message), result.stderr[-2000:]
         assert time.monotonic() - began < 60
     assert not (tmp_path / "data").exists()
+
+
+@pytest.mark.integration
+def test_a_renamed_preset_is_refused_in_one_line_that_names_the_new_one(tmp_path: Path) -> None:
+    cases = [
+        ("train.py", ["experiment=v5"], "error: experiment=v5 was renamed experiment=anchored_rendered"),
+        (
+            "evaluate.py",
+            ["ckpt=x.ckpt", "data=default_model"],
+            "error: data=default_model was renamed data=procedural",
+        ),
+        (
+            "train.py",
+            ["experiment=no_such_preset"],
+            "error: In 'train': Could not find 'experiment/no_such_preset'",
+        ),
+    ]
+    for script, args, message in cases:
+        result = run_python(script, *args, cwd=tmp_path)
+        assert result.returncode == 2, result.stderr[-2000:]
+        lines = [line for line in result.stderr.splitlines() if line.strip()]
+        assert len(lines) == 1 and lines[0].startswith(message), result.stderr[-2000:]
+    # An unknown name lists the group's options, the new names among them.
+    assert "(options: anchored, anchored_fixres, anchored_rendered," in lines[0]
+    assert not (tmp_path / "data").exists() and not (tmp_path / "logs").exists()
+
+
+def test_every_renamed_preset_names_a_preset_that_exists_in_place_of_the_old_one() -> None:
+    from hydra.errors import MissingConfigException
+
+    from brdfgan.errors import RENAMED_PRESETS, missing_config_message
+
+    for old, new in RENAMED_PRESETS.items():
+        group, _, name = old.rpartition("/")
+        assert (ROOT / "conf" / group / f"{new}.yaml").is_file(), f"{old} -> {new}: no such preset"
+        assert not (ROOT / "conf" / f"{old}.yaml").exists(), f"{old} is still a preset"
+        error = MissingConfigException(f"Could not find '{old}'\n\nAvailable options", old, [new])
+        assert missing_config_message(error) == f"{group}={name} was renamed {group}={new}"
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(
+    "renamed", ["experiment=anchored_rendered", "experiment=procedural", "data=procedural"]
+)
+def test_a_new_name_composes(tmp_path: Path, renamed: str) -> None:
+    cfg = compose_train([renamed], tmp_path)
+    assert cfg.data.data_dir.endswith(("/procedural", "/procedural_and_scans"))

@@ -363,13 +363,13 @@ def _fake_training_run(run_dir: Path, overrides: list[str], epoch: int, step: in
 def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> None:
     from brdfgan.inference.model.export_weights import training_summary
 
-    gan = _fake_training_run(tmp_path / "gan", ["experiment=default_model", "loss=full"], epoch=6, step=4900)
-    content = ["experiment=default_model_finetune", f"init_from={gan}"]
+    gan = _fake_training_run(tmp_path / "gan", ["experiment=procedural", "loss=full"], epoch=6, step=4900)
+    content = ["experiment=procedural_finetune", f"init_from={gan}"]
     finetune = _fake_training_run(tmp_path / "finetune", content, epoch=5, step=2100)
     summary = training_summary(tmp_path / "finetune", finetune, "test CPU")
     assert summary["optimizer_steps"] == 2100 and summary["epochs"] == 6
     assert summary["loss"] == {"adversarial": False, "feature": False, "parameter": True, "rendering": True}
-    assert summary["metallic_loss"] == "bce"  # v3's recipe (experiment=default_model)
+    assert summary["metallic_loss"] == "bce"  # v3's recipe (experiment=procedural)
     earlier = summary["init_from"]
     assert earlier["run"] == str(tmp_path / "gan")
     assert earlier["optimizer_steps"] == 4900 and earlier["epochs"] == 7
@@ -379,7 +379,7 @@ def test_a_warm_started_run_summarises_the_run_it_began_from(tmp_path: Path) -> 
     # Weights that do not come from a run directory are named only.
     weights = tmp_path / "w.safetensors"
     weights.write_bytes(b"")
-    from_weights = ["experiment=default_model_finetune", f"init_from={weights}"]
+    from_weights = ["experiment=procedural_finetune", f"init_from={weights}"]
     other = _fake_training_run(tmp_path / "other", from_weights, epoch=0, step=350)
     from_outside = training_summary(tmp_path / "other", other, None)
     assert from_outside["init_from"] == {"checkpoint": str(weights)}
@@ -391,7 +391,7 @@ def test_the_summary_says_how_the_training_photos_were_made(tmp_path: Path) -> N
     from brdfgan.inference.model.export_weights import recipe_totals, training_summary
 
     relief = ["data.relief.swap_probability=0.25", "data.relief.bump_probability=0.5"]
-    v5 = _fake_training_run(tmp_path / "v5", ["experiment=v5", *relief], epoch=14, step=6000)
+    v5 = _fake_training_run(tmp_path / "v5", ["experiment=anchored_rendered", *relief], epoch=14, step=6000)
     dataset = training_summary(tmp_path / "v5", v5, None)["dataset"]
     assert dataset["training_photos"] == "rendered on the fly"
     assert dataset["relief"]["swap_probability"] == 0.25 and dataset["relief"]["bump_probability"] == 0.5
@@ -413,7 +413,11 @@ def test_the_summary_of_a_rendered_run_without_shards_reads_its_banks_spec(tmp_p
     # says what the materials were.
     from brdfgan.inference.model.export_weights import training_summary
 
-    overrides = ["experiment=v5", "data.prepare=null", "+dataset_spec@data.bank.spec=procedural_and_scans"]
+    overrides = [
+        "experiment=anchored_rendered",
+        "data.prepare=null",
+        "+dataset_spec@data.bank.spec=procedural_and_scans",
+    ]
     run = _fake_training_run(tmp_path / "gpu", overrides, epoch=0, step=10)
     summary = training_summary(tmp_path / "gpu", run, None)
     assert summary["dataset"]["training_photos"] == "rendered on the fly"
@@ -428,7 +432,7 @@ def test_the_summary_records_the_share_of_scanned_materials(tmp_path: Path) -> N
     scans = training_summary(tmp_path / "v4", v4, None)["dataset"]["scans"]
     assert 0.0 < scans["fraction"] < 1.0
     assert len(scans["val_sets"]) == len(scans["test_sets"]) == 3 and "Metal012" in scans["val_sets"]
-    v3 = _fake_training_run(tmp_path / "v3", ["experiment=default_model"], epoch=0, step=10)
+    v3 = _fake_training_run(tmp_path / "v3", ["experiment=procedural"], epoch=0, step=10)
     assert "scans" not in training_summary(tmp_path / "v3", v3, None)["dataset"]
 
 

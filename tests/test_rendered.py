@@ -394,11 +394,12 @@ def test_relief_sampling_names_a_bad_key() -> None:
 
 @pytest.mark.integration
 @pytest.mark.mitsuba
-def test_a_fresh_clone_trains_the_v5_recipe_without_a_training_set(tmp_path: Path) -> None:
-    # experiment=v5 at toy sizes: the bank is painted, only the validation shards are generated,
-    # and the run trains on rendered photos and validates on Mitsuba ones.
+def test_a_fresh_clone_trains_the_rendered_recipe_without_a_training_set(tmp_path: Path) -> None:
+    # experiment=anchored_rendered at toy sizes: the bank is painted, only the validation shards are
+    # generated, and the run trains on rendered photos and validates on Mitsuba ones.
     result = run_python(
-        "train.py", "experiment=v5", "task_name=v5_smoke", "dataset_spec@data.prepare.spec=tiny",
+        "train.py", "experiment=anchored_rendered", "task_name=rendered_smoke",
+        "dataset_spec@data.prepare.spec=tiny",
         "data.data_dir=${paths.data_dir}/tiny", "data.train_crop=32", "data.batch_size=2",
         "data.epoch_samples=4", "data.environment_lights=4", "data.bank.environment_resolution=16",
         "data.compile_renderer=false", "loss.compile=false", "model.generator.width=8",
@@ -410,7 +411,7 @@ def test_a_fresh_clone_trains_the_v5_recipe_without_a_training_set(tmp_path: Pat
     assert (data / "val" / "manifest.json").exists()
     assert not list((data / "train").glob("*.tar")) and not (data / "test" / "manifest.json").exists()
     assert list((tmp_path / "data" / "banks").glob("*/bank.json"))
-    run = sorted((tmp_path / "logs" / "v5_smoke" / "runs").iterdir())[-1]
+    run = sorted((tmp_path / "logs" / "rendered_smoke" / "runs").iterdir())[-1]
     assert (run / "checkpoints" / "last.ckpt").exists()
     metrics = next((run / "csv").glob("version_*/metrics.csv")).read_text()
     assert "val/loss" in metrics and "train/g_total" in metrics

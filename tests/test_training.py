@@ -29,7 +29,7 @@ LOSSES = ["full", "no_adv", "no_feat", "no_param", "no_render"]
 
 @pytest.mark.integration
 @pytest.mark.parametrize("loss", LOSSES)
-@pytest.mark.parametrize("experiment", ["null", "cpu", "debug", "paper", "default_model"])
+@pytest.mark.parametrize("experiment", ["null", "cpu", "debug", "paper", "procedural"])
 def test_every_loss_and_experiment_composes_and_builds(tmp_path: Path, loss: str, experiment: str) -> None:
     chosen = {"null": [], "debug": ["debug=default"]}.get(experiment, [f"experiment={experiment}"])
     cfg = compose_train([f"loss={loss}", *chosen], tmp_path)
@@ -40,10 +40,10 @@ def test_every_loss_and_experiment_composes_and_builds(tmp_path: Path, loss: str
         assert cfg.model.generator.width == 64 and cfg.model.generator.residual_blocks == 9
         assert cfg.model.optimizer.lr == 2e-4 and list(cfg.model.optimizer.betas) == [0.5, 0.999]
         return  # building needs 4 GPUs
-    if experiment == "default_model":
-        # 128² crops of the 256² default_model dataset (the v3 recipe: many materials, phone-like
+    if experiment == "procedural":
+        # 128² crops of the 256² procedural dataset (the v3 recipe: many materials, phone-like
         # captures, sensor effects on), validated on whole photos.
-        assert cfg.data.train_crop == 128 and cfg.data.data_dir.endswith("default_model")
+        assert cfg.data.train_crop == 128 and cfg.data.data_dir.endswith("/procedural")
         spec = cfg.data.prepare.spec
         assert spec.materials >= 1000 and spec.resolution == 256 and not spec.families
         assert spec.mixing.fraction > 0 and spec.recolor.probability > 0 and spec.capture.tilt_max_deg > 0
@@ -58,10 +58,10 @@ def test_every_loss_and_experiment_composes_and_builds(tmp_path: Path, loss: str
 
 
 @pytest.mark.integration
-def test_default_model_finetune_is_stage_one_without_a_discriminator(tmp_path: Path) -> None:
-    stage1 = compose_train(["experiment=default_model"], tmp_path)
-    stage2 = compose_train(["experiment=default_model_finetune"], tmp_path)
-    assert stage2.init_from.endswith("logs/default_model/gan/checkpoints/last.ckpt")
+def test_procedural_finetune_is_stage_one_without_a_discriminator(tmp_path: Path) -> None:
+    stage1 = compose_train(["experiment=procedural"], tmp_path)
+    stage2 = compose_train(["experiment=procedural_finetune"], tmp_path)
+    assert stage2.init_from.endswith("logs/procedural/gan/checkpoints/last.ckpt")
     assert stage2.data == stage1.data and stage2.model.generator == stage1.model.generator
     assert stage2.loss == stage1.loss and not stage1.loss.switches.adversarial  # v3: one supervised stage
     _, module, _ = build(stage2)

@@ -127,7 +127,7 @@ def test_cpu_smoke_mode_prints_the_table_and_writes_out(tmp_path: Path) -> None:
         "peak GPU memory, 32-true",
         "rendering loss fwd+bwd",
         "bf16-mixed vs 32-true",
-        "experiment=v5 on rendered photos, 32-true",
+        "experiment=anchored_rendered on rendered photos, 32-true",
         "DDP, 2 processes",
     ):
         assert check in rows, result.stdout
@@ -188,6 +188,7 @@ def test_a_failed_compiled_run_is_retried_with_the_loss_eager(
     assert table["peak GPU memory, bf16-mixed"][0] == "3.00 GiB"
     assert table["rendering loss fwd+bwd"][0] == "250.0 ms (25% of the step)"
     assert table["32-true vs bf16-mixed"][0] == "0.50× the step time"
-    assert table["experiment=v5 on rendered photos, bf16-mixed"][0] == "batch interval 1000.0 ms"
+    rendered = table["experiment=anchored_rendered on rendered photos, bf16-mixed"]
+    assert rendered[0] == "batch interval 1000.0 ms"
     assert table["DDP, 2 processes"][0] == "skipped"
     assert raw["main_bf16_mixed_eager"]["stats"]["timed"] == 20

@@ -196,6 +196,32 @@ class LightningTipFilter:
         return not (isinstance(message, str) and message.lstrip().startswith("💡"))
 
 
+# Config presets renamed, ``"<group>/<old name>": "<new name>"``: a command that asks for an old
+# name is refused in one line that names the new one (:func:`missing_config_message`). Experiments
+# and data are named by what they are, not by the model version that first used them.
+RENAMED_PRESETS: dict[str, str] = {
+    "experiment/default_model": "procedural",
+    "experiment/default_model_finetune": "procedural_finetune",
+    "experiment/v5": "anchored_rendered",
+    "experiment/v5_fixres": "anchored_rendered_fixres",
+    "experiment/v5_shading": "anchored_rendered_normals",
+    "data/default_model": "procedural",
+    "dataset_spec/default_model": "procedural",
+}
+
+
+def missing_config_message(error: BaseException) -> str:
+    """The one line for Hydra's "Could not find '<group>/<name>'": a renamed preset
+    (:data:`RENAMED_PRESETS`) names its new name, any other the group's options."""
+    missing = getattr(error, "missing_cfg_file", None) or ""
+    group, _, name = missing.rpartition("/")
+    if missing in RENAMED_PRESETS:
+        return f"{group}={name} was renamed {group}={RENAMED_PRESETS[missing]}"
+    first = str(error).split("\n", 1)[0].strip() or type(error).__name__
+    options = getattr(error, "options", None)
+    return f"{first} (options: {', '.join(options)})" if group and options else first
+
+
 def run_hydra_app(app: Callable[[], object]) -> None:
     """Run a ``@hydra.main`` entry point so that composition errors are one line too.
 
@@ -207,7 +233,7 @@ def run_hydra_app(app: Callable[[], object]) -> None:
     """
     import logging
 
-    from hydra.errors import HydraException
+    from hydra.errors import HydraException, MissingConfigException
     from omegaconf.errors import OmegaConfBaseException
 
     os.environ["HYDRA_FULL_ERROR"] = "1"
@@ -221,6 +247,10 @@ def run_hydra_app(app: Callable[[], object]) -> None:
         if is_disk_full(error):
             print(f"error: {disk_full_message(error)}", file=sys.stderr)
             raise SystemExit(DISK_FULL_EXIT_CODE) from None
+        # Hydra's missing config is an OSError too (an IOError subclass): a user's typo, not I/O.
+        if isinstance(error, MissingConfigException):
+            print(f"error: {missing_config_message(error)}", file=sys.stderr)
+            raise SystemExit(USER_ERROR_EXIT_CODE) from None
         if isinstance(error, OSError):
             raise
         # "Error merging override seed=abc" says where; its cause says what is wrong.

@@ -38,7 +38,7 @@ from torch import Tensor
 from brdfgan.core.checks import check_shape
 
 # The horizontal field of view a photo is assumed to have when nothing says otherwise: the centre
-# of the v3 training captures' 40–75° (conf/dataset_spec/default_model.yaml, capture.fov_*), after
+# of the v3 training captures' 40–75° (conf/dataset_spec/procedural.yaml, capture.fov_*), after
 # the preprocessing's centre crop. Photos without EXIF focal length get it.
 DEFAULT_FOV_DEG = 57.5
 FLASH_FRAME_SIZE = 3

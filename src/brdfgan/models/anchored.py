@@ -24,7 +24,8 @@ slopes, or of a height's differences (``normal_head``).
 
 Ablation-only switches (no shipped recipe sets them; ``docs/default_model.md`` has each one's
 run): ``anchored=False``, ``shading`` other than ``"detached"``, ``global_features=False``,
-``highlight_profile=False``. ``normal_head="height"`` is the v5 candidate's (``experiment=v5``).
+``highlight_profile=False``. ``normal_head="height"`` is ``experiment=anchored_rendered``'s (the v5
+candidate).
 """
 
 from __future__ import annotations
