@@ -24,6 +24,7 @@ from brdfgan.data.storage.shards import (
     read_digest,
     read_manifest,
     sha256_file,
+    shard_differences,
     shard_path,
     verify_shard,
     write_digest,
@@ -394,3 +395,34 @@ def test_read_manifest_errors(tmp_path: Path) -> None:
     (tmp_path / "val" / "manifest.json").write_text("{oops")
     with pytest.raises(ShardError, match="unreadable"):
         read_manifest(tmp_path, "val")
+
+
+def test_two_generations_agree_when_photos_are_within_one_code_and_not_beyond(tmp_path: Path) -> None:
+    # Mitsuba's LLVM renders move a rare pixel by one 16-bit code between runs: such shards differ
+    # in bytes and SHA-256 but hold the same samples; two codes, other maps or metadata do not.
+    samples = [make_sample(0), make_sample(1)]
+
+    def nudged(sample: Sample, codes: int, **changes: object) -> Sample:
+        photo = sample.photo.clone()
+        photo[1, 3, 4] = (round(float(photo[1, 3, 4]) * 65535) + codes) / 65535  # away from the ends
+        fields = {"key": sample.key, "photo": photo, "maps": sample.maps, "meta": sample.meta, **changes}
+        return Sample(**fields)  # type: ignore[arg-type]
+
+    reference = write_shard(tmp_path / "a.tar", samples)
+    one_code = write_shard(tmp_path / "b.tar", [nudged(samples[0], 1), samples[1]])
+    assert one_code.sha256 != reference.sha256
+    assert shard_differences(reference.path, one_code.path) == []
+    two_codes = write_shard(tmp_path / "c.tar", [nudged(samples[0], 2), samples[1]])
+    assert shard_differences(reference.path, two_codes.path) == [
+        "sample 's-0000': photos differ by 2 codes (tolerance 1)"
+    ]
+    other_meta = write_shard(tmp_path / "d.tar", [samples[0], nudged(samples[1], 0, meta={"seed": 9})])
+    assert shard_differences(reference.path, other_meta.path) == ["sample 's-0001': metadata differs"]
+    other_maps = write_shard(
+        tmp_path / "e.tar", [nudged(samples[0], 0, maps=random_maps(12, 10, seed=7)), samples[1]]
+    )
+    assert shard_differences(reference.path, other_maps.path) == ["sample 's-0000': maps differ"]
+    fewer = write_shard(tmp_path / "f.tar", samples[:1])
+    assert shard_differences(reference.path, fewer.path) == [
+        f"{reference.path} and {fewer.path} hold different samples"
+    ]

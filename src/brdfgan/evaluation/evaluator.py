@@ -34,6 +34,7 @@ from brdfgan.inference.model.tiling import model_placement
 from brdfgan.io.atomic import atomic_replace, write_text_atomic
 from brdfgan.io.images import write_image
 from brdfgan.metrics import hotspot_centres
+from brdfgan.models.heads import network_photos
 
 FLASH_FRAME_SOURCES = ("recorded", "centred")
 PAPER_MAPS = ("diffuse", "specular", "normal", "roughness")
@@ -67,7 +68,7 @@ def evaluate_models(
     for model in models.values():
         model.to(device).eval()
     for batch in batches:
-        photo = batch["photo"].to(device)
+        photo = network_photos(batch).to(device)
         truth = batch["maps"].to(device)
         meta = batch.get("meta")
         hotspot = None if meta is None else hotspot_centres(meta, *truth.shape[-2:]).to(device)

@@ -9,16 +9,19 @@ map set that always satisfies :func:`brdfgan.core.svbrdf.validate_maps`.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Literal
 
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from brdfgan.capture import TRAINING_CAPTURE, CaptureKind
 from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, ROUGHNESS, join_maps, normalize_normal
 from brdfgan.errors import UserError
 
-PHOTO_CHANNELS = 3
+# The generator's input channels: the photos of the training capture it sees (brdfgan.capture).
+PHOTO_CHANNELS = TRAINING_CAPTURE.network_channels
 # Lower bound on the normal's z before normalisation: keeps the vector length >= 1e-3, so the
 # normalisation never divides by ~0 (finite gradients) and the normal never points into the surface.
 NORMAL_Z_MIN = 1e-3
@@ -50,6 +53,15 @@ def check_normal_head(normal_head: str) -> NormalHead:
     return normal_head  # type: ignore[return-value]
 
 
+def network_photos(batch: Mapping[str, Tensor], capture: CaptureKind = TRAINING_CAPTURE) -> Tensor:
+    """The photos of a batch the generator sees, stacked along the channels in the capture's order.
+
+    Shape: each ``batch[photo.batch_key]`` ``(B, 3, H, W)`` → ``(B, capture.network_channels, H, W)``.
+    """
+    photos = [batch[photo.batch_key] for photo in capture.network_photos]
+    return photos[0] if len(photos) == 1 else torch.cat(photos, dim=1)
+
+
 def encode_photo(photo: Tensor) -> Tensor:
     """Linear LDR photo in [0, 1] → centred range [-1, 1] (``2x - 1``), the networks' input scale.
 
@@ -70,8 +82,7 @@ def maps_from_raw(raw: Tensor, normal_head: NormalHead = "softplus_z") -> Tensor
       With ``normal_head="unit_z"`` instead ``z = 1`` and the third raw channel is unused:
       ``normalize(x, y, 1)``, the height-gradient form. Why: the softplus head is scale-free —
       the loss only sees the direction, so nothing holds ``|(x, y, z)|`` — and under Adam the raw
-      z drifted to ~8 in a 19-minute run (logs of issue 16), which divides the tilt's gradient by
-      8 and left the predicted normals flat (mean |x, y| 0.003 against 0.035 in the data). With
+      z grows, which divides the tilt's gradient by z and leaves the predicted normals flat. With
       z fixed, a raw (x, y) is the tangent of the tilt and its gradient at flat is 1.
 
     Shape:

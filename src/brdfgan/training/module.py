@@ -36,6 +36,7 @@ from brdfgan.losses.parameter import parameter_loss
 from brdfgan.losses.rendering import rendering_loss
 from brdfgan.losses.total import GANLoss
 from brdfgan.metrics import fixed_render_configs, hotspot_centres
+from brdfgan.models.heads import network_photos
 from brdfgan.training.schedule import LinearDecaySchedule
 
 log = logging.getLogger(__name__)
@@ -221,7 +222,7 @@ class SVBRDFGAN(L.LightningModule):
             optimizer.step()
 
     def _inputs(self, batch: Mapping[str, Any]) -> tuple[Tensor, Tensor]:
-        photo, maps = batch["photo"], batch["maps"]
+        photo, maps = network_photos(batch), batch["maps"]
         if self.channels_last:
             photo = photo.contiguous(memory_format=torch.channels_last)
             maps = maps.contiguous(memory_format=torch.channels_last)

@@ -29,6 +29,7 @@ import webdataset as wds
 from lightning.pytorch.loops.progress import _ProcessedTracker
 from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
+from brdfgan.capture import TRAINING_CAPTURE
 from brdfgan.core.flash_geometry import pixel_scale
 from brdfgan.core.render import FlashCapture
 from brdfgan.data.phone.conditions import sample_as_photographed
@@ -134,7 +135,8 @@ def collate_samples(samples: Sequence[Sample]) -> dict[str, Any]:
     meta = [dict(sample.meta) for sample in samples]
     height, width = samples[0].photo.shape[-2:]
     return {
-        "photo": torch.stack([sample.photo for sample in samples]).float(),
+        # The flash photo under its batch key (brdfgan.capture: what a batch of the capture holds).
+        TRAINING_CAPTURE.reference.batch_key: torch.stack([sample.photo for sample in samples]).float(),
         "maps": torch.stack([sample.maps for sample in samples]).float(),
         "flash": flash_frames(meta, height, width),
         "key": [sample.key for sample in samples],

@@ -50,6 +50,7 @@ import torch
 from torch import Tensor
 from torch.utils.data import DataLoader
 
+from brdfgan.capture import TRAINING_CAPTURE
 from brdfgan.core.exposure import auto_exposure_scale
 from brdfgan.core.lighting import Environment, SunLight, environment_lights
 from brdfgan.core.relight import SKY_LIGHT_DISTANCE
@@ -847,6 +848,6 @@ class RenderedDataModule(ShardDataModule):
                 sample = random_crop(sample, self.train_crop, random.Random(_mix(seed, "crop")))
             samples.append(sample)
         collated = collate_samples(samples)
-        for name in ("photo", "maps", "flash"):
+        for name in (*(photo.batch_key for photo in TRAINING_CAPTURE.photos), "maps", "flash"):
             collated[name] = collated[name].to(device)
         return collated

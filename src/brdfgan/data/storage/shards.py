@@ -29,6 +29,7 @@ import torch
 import zstandard
 from torch import Tensor
 
+from brdfgan.capture import TRAINING_CAPTURE, known_shard_members
 from brdfgan.core.checks import check_shape
 from brdfgan.core.svbrdf import (
     NORMAL,
@@ -47,6 +48,7 @@ __all__ = [
     "FORMAT_MEMBERS",
     "LEGACY_SHARD_FORMAT",
     "MANIFEST_NAME",
+    "PHOTO_CODE_TOLERANCE",
     "PNG_COMPRESSION",
     "SAMPLE_MEMBERS",
     "SHARD_FORMATS",
@@ -63,6 +65,7 @@ __all__ = [
     "read_manifest",
     "sample_format",
     "sha256_file",
+    "shard_differences",
     "shard_path",
     "verify_shard",
     "write_digest",
@@ -74,14 +77,30 @@ SHARD_FORMATS: tuple[str, ...] = ("u16z", "png")
 # The format of a dataset that records none: every dataset made before u16z existed.
 LEGACY_SHARD_FORMAT = "png"
 # The one definition of a sample's files per format, in their order inside a shard.
+# The photos' members come from the capture the data holds (brdfgan.capture: the flash photo's is
+# ``input``); a member of another kind's photo is known, so that a reader accepts it.
+_PHOTO = TRAINING_CAPTURE.reference.member
 FORMAT_MEMBERS: Mapping[str, tuple[str, ...]] = {
-    "u16z": ("input.u16z", "maps.u16z", "meta.json"),
-    "png": ("input.png", "basecolor.png", "normal.png", "roughness.png", "metallic.png", "meta.json"),
+    "u16z": (*TRAINING_CAPTURE.shard_members("u16z"), "maps.u16z", "meta.json"),
+    "png": (
+        *TRAINING_CAPTURE.shard_members("png"),
+        "basecolor.png",
+        "normal.png",
+        "roughness.png",
+        "metallic.png",
+        "meta.json",
+    ),
 }
 # The members of a PNG sample (the only format before u16z; kept under its old name).
 SAMPLE_MEMBERS: tuple[str, ...] = FORMAT_MEMBERS["png"]
-_KNOWN_MEMBERS = frozenset(name for names in FORMAT_MEMBERS.values() for name in names)
+_KNOWN_MEMBERS = frozenset(name for names in FORMAT_MEMBERS.values() for name in names).union(
+    *(known_shard_members(extension) for extension in SHARD_FORMATS)
+)
 MANIFEST_NAME = "manifest.json"
+# Two generations of one spec write the same maps and metadata, but Mitsuba's LLVM variant renders
+# a rare pixel one 16-bit code apart from run to run (the order of its parallel sums), so a shard's
+# SHA-256 can differ: photos are compared within this many codes (docs/data.md, determinism).
+PHOTO_CODE_TOLERANCE = 1
 DIGEST_SUFFIX = ".sha256"
 _HEX_DIGEST = re.compile(r"[0-9a-f]{64}")
 # zlib level 1: noisy 16-bit renders barely compress further at higher levels, which encode slower
@@ -198,9 +217,9 @@ def encode_sample(sample: Sample, shard_format: str = "png") -> dict[str, bytes]
     photo = _quantise(sample.photo)
     maps = _quantise_maps(sample.maps)
     if shard_format == "u16z":
-        return {"input.u16z": _encode_u16z(photo), "maps.u16z": _encode_u16z(maps), "meta.json": meta}
+        return {f"{_PHOTO}.u16z": _encode_u16z(photo), "maps.u16z": _encode_u16z(maps), "meta.json": meta}
     return {
-        "input.png": _encode_png(photo),
+        f"{_PHOTO}.png": _encode_png(photo),
         "basecolor.png": _encode_png(maps[0:3]),
         "normal.png": _encode_png(maps[3:6]),
         "roughness.png": _encode_png(maps[6:7]),
@@ -235,7 +254,7 @@ def decode_sample(record: Mapping[str, Any]) -> Sample:
     if missing:
         raise ShardError(f"{where}: missing member(s) {', '.join(missing)}")
     if shard_format == "u16z":
-        photo = _decode_u16z(record["input.u16z"], 3, f"{where} input.u16z")
+        photo = _decode_u16z(record[f"{_PHOTO}.u16z"], 3, f"{where} {_PHOTO}.u16z")
         maps = _decode_u16z(record["maps.u16z"], NUM_CHANNELS, f"{where} maps.u16z")
         images = [photo, maps]
     else:
@@ -555,6 +574,34 @@ def iter_shard(path: str | os.PathLike[str]) -> Iterator[Sample]:
                 yield decode_sample({"__key__": key, "__url__": str(path), **record})
     except (tarfile.TarError, OSError, EOFError) as error:
         raise ShardError(f"{path}: unreadable or corrupt tar ({error})") from error
+
+
+def shard_differences(
+    first: str | os.PathLike[str], second: str | os.PathLike[str], photo_codes: int = PHOTO_CODE_TOLERANCE
+) -> list[str]:
+    """How two shards of the same samples differ beyond the generation's tolerance, one line per
+    difference (empty when they agree): keys, maps and metadata exactly, photos within
+    ``photo_codes`` 16-bit codes per channel (:data:`PHOTO_CODE_TOLERANCE`).
+
+    Raises:
+        ShardError: naming the file, when either is unreadable or a sample is malformed.
+    """
+    differences: list[str] = []
+    ours, theirs = list(iter_shard(first)), list(iter_shard(second))
+    if [s.key for s in ours] != [s.key for s in theirs]:
+        return [f"{first} and {second} hold different samples"]
+    for a, b in zip(ours, theirs, strict=True):
+        if dict(a.meta) != dict(b.meta):
+            differences.append(f"sample {a.key!r}: metadata differs")
+        if a.maps.shape != b.maps.shape or not torch.equal(a.maps, b.maps):
+            differences.append(f"sample {a.key!r}: maps differ")
+        if a.photo.shape != b.photo.shape:
+            differences.append(f"sample {a.key!r}: photos differ in size")
+            continue
+        codes = np.abs(_quantise(a.photo).astype(np.int32) - _quantise(b.photo).astype(np.int32)).max()
+        if codes > photo_codes:
+            differences.append(f"sample {a.key!r}: photos differ by {codes} codes (tolerance {photo_codes})")
+    return differences
 
 
 def _scan_members(tar: tarfile.TarFile, path: Path, size: int, decode: bool) -> int:

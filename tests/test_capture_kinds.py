@@ -1,0 +1,96 @@
+"""The capture seam: one type says what photos a capture holds, and every stage reads it
+(predict's dispatch, the shard members, a batch's keys, the generator's input channels)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from brdfgan.capture import (
+    CAPTURE_KINDS,
+    FLASH_PHOTO,
+    SINGLE_PHOTO,
+    TRAINING_CAPTURE,
+    VIEWS,
+    CaptureKind,
+    CapturePhoto,
+    PhotoRole,
+    capture_kind,
+    known_shard_members,
+)
+from brdfgan.data.loading.datamodule import collate_samples
+from brdfgan.data.storage.shards import FORMAT_MEMBERS, Sample, encode_sample
+from brdfgan.errors import UserError
+from brdfgan.inference.dispatch import CAPTURE_PIPELINES, Capture, group_captures
+from brdfgan.models import PHOTO_CHANNELS
+from brdfgan.models.heads import network_photos
+from tests.conftest import random_maps
+
+# The flash + no-flash pair, as its issue will declare it: the seam must take it as one entry.
+NO_FLASH_PHOTO = CapturePhoto(PhotoRole.NO_FLASH, member="input_noflash", batch_key="photo_noflash")
+PAIR = CaptureKind(
+    "pair", (FLASH_PHOTO, NO_FLASH_PHOTO), "a flash photo and a no-flash photo", flag="--no-flash"
+)
+
+
+def test_every_kind_has_one_pipeline_and_the_training_capture_is_the_single_photo() -> None:
+    assert set(CAPTURE_PIPELINES) == set(CAPTURE_KINDS) == {"single", "views"}
+    assert TRAINING_CAPTURE is SINGLE_PHOTO and capture_kind("views") is VIEWS
+    with pytest.raises(UserError, match=r"^capture kind 'pair': expected one of single, views$"):
+        capture_kind("pair")
+
+
+def test_the_generator_shard_and_batch_read_the_training_capture() -> None:
+    assert PHOTO_CHANNELS == TRAINING_CAPTURE.network_channels == 3
+    assert FORMAT_MEMBERS["u16z"][:1] == TRAINING_CAPTURE.shard_members("u16z") == ("input.u16z",)
+    assert FORMAT_MEMBERS["png"][:1] == ("input.png",)
+    sample = Sample("k", torch.rand(3, 8, 8), random_maps(8, 8, seed=0), {})
+    assert set(encode_sample(sample, "u16z")) == set(FORMAT_MEMBERS["u16z"])
+    batch = collate_samples([sample])
+    assert torch.equal(network_photos(batch), batch[FLASH_PHOTO.batch_key])
+
+
+def test_a_pair_kind_derives_its_members_keys_and_channels() -> None:
+    assert PAIR.shard_members("u16z") == ("input.u16z", "input_noflash.u16z")
+    assert PAIR.network_channels == 6 and PAIR.roles(2) == (PhotoRole.FLASH, PhotoRole.NO_FLASH)
+    flash, no_flash = torch.zeros(2, 3, 4, 4), torch.ones(2, 3, 4, 4)
+    stacked = network_photos({"photo": flash, "photo_noflash": no_flash}, PAIR)
+    assert stacked.shape == (2, 6, 4, 4) and torch.equal(stacked[:, 3:], no_flash)
+    fit_only = CaptureKind(
+        "pair_fit", (FLASH_PHOTO, CapturePhoto(PhotoRole.NO_FLASH, "n", "n", network=False)), ""
+    )
+    assert fit_only.network_channels == 3
+    with pytest.raises(UserError, match=r"^--no-flash takes at most 2 photos of one surface, got 3$"):
+        PAIR.roles(3)
+    # Shards of every kind's photos are readable: the reader knows their members.
+    assert "input_noflash.u16z" not in known_shard_members("u16z")  # not a kind yet
+
+
+@pytest.mark.parametrize(
+    ("photos", "message"),
+    [
+        ((NO_FLASH_PHOTO,), "its first photo must be the flash photo"),
+        ((FLASH_PHOTO, CapturePhoto(PhotoRole.NO_FLASH, "input", "b")), "repeated member"),
+        ((FLASH_PHOTO, CapturePhoto(PhotoRole.NO_FLASH, "m", "photo")), "repeated batch_key"),
+    ],
+)
+def test_a_malformed_kind_is_refused(photos: tuple[CapturePhoto, ...], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        CaptureKind("bad", photos, "")
+
+
+def test_photos_group_into_captures_by_kind(tmp_path: Path) -> None:
+    photos = [tmp_path / "a" / "wood.jpg", tmp_path / "b" / "wood.png", tmp_path / "tiles.jpg"]
+    singles = group_captures(SINGLE_PHOTO, photos)
+    assert [(c.files, c.name) for c in singles] == [
+        ((photos[0],), "wood"),
+        ((photos[1],), "wood-2"),
+        ((photos[2],), "tiles"),
+    ]
+    (views,) = group_captures(VIEWS, photos)
+    assert views == Capture(VIEWS, tuple(photos), "wood") and views.reference == photos[0]
+    assert views.roles == (PhotoRole.FLASH, PhotoRole.VIEW, PhotoRole.VIEW)
+    with pytest.raises(UserError, match=r"^--views takes at most 12 photos of one surface, got 13$"):
+        group_captures(VIEWS, photos * 4 + photos[:1])
