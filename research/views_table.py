@@ -35,7 +35,7 @@ from torch import Tensor
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
 from brdfgan.data.storage.shards import iter_shard, list_shards
 from brdfgan.evaluation.real_captures import (
-    Capture,
+    CalibratedCapture,
     capture_models,
     fit_capture_maps,
     fit_gain,
@@ -84,7 +84,7 @@ def materials(sets: Sequence[tuple[str, str, int]]) -> list[tuple[str, Tensor]]:
 
 
 def held_out_errors(
-    capture: Capture, photos: Sequence[Photo], maps: Tensor, model: str
+    capture: CalibratedCapture, photos: Sequence[Photo], maps: Tensor, model: str
 ) -> tuple[float, float]:
     """``maps`` relit at the views of :data:`HELD_OUT`: their mean sRGB RMSE with one gain fitted
     on view 0 (eval-captures' headline) and at the calibrated power."""
@@ -108,7 +108,9 @@ FIGURE_VIEW = 6
 FIGURE_COLUMNS = ("photo (view 0)", "base colour", "normal", "roughness", f"view {FIGURE_VIEW} relit")
 
 
-def figure_row(capture: Capture, photos: list[Photo], maps: Tensor, label: str, panel: int) -> np.ndarray:
+def figure_row(
+    capture: CalibratedCapture, photos: list[Photo], maps: Tensor, label: str, panel: int
+) -> np.ndarray:
     """One row of the figure: the reference photo, maps, and held-out view relit with the gain of
     view 0 (as scored). Shape ``(panel, 5·panel, 3)`` uint8."""
     parts = split_maps(maps)
@@ -130,7 +132,11 @@ def figure_row(capture: Capture, photos: list[Photo], maps: Tensor, label: str, 
 
 
 def write_figure(
-    path: Path, capture: Capture, photos: list[Photo], rows: list[tuple[str, Tensor]], panel: int = 160
+    path: Path,
+    capture: CalibratedCapture,
+    photos: list[Photo],
+    rows: list[tuple[str, Tensor]],
+    panel: int = 160,
 ) -> None:
     canvas = np.concatenate([figure_row(capture, photos, maps, label, panel) for label, maps in rows], axis=0)
     truth_photo = linear_to_srgb(photos[FIGURE_VIEW].linear.clamp(0, 1)).permute(1, 2, 0).numpy()
@@ -198,7 +204,7 @@ def main() -> None:
     print(table)
 
 
-def make_captures(folder: Path, per_set: int) -> list[tuple[Capture, Tensor]]:
+def make_captures(folder: Path, per_set: int) -> list[tuple[CalibratedCapture, Tensor]]:
     """Each material's capture (module docstring) with its true maps: rendered into
     ``folder/<set>_<n>/`` unless an earlier run left it there."""
     sensor, settings = locked_phone("conf/sensor/phone_eval.yaml"), HandheldSettings()
@@ -214,7 +220,7 @@ def make_captures(folder: Path, per_set: int) -> list[tuple[Capture, Tensor]]:
 
 def add_errors(
     rows: dict[str, Row],
-    capture: Capture,
+    capture: CalibratedCapture,
     photos: list[Photo],
     model: str,
     views: int,

@@ -25,7 +25,7 @@ from brdfgan.core.render import project_to_image
 from brdfgan.core.svbrdf import join_maps
 from brdfgan.data.phone.sensor import SensorEffects, encode_srgb8
 from brdfgan.evaluation.real_captures import (
-    Capture,
+    CalibratedCapture,
     fit_capture_maps,
     fit_gain,
     read_capture,
@@ -220,7 +220,7 @@ def mitsuba_capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return write_synthetic_capture(capture, maps, tmp_path_factory.mktemp("fit") / "wave")
 
 
-def held_out_relit(capture: Capture, photos: list[Photo], maps: Tensor, fitted: int) -> float:
+def held_out_relit(capture: CalibratedCapture, photos: list[Photo], maps: Tensor, fitted: int) -> float:
     scores = score_capture(capture, photos, maps, "m", fit_views=fitted)
     return sum(s.rmse_fitted for s in scores if s.view >= 5) / 2
 

@@ -49,7 +49,7 @@ GAIN_PASSES = 5
 
 __all__ = [
     "REFERENCE_FILES",
-    "Capture",
+    "CalibratedCapture",
     "CaptureError",
     "CaptureModel",
     "CaptureResults",
@@ -93,8 +93,10 @@ class CaptureError(UserError):
 
 
 @dataclass(frozen=True)
-class Capture:
+class CalibratedCapture:
     """One capture folder: its views and calibration (centimetres, sample centre at the origin).
+    The views are a :data:`~brdfgan.capture.VIEWS` capture, the input view its flash reference;
+    ``--fit-views K`` fits the first K of them as ``predict --views`` does.
 
     Attributes:
         name: how tables name it (the folder's name, made unique within a run).
@@ -128,7 +130,7 @@ def is_capture_folder(folder: Path) -> bool:
     return any((folder / name).is_file() for name in (PARAMETERS_FILE, CAMERA_FILE, "00.png"))
 
 
-def find_captures(paths: Sequence[str | os.PathLike[str]]) -> list[Capture]:
+def find_captures(paths: Sequence[str | os.PathLike[str]]) -> list[CalibratedCapture]:
     """The captures named on the command line, read and checked (module docstring: a folder is a
     capture or a folder of captures). Raises :class:`CaptureError` for the first bad one."""
     folders: list[Path] = []
@@ -165,7 +167,7 @@ def _capture_names(folders: Sequence[Path]) -> list[str]:
     )
 
 
-def read_capture(folder: str | os.PathLike[str], name: str | None = None) -> Capture:
+def read_capture(folder: str | os.PathLike[str], name: str | None = None) -> CalibratedCapture:
     """Read and check one capture folder (either layout; ``parameters.json`` first).
 
     Raises:
@@ -229,7 +231,7 @@ def _short(value: Any, limit: int = 60) -> str:
     return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
-def _read_json_layout(folder: Path, name: str) -> Capture:
+def _read_json_layout(folder: Path, name: str) -> CalibratedCapture:
     path = folder / PARAMETERS_FILE
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -266,7 +268,9 @@ def _read_json_layout(folder: Path, name: str) -> Capture:
         raise CaptureError(f"{path}: images_dir: expected a folder name, got {_short(images_dir)}")
     views = _view_files(folder, ids, images_dir, PARAMETERS_FILE)
     index = torch.tensor(ids)
-    return Capture(name, folder, views, tuple(ids), camera[index], light[index], power, image_size, "json")
+    return CalibratedCapture(
+        name, folder, views, tuple(ids), camera[index], light[index], power, image_size, "json"
+    )
 
 
 def _text_numbers(path: Path) -> list[list[float]]:
@@ -293,7 +297,7 @@ def _text_numbers(path: Path) -> list[list[float]]:
     return rows
 
 
-def _read_text_layout(folder: Path, name: str) -> Capture:
+def _read_text_layout(folder: Path, name: str) -> CalibratedCapture:
     for required in (SIZE_FILE, POWER_FILE):
         if not (folder / required).is_file():
             raise CaptureError(f"{folder / required}: not found (the capture's {CAMERA_FILE} needs it)")
@@ -318,7 +322,7 @@ def _read_text_layout(folder: Path, name: str) -> Capture:
         )
     ids = list(range(camera.shape[0]))
     views = _view_files(folder, ids, None, CAMERA_FILE)
-    return Capture(name, folder, views, tuple(ids), camera, light, power, image_size, "txt")
+    return CalibratedCapture(name, folder, views, tuple(ids), camera, light, power, image_size, "txt")
 
 
 def _view_file(folder: Path, view: int) -> Path | None:
@@ -356,7 +360,7 @@ def _view_files(folder: Path, ids: Sequence[int], images_dir: str | None, source
     return tuple(views)
 
 
-def _check_views(capture: Capture) -> Capture:
+def _check_views(capture: CalibratedCapture) -> CalibratedCapture:
     """Every view square and of the first one's size (image headers only)."""
     from PIL import Image, UnidentifiedImageError
 
@@ -383,7 +387,7 @@ def _check_views(capture: Capture) -> Capture:
     return replace(capture, side=first[0])
 
 
-def read_views(capture: Capture) -> list[Photo]:
+def read_views(capture: CalibratedCapture) -> list[Photo]:
     """Every view decoded like ``brdfgan predict`` decodes a photo (sRGB → linear)."""
     photos = [read_photo(path, "srgb") for path in capture.views]
     for photo in photos:
@@ -395,7 +399,7 @@ def read_views(capture: Capture) -> list[Photo]:
 # --- geometry, relighting, scores ---------------------------------------------------------------
 
 
-def capture_flash_frame(capture: Capture, view: int = 0, side: int | None = None) -> Tensor:
+def capture_flash_frame(capture: CalibratedCapture, view: int = 0, side: int | None = None) -> Tensor:
     """The :mod:`flash frame <brdfgan.core.flash_geometry>` of view ``view`` (index into
     ``capture.views``) at ``side`` pixels (default: the capture's): the hotspot where the flash is
     above the plane, ``s = (image_size / side) / light_z`` (module docstring).
@@ -415,7 +419,7 @@ def capture_flash_frame(capture: Capture, view: int = 0, side: int | None = None
 
 
 @torch.no_grad()
-def relight(capture: Capture, maps: Tensor) -> Tensor:
+def relight(capture: CalibratedCapture, maps: Tensor) -> Tensor:
     """Every view re-rendered from ``maps`` at its calibrated camera and flash, radiance ×
     ``light_pow`` (linear, unclipped), one view at a time (bounded memory at 1024²+).
 
@@ -544,7 +548,7 @@ def capture_models(
     ]
 
 
-def predict_capture_maps(capture: Capture, photo: Photo, model: CaptureModel) -> Tensor:
+def predict_capture_maps(capture: CalibratedCapture, photo: Photo, model: CaptureModel) -> Tensor:
     """``model``'s maps of the input view ``photo``, at the capture's resolution (module docstring).
 
     Shape: output ``(8, side, side)`` float32.
@@ -564,7 +568,7 @@ def predict_capture_maps(capture: Capture, photo: Photo, model: CaptureModel) ->
     return resize_maps(maps.detach().float().cpu(), side)
 
 
-def check_fit_views(captures: Sequence[Capture], fit_views: int) -> None:
+def check_fit_views(captures: Sequence[CalibratedCapture], fit_views: int) -> None:
     """Raise :class:`CaptureError` for the first capture with no view left to relight after
     fitting to its first ``fit_views`` views (``fit_views`` ≥ 1)."""
     if fit_views < 1:
@@ -578,7 +582,7 @@ def check_fit_views(captures: Sequence[Capture], fit_views: int) -> None:
 
 
 def fit_capture_maps(
-    capture: Capture,
+    capture: CalibratedCapture,
     photos: Sequence[Photo],
     maps: Tensor,
     fit_views: int,
@@ -656,7 +660,7 @@ class CaptureResults:
 
 
 def score_capture(
-    capture: Capture, photos: Sequence[Photo], maps: Tensor, model: str, fit_views: int = 1
+    capture: CalibratedCapture, photos: Sequence[Photo], maps: Tensor, model: str, fit_views: int = 1
 ) -> list[ViewScore]:
     """Relight ``maps`` at every view of ``capture`` and score them against ``photos``; the first
     ``fit_views`` views are the input and the fitted ones (in no mean)."""
@@ -677,9 +681,9 @@ def score_capture(
 
 
 def evaluate_captures(
-    captures: Sequence[Capture],
+    captures: Sequence[CalibratedCapture],
     models: Sequence[CaptureModel],
-    on_capture: Callable[[Capture], None] | None = None,
+    on_capture: Callable[[CalibratedCapture], None] | None = None,
     fit_views: int = 1,
     fit_config: ViewFitConfig | None = None,
 ) -> CaptureResults:
