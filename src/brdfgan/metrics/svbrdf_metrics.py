@@ -1245,7 +1245,7 @@ class ObservableNormalAngle(Metric):
     """The normal angle over the texels whose relief the photo shows (:func:`observable_mask` of the
     true :func:`relief_shading` against the photo's 8-bit rounding), beside the flat map's over the
     same texels. Both are ``Σ θ·mask / N`` over all N texels (the part of the angle a photo can
-    show, as :func:`brdfgan.data.tools.relief.observable_angle`), so their ratio is the model's gain
+    show), so their ratio is the model's gain
     over a flat map where the relief is visible.
 
     ``update(pred, true, photo=None, flash=None)``: ``photo`` the linear photos the model read

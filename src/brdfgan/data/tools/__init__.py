@@ -1,2 +1,2 @@
-"""Tools over datasets: statistics (``brdfgan dataset-stats``), relief statistics, contact sheets
+"""Tools over datasets: statistics (``brdfgan dataset-stats``), contact sheets
 and the Deschaintre et al. 2018 dataset converter."""
