@@ -12,7 +12,11 @@
 - :mod:`~brdfgan.inference.views`: several photos of one surface (issue 47): each registered to
   the reference photo (:mod:`.views.register`: features or a marker board), then one material
   fitted to all of them (:mod:`.views.fit`, settings in :mod:`.views.config`).
-- :mod:`~brdfgan.inference.pipeline`: the stages chained per photo and per batch.
+- :mod:`~brdfgan.inference.pipeline`: the stages chained for one photo, and the write-out every
+  kind of capture ends in.
+- :mod:`~brdfgan.inference.dispatch`: a run's files grouped into captures of one kind
+  (:mod:`brdfgan.capture`: one photo, several views) and each run by its kind's pipeline from one
+  table; the batch goes on past a failed capture.
 """
 
 # Adam steps of `brdfgan predict --refine` given bare (brdfgan.inference.refine.RefineConfig.steps).
