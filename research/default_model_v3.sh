@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # Reproduces brdfgan-default-v3, the default model shipped before v4 (research/ keeps it as history;
-# scripts/default_model_v4.sh reproduces the shipped one), and its measurements (docs/default_model_v3.md):
+# scripts/default_model_v4.sh reproduces the shipped one), and its measurements (research/notes/2026-12-default-model-v3.md):
 # the v3 dataset, v3, a second seed of its recipe, the same-budget baseline, the trivial references, the evaluation on the
 # procedural test split and on the out-of-distribution benchmark, the export into the package.
 # One training at a time on the two threads (two side by side each ran at 40-60 % speed).
 # About 2.5 hours on the 2-core CPU machine this project was developed on (no GPU); the
-# equal-wall-time comparisons that chose the recipe are in docs/default_model_v3.md, "How the v3 recipe was chosen" (logs/v3cmp).
+# equal-wall-time comparisons that chose the recipe are in research/notes/2026-12-default-model-v3.md, "How the v3 recipe was chosen" (logs/v3cmp).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=.venv/bin/python

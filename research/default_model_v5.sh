@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reproduces the v5 candidate (issue 46) and its measurements (docs/default_model.md): stage 1
+# Reproduces the v5 candidate (issue 46) and its measurements (research/notes/2026-12-v5-candidate.md): stage 1
 # (experiment=anchored_rendered: photos rendered on the fly, no training set to generate), stage 2
 # on whole 256² photos (experiment=anchored_rendered_fixres), the normals' learning curve, and the
 # evaluation on the validation split's two parts, the procedural and scan test sets and both OOD
@@ -43,7 +43,7 @@ normal_curve() {  # validation normal angle through both stages (v4 ended at 7.9
   done
   $PY -m scripts.learning_curve "${runs[@]}" --metric val/normal_angle_deg --reference "flat map=7.95" \
     --out $RUNS_OUT/normal_curve
-  cp $RUNS_OUT/normal_curve.png docs/default_model_v5_normal_curve.png  # the table is in docs/default_model.md
+  cp $RUNS_OUT/normal_curve.png docs/default_model_v5_normal_curve.png  # the table is in research/notes/2026-12-v5-candidate.md
 }
 
 evaluate() {  # validation parts, test sets, both OOD variants: the v5 runs there are, v4, the references
@@ -89,7 +89,7 @@ export_weights() {
 ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's changes added at a time
   # (rendered photos with the calibrated sensor; + relief sampling; + no shading image = the first
   # v5 recipe), then the height head and the slope term (today's experiment=anchored_rendered), 1 000
-  # batches each, scored on the validation split's two parts (docs/default_model.md). ROWS picks
+  # batches each, scored on the validation split's two parts (research/notes/2026-12-v5-candidate.md). ROWS picks
   # rows (default all), SEED another seed (its runs are <row>_seed<SEED>), EVAL the scores' folders.
   local seed=${SEED:-0} suffix=""
   [ "$seed" = 0 ] || suffix=_seed$seed
@@ -103,27 +103,27 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
     [rendered]="$slopes"
     [rendered_relief]="$slopes $relief"
     [v5_recipe]="$slopes $relief model.generator.shading=none"  # the first v5 recipe
-    # The normals as a height's differences (integrable slopes; docs/data.md, "(e)"),
+    # The normals as a height's differences (integrable slopes; research/notes/2026-12-relief-investigation.md, "(e)"),
     [rendered_height]="experiment=anchored_rendered loss.normal_tilt_weight=0"
     # and a squared slope error beside the angle (the angle alone is minimised by a flat map
-    # where a tilt is uncertain; docs/default_model_v3.md): today's experiment=anchored_rendered.
+    # where a tilt is uncertain; research/notes/2026-12-default-model-v3.md): today's experiment=anchored_rendered.
     [rendered_height_tilt]="experiment=anchored_rendered"
     # Each with a quarter of the crops' own relief removed: a texture over a flat surface, where
-    # every model drew relief on the near-flat held-out scans (docs/default_model.md).
+    # every model drew relief on the near-flat held-out scans (research/notes/2026-12-v5-candidate.md).
     [rendered_height_flat]="experiment=anchored_rendered loss.normal_tilt_weight=0 data.relief.flat_probability=0.25"
     [rendered_height_tilt_flat]="experiment=anchored_rendered data.relief.flat_probability=0.25"
     # Half of the crops' relief turned inside out: whether dark is low is then not in the base
-    # colour (the training scans disagree on it; docs/data.md), only in the photo's shading.
+    # colour (the training scans disagree on it; research/notes/2026-12-relief-investigation.md), only in the photo's shading.
     [rendered_height_invert]="experiment=anchored_rendered loss.normal_tilt_weight=0 data.relief.invert_probability=0.5"
     # and with half of the base colours faded besides: relief shading under a plain albedo, which
-    # the issue's scratch harness learned from (docs/data.md, "(d)").
+    # the issue's scratch harness learned from (research/notes/2026-12-relief-investigation.md, "(d)").
     [rendered_height_invert_plain]="experiment=anchored_rendered loss.normal_tilt_weight=0 data.relief.invert_probability=0.5 data.relief.plain_albedo_probability=0.5"
     # Shading first: the normals trained alone on those photos (experiment=anchored_rendered_normals), which
     # read some relief from the shading where the full recipe reads none; then the inverted row's
     # recipe starting from its weights, so the whole generator learns on with that reading.
     [shading_first]="experiment=anchored_rendered_normals"
     # The same on photos without room light, validated on the validation split re-generated
-    # without it (relief_light makes it and scores this row; docs/data.md "(h)").
+    # without it (relief_light makes it and scores this row; research/notes/2026-12-relief-investigation.md "(h)").
     [shading_noenv]="experiment=anchored_rendered_normals data.data_dir=data/pas_noenv data.prepare.spec.lighting.env_to_flash_min=1e-6 data.prepare.spec.lighting.env_to_flash_max=1e-6"
     [rendered_height_invert_after_shading]="experiment=anchored_rendered loss.normal_tilt_weight=0 data.relief.invert_probability=0.5 init_from=$OUT/ablation/shading_first$suffix/checkpoints/last.ckpt"
     # v4 itself (both stages) trained on for 1 000 batches of rendered photos at stage 2's rate:
@@ -156,7 +156,7 @@ ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's cha
 
 shading_curve() {  # the normals alone (experiment=anchored_rendered_normals) 8x as long: 8 000 batches of 4, 61 min,
   # validated every 2 000: whether more photos lift the slope cosine past the 1 000-2 000-batch
-  # plateau (docs/default_model.md, "More photos"); scored beside v4 like an ablation row.
+  # plateau (research/notes/2026-12-v5-candidate.md, "More photos"); scored beside v4 like an ablation row.
   local run=$OUT/shading_curve
   [ -f $run/.done ] || {
     $PY train.py experiment=anchored_rendered_normals data.epoch_samples=8000 trainer.max_epochs=4 \
@@ -167,7 +167,7 @@ shading_curve() {  # the normals alone (experiment=anchored_rendered_normals) 8x
     $OUT/shading_curve_ "" "${HELD_OUT:-}" val ${HELD_OUT:+test}
 }
 
-relief_light() {  # docs/data.md "(h)": what hides the flash's relief shading. The validation split and
+relief_light() {  # research/notes/2026-12-relief-investigation.md "(h)": what hides the flash's relief shading. The validation split and
   # the standard OOD variant re-generated without room light (and once with the camera square on),
   # each read with and without the evaluation sensor; relief_oracle --steps 0 scores only the
   # observation's correlation with the true relief shading (~5 min); then the fit on the photos

@@ -1,7 +1,7 @@
 """v5 trained at GPU scale on photos rendered on the fly (issue 46), time-boxed for a lent GPU.
 
 The normals-only runs on the 2-core machine plateau at a slope cosine of ~0.15–0.2, from 1 000
-to 8 000 batches of 4 crops and after a plain-albedo start alike (docs/default_model.md). This
+to 8 000 batches of 4 crops and after a plain-albedo start alike (research/notes/2026-12-v5-candidate.md). This
 asks whether a larger network moves them: two ``train.py`` stages under one wall-time budget, on
 ``data=rendered`` (the photos rendered on the GPU every batch, the material bank painted by
 the plan's CPU processes):
@@ -409,7 +409,7 @@ def _write_summary(out: Path, summary: dict[str, Any], work: Path) -> None:
 
 # One GPU: v5's generator at twice its width (4x the weights: the normals alone plateau from
 # 4 000 to 8 000 batches at v5's width on the CPU machine, so more photos alone do not lift them;
-# docs/default_model.md, "More photos"), 32 photos a batch. Two snapshots a stage: four fp16
+# research/notes/2026-12-v5-candidate.md, "More photos"), 32 photos a batch. Two snapshots a stage: four fp16
 # exports of ~15 MB fit OUT's 64 MiB.
 GPU_PLAN = Plan(device="cuda", width=32, batch=32, workers=14, paint_workers=16,
                 snapshots=2, shading_share=0.45, precision="bf16-mixed")  # fmt: skip

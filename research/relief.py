@@ -1,7 +1,7 @@
 """Relief statistics of normal maps and what a photo shows of them (issue 46, item 1).
 
 Three questions, one group of pure functions each (definitions in each docstring; the measured
-tables are in docs/data.md, "Relief: what the training data shows and what a photo can show"):
+tables are in research/notes/2026-12-relief-investigation.md):
 
 - **Realism: what relief the maps hold.** :func:`tilt_deg` (a texel's angle from +Z; its mean is
   the angle a flat map scores), :func:`flat_share`, :func:`flat_window_share`,

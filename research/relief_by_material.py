@@ -1,5 +1,5 @@
 """What a model reads of relief, material by material: the per-material table of
-docs/default_model.md ("What the network reads of relief").
+research/notes/2026-12-v5-candidate.md ("What the network reads of relief").
 
     python -m research.relief_by_material data/procedural_and_scans_test_scans \
         v4=logs/v5/v4.safetensors height=logs/v5/ablation/rendered_height/checkpoints/last.ckpt

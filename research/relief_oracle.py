@@ -20,7 +20,7 @@ observations:
 
 The fit is given what a model must find (base colour, roughness, metallic) and has no learned
 prior of relief. Writes ``OUT.json``; prints one line per observation and ridge. The tables of
-docs/data.md ("(g)"):
+research/notes/2026-12-relief-investigation.md ("(g)"):
 
     python -m research.relief_oracle --out logs/v5/oracle/val_procedural_shading \\
         data=procedural_and_scans data.data_dir=data/procedural_and_scans_val_procedural \\

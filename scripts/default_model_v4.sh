@@ -19,7 +19,7 @@ BUDGET_S=480  # training seconds per comparison run
 # Seconds per step of each variant on the 2-core machine (70-step probes; A and B share one
 # architecture): a run's steps are BUDGET_S / its step time, so each gets the same wall time.
 # The decisive rows of the issue's comparison, rerun once the heads' gain let the network learn
-# at this length (docs/default_model.md keeps the first table, from before the gain, and says why
+# at this length (research/notes/2026-12-default-model-v4.md keeps the first table, from before the gain, and says why
 # its width, crop, scan-share and learning-rate rows were not rerun).
 declare -A STEP_S=([A_base]=0.73 [B_input_only]=0.73 [C_no_shading]=0.66 [D_gradient]=0.75
                    [E_adversarial]=0.81 [G_global]=0.74)
@@ -98,7 +98,7 @@ normal_curve() {  # validation normal angle through both stages, with and withou
   $PY -m scripts.learning_curve "shading=$OUT/final_seed0+$OUT/fixres_seed0" \
     "none=$OUT/no_shading_seed0+$OUT/no_shading_fixres_seed0" "shading, seed 1=$OUT/final_seed1+$OUT/fixres_seed1" \
     --metric val/normal_angle_deg --reference "flat map=7.95" --out $OUT/normal_curve
-  cp $OUT/normal_curve.png docs/default_model_normal_curve.png  # the table is in docs/default_model.md
+  cp $OUT/normal_curve.png docs/default_model_normal_curve.png  # the table is in research/notes/2026-12-default-model-v4.md
 }
 
 joint() {  # the final recipe with the paper's joint rendering loss, seed 0: what the cross pairing changed

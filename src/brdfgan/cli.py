@@ -279,8 +279,9 @@ def _add_predict_model(predict: argparse.ArgumentParser) -> None:
         type=_positive,
         metavar="STEPS",
         help="fit one offset per map (base colour, roughness, metallic), the exposure and the ambient "
-        "light to the photo with the differentiable renderer: relit views come closer to the "
-        "surface's, the roughness map moves away from the true one (docs/refinement.md); STEPS Adam steps "
+        "light to the photo with the differentiable renderer: relit views of the photographed light, "
+        "not better maps (with the shipped model it does not lower the maps' errors; "
+        "docs/refinement.md); STEPS Adam steps "
         f"(default {DEFAULT_REFINE_STEPS} when given bare; ~4 s per photo at 256² on 2 CPU cores)",
     )
 

@@ -9,7 +9,7 @@ two map groups the anchored network predicts with separate decoders — (base co
 (normal, roughness) — beside the *true* other group, half of the configurations each
 (:func:`cross_paired`). Why: under the joint render one map's error is paid back by another's (a
 too-bright metal colour by a glossier lobe), and that compensation did not carry over to held-out
-scans; the probe and the runs: ``docs/default_model.md`` ("The cross-paired rendering loss").
+scans; the probe and the runs: ``research/notes/2026-12-default-model-v4.md``.
 """
 
 from __future__ import annotations

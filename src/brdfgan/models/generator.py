@@ -29,7 +29,7 @@ Choices the paper leaves open (all parameter-free or removing dead parameters):
   The paper preset has 45,598,408 parameters (45.6 M as published; 45,609,032 with all biases).
 
 The generator takes a flash frame like every generator (``forward(photo, flash)``) and ignores
-it: flash-offset input channels were tried and not adopted (docs/default_model_v3.md); the
+it: flash-offset input channels were tried and not adopted (research/notes/2026-12-default-model-v3.md); the
 anchored generator reads them.
 """
 
