@@ -1,7 +1,8 @@
 """v5 trained at GPU scale on photos rendered on the fly (issue 46), time-boxed for a lent GPU.
 
 The normals-only runs on the 2-core machine plateau at a slope cosine of ~0.15–0.2, from 1 000
-to 8 000 batches of 4 crops and after a plain-albedo start alike (research/notes/2026-12-v5-candidate.md). This
+to 8 000 batches of 4 crops and after a plain-albedo start alike
+(research/notes/2026-12-v5-candidate.md). This
 asks whether a larger network moves them: two ``train.py`` stages under one wall-time budget, on
 ``data=rendered`` (the photos rendered on the GPU every batch, the material bank painted by
 the plan's CPU processes):

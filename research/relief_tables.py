@@ -1,5 +1,6 @@
 """The "before" tables of issue 46, item 1 (a)–(c): the relief of the training data and what a
-photo shows of it (definitions in :mod:`research.relief`; the tables in research/notes/2026-12-relief-investigation.md).
+photo shows of it (definitions in :mod:`research.relief`; the tables in
+research/notes/2026-12-relief-investigation.md).
 
 (a) **Realism**: per procedural family (a few training materials each, painted at the spec's
 material resolution as the bank paints them, cut into training crops as the bank cuts them) and
@@ -313,7 +314,8 @@ def dark_is_low_table(bank: HandfulBank, materials: dict[str, list[PaintedMateri
 def sensor_variants(cfg: DictConfig) -> list[tuple[str, SensorEffects | None]]:
     """The deliveries compared: none, the evaluation sensor, v4's training sensor
     (``data=procedural_and_scans``) with and without its noise and JPEG, and ``data=rendered``'s
-    sensor (the phone's noise and JPEG calibrated to a downscaled photo, research/notes/2026-12-relief-investigation.md says why)."""
+    sensor (the phone's noise and JPEG calibrated to a downscaled photo; why:
+    research/notes/2026-12-relief-investigation.md)."""
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         v4 = compose(config_name="train", overrides=["data=procedural_and_scans"])
     training: SensorEffects = hydra.utils.instantiate(v4.data.sensor)

@@ -113,9 +113,9 @@ def tilt_squared_error(pred: Tensor, target: Tensor) -> Tensor:
     Why beside the angular distance: an angle is an L1-type error, minimised by the conditional
     *median*; where the photo leaves a tilt uncertain — and a quarter of the training texels are
     flat — that median is exactly flat, so the network's normals collapse to flat first and learn
-    slowly after (the normal-only runs: ``research/notes/2026-12-default-model-v3.md``, "The maps were not where the
-    photos showed them"). Squared error targets the conditional mean, whose gradient grows with the
-    miss.
+    slowly after (the normal-only runs: ``research/notes/2026-12-default-model-v3.md``, "The maps
+    were not where the photos showed them"). Squared error targets the conditional mean, whose
+    gradient grows with the miss.
 
     Shape:
         - pred, target: ``(*, 3, H, W)``, unit normals with z > 0

@@ -724,10 +724,10 @@ class RerenderError(Metric):
 # falls to half its height over the base level at 0.03 of the side for perceptual roughness 0.2,
 # 0.07 at 0.3, 0.10 at 0.35, 0.13 at 0.4 and 0.21 at 0.5. 0.125 covers the highlight of the
 # glossy to mid-rough samples, where the photo is brightest (and clips), and is of the size of
-# the marks in the shipped model's maps (the grid of research/notes/2026-12-default-model-v3.md: radii of roughly
-# 0.1–0.2 of the side). A smaller disk would hold too few pixels for a stable RMSE (0.125 keeps
-# π·0.125² = 4.9 % of the image, ~3,200 pixels per 256² sample); a larger one would dilute a
-# local mark with unaffected surroundings.
+# the marks in the shipped model's maps (the grid of research/notes/2026-12-default-model-v3.md:
+# radii of roughly 0.1–0.2 of the side). A smaller disk would hold too few pixels for a stable
+# RMSE (0.125 keeps π·0.125² = 4.9 % of the image, ~3,200 pixels per 256² sample); a larger one
+# would dilute a local mark with unaffected surroundings.
 HOTSPOT_RADIUS_FRACTION = 0.125
 
 

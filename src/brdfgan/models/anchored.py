@@ -22,10 +22,10 @@ Inputs per pixel: ``log`` of the photo and of the anchor, and the four flash sid
 (:mod:`brdfgan.inference.model.tiling`). The normal head is ``normalize(s_x, s_y, 1)`` of two
 slopes, or of a height's differences (``normal_head``).
 
-Ablation-only switches (no shipped recipe sets them; ``research/notes/2026-12-default-model-v4.md`` has each one's
-run): ``anchored=False``, ``shading`` other than ``"detached"``, ``global_features=False``,
-``highlight_profile=False``. ``normal_head="height"`` is ``experiment=anchored_rendered``'s (the v5
-candidate).
+Ablation-only switches (no shipped recipe sets them; each one's run is in
+``research/notes/2026-12-default-model-v4.md``): ``anchored=False``, ``shading`` other than
+``"detached"``, ``global_features=False``, ``highlight_profile=False``. ``normal_head="height"``
+is ``experiment=anchored_rendered``'s (the v5 candidate).
 """
 
 from __future__ import annotations
