@@ -1,8 +1,8 @@
 """Generate a synthetic SVBRDF dataset: ``python generate.py [dataset_spec=paper] [shard=N] [plan=true]``.
 
 Thin entry point: the config (``conf/generate.yaml``) becomes a
-:class:`brdfgan.data.storage.generation.DatasetSpec` (every value checked, naming its key, before
-anything is written); :func:`brdfgan.data.storage.generation.run_generation` does the work. See the
+:class:`brdfgan.data.spec.dataset_spec.DatasetSpec` (every value checked, naming its key, before
+anything is written); :func:`brdfgan.data.generation.generation.run_generation` does the work. See the
 config file for multi-process and SLURM use. A bad value, a bad environment file or a full disk
 ends with one ``error:`` line; Ctrl-C or SIGTERM with one line too, keeping complete shards.
 """
@@ -15,7 +15,7 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from brdfgan.config_check import check_config
-from brdfgan.data.storage.generate_config import register_configs
+from brdfgan.data.generation.generate_config import register_configs
 from brdfgan.errors import exit_on_user_error, interrupts_raise, run_hydra_app
 from brdfgan.sweep_folders import register_resolvers
 
@@ -34,11 +34,9 @@ def main(cfg: DictConfig) -> None:
 
 
 def generate(cfg: DictConfig) -> None:
+    from brdfgan.data.generation.generation import dataset_ready, plan_shards, run_generation
     from brdfgan.data.materials.scanned import scanned_material_folders
-    from brdfgan.data.storage.generation import (
-        dataset_ready,
-        plan_shards,
-        run_generation,
+    from brdfgan.data.spec.dataset_spec import (
         scan_materials,
         spec_from_config,
         split_materials,

@@ -1,7 +1,7 @@
 """Dataset generation benchmark: samples per hour and where the time goes.
 
 For each case, materials go through the whole production path of
-:func:`brdfgan.data.storage.generation.material_samples` — family maps at the material resolution,
+:func:`brdfgan.data.generation.generation.material_samples` — family maps at the material resolution,
 crops, captures per crop (environment + flash, Mitsuba, auto exposure) — and every sample is
 encoded as it would be written to a shard. The first two cases are the paper-like protocol
 (7 crops × 3 captures per material); the last is the procedural dataset (v3's recipe)
@@ -32,8 +32,8 @@ CASES: list[str] = ["256,64,1024", "512,196,2048", "recipe"]
 def _recipe_spec() -> Any:
     from hydra import compose, initialize_config_dir
 
-    from brdfgan.data.storage.generate_config import register_configs
-    from brdfgan.data.storage.generation import spec_from_config
+    from brdfgan.data.generation.generate_config import register_configs
+    from brdfgan.data.spec.dataset_spec import spec_from_config
 
     register_configs()
     with initialize_config_dir(str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
@@ -42,20 +42,17 @@ def _recipe_spec() -> Any:
 
 
 def _measure(case: str, materials: int) -> dict[str, float]:
-    from brdfgan.data.storage.generation import single_torch_thread
+    from brdfgan.data.spec.determinism import single_torch_thread
 
     with single_torch_thread():  # as run_generation does
         return _measure_spec(case, materials)
 
 
 def _measure_spec(case: str, materials: int) -> dict[str, float]:
+    from brdfgan.data.generation.generation import MitsubaPhotographer, material_samples
     from brdfgan.data.phone.environments import build_environment_pools, load_environment
-    from brdfgan.data.storage.generation import (
-        DatasetSpec,
-        MitsubaPhotographer,
-        derive_seed,
-        material_samples,
-    )
+    from brdfgan.data.spec.dataset_spec import DatasetSpec
+    from brdfgan.data.spec.determinism import derive_seed
     from brdfgan.data.storage.shards import write_shard
 
     if case == "recipe":

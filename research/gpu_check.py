@@ -4,7 +4,7 @@ Run ``research/gpu_check.sh`` (GPU) or ``research/gpu_check.sh --device cpu --ti
 run of the same path at toy sizes, seconds). Nothing is downloaded and Mitsuba is not needed:
 
 1. Data: a small dataset (10 materials → 32 train, 2 val, 2 test samples at 512²) made by the
-   real generation pipeline (:func:`brdfgan.data.storage.generation.run_generation`: procedural families,
+   real generation pipeline (:func:`brdfgan.data.generation.generation.run_generation`: procedural families,
    crops, the shard writer, manifests) with the photos rendered by the project's torch renderer
    (:func:`brdfgan.core.render.render_flash` + :func:`brdfgan.core.exposure.auto_expose`) instead
    of Mitsuba, in a temporary folder.
@@ -292,7 +292,7 @@ def rendered_overrides(
 
 
 def torch_photographer(spec: Any) -> Callable[..., tuple[torch.Tensor, float]]:
-    """A :data:`~brdfgan.data.storage.generation.PhotographFn` without Mitsuba: the flash-only torch
+    """A :data:`~brdfgan.data.generation.generation.PhotographFn` without Mitsuba: the flash-only torch
     render of the drawn flash and field of view, auto-exposed with the drawn exposure error (no
     environment light; tilt, distance and flash offset are ignored — the capture randomisation
     is off by default anyway)."""
@@ -313,9 +313,10 @@ def torch_photographer(spec: Any) -> Callable[..., tuple[torch.Tensor, float]]:
 def make_data(root: Path, plan: Plan) -> tuple[Path, int]:
     """Generate the check's dataset into ``root`` (10 materials: 8 train × 2 crops × 2 photos = 32
     train samples, one material each for val and test); return it and its train sample count."""
-    from brdfgan.data.loading.augment import CropSampling
+    from brdfgan.data.generation.generation import run_generation
+    from brdfgan.data.materials.augment import CropSampling
     from brdfgan.data.phone.environments import LightingConfig
-    from brdfgan.data.storage.generation import DatasetSpec, run_generation
+    from brdfgan.data.spec.dataset_spec import DatasetSpec
     from brdfgan.data.storage.shards import read_manifest
 
     spec = DatasetSpec(

@@ -135,7 +135,7 @@ def stage(scans: Path, to: Path = STAGED) -> None:
     import cv2
 
     from brdfgan.data.materials.scanned import SCANNED_EXTENSIONS, scanned_material_folders
-    from brdfgan.data.storage.generation import split_scan_sets
+    from brdfgan.data.spec.dataset_spec import split_scan_sets
 
     work = Path(tempfile.mkdtemp(prefix="gpu_train-"))
     overrides = [*_bank_overrides(work, 1), f"data.bank.spec.scans.folder={scans}"]

@@ -43,7 +43,6 @@ from torch import Tensor
 
 from brdfgan.core.lighting import Environment
 from brdfgan.core.svbrdf import NORMAL
-from brdfgan.data.loading.augment import random_crops
 from brdfgan.data.loading.rendered import (
     MaterialBank,
     ReliefSampling,
@@ -53,19 +52,13 @@ from brdfgan.data.loading.rendered import (
     sample_relief,
     scene_tensors,
 )
+from brdfgan.data.materials.augment import random_crops
 from brdfgan.data.materials.families import resolve_families
 from brdfgan.data.materials.source import PaintedMaterial
 from brdfgan.data.phone.environments import EnvironmentSpec, load_environment
 from brdfgan.data.phone.sensor import SensorEffects
-from brdfgan.data.storage.generation import (
-    DatasetSpec,
-    derive_seed,
-    material_seed,
-    paint_material,
-    scan_materials,
-    single_torch_thread,
-    split_materials,
-)
+from brdfgan.data.spec.dataset_spec import DatasetSpec, paint_material, scan_materials, split_materials
+from brdfgan.data.spec.determinism import derive_seed, material_seed, single_torch_thread
 from brdfgan.training.config import register_configs
 from research.relief import (
     FLAT_DEG,

@@ -13,8 +13,8 @@ from omegaconf import DictConfig, OmegaConf
 from torch import Tensor
 
 from brdfgan.core.svbrdf import flat_maps, join_maps, normalize_normal, validate_maps
+from brdfgan.data.generation.generate_config import register_configs as register_generate_configs
 from brdfgan.data.materials.base import MaterialFamily
-from brdfgan.data.storage.generate_config import register_configs as register_generate_configs
 from brdfgan.evaluation.config import register_configs as register_evaluate_configs
 from brdfgan.training.config import register_configs
 

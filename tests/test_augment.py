@@ -8,7 +8,7 @@ import torch
 from brdfgan.core.render import render_flash
 from brdfgan.core.sampling import log_uniform
 from brdfgan.core.svbrdf import CHANNELS, flat_maps, join_maps, linear_to_srgb, srgb_to_linear, validate_maps
-from brdfgan.data.loading.augment import CropSampling, CropTransform, crop_maps, random_crops
+from brdfgan.data.materials.augment import CropSampling, CropTransform, crop_maps, random_crops
 from brdfgan.data.materials.base import height_to_normal
 from brdfgan.data.materials.noise import fbm, value_noise
 

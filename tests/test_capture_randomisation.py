@@ -23,6 +23,7 @@ from brdfgan.core.render import (
     view_footprint,
 )
 from brdfgan.core.svbrdf import flat_maps
+from brdfgan.data.generation.generation import material_samples
 from brdfgan.data.phone.conditions import (
     CaptureDraw,
     CaptureSampling,
@@ -32,7 +33,8 @@ from brdfgan.data.phone.conditions import (
     tilted_camera,
 )
 from brdfgan.data.phone.environments import build_environment_pools
-from brdfgan.data.storage.generation import DatasetConfigError, material_samples, spec_from_config
+from brdfgan.data.spec.dataset_spec import spec_from_config
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 from brdfgan.errors import UserError
 from tests.conftest import random_maps, relative_l1
 from tests.test_generation import TorchPhotographer, tiny_spec

@@ -14,8 +14,10 @@ from hydra import compose, initialize_config_dir
 from hydra.errors import InstantiationException
 from omegaconf import DictConfig, OmegaConf
 
+from brdfgan.data.generation.generation import plan_shards
 from brdfgan.data.loading.datamodule import ShardDataModule
-from brdfgan.data.storage.generation import DatasetConfigError, DatasetSpec, plan_shards, spec_from_config
+from brdfgan.data.spec.dataset_spec import DatasetSpec, spec_from_config
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 # The configs that mix in the real scans need them (../shared/scans, as the configs default to).

@@ -13,9 +13,10 @@ import hydra
 import pytest
 import torch
 
+from brdfgan.data.generation import generation
+from brdfgan.data.generation.generation import SPEC_FILE, ensure_dataset, run_generation
 from brdfgan.data.loading.datamodule import ShardDataModule
-from brdfgan.data.storage import generation
-from brdfgan.data.storage.generation import SPEC_FILE, DatasetConfigError, ensure_dataset, run_generation
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 from brdfgan.models.generator import Generator
 from brdfgan.runs import save_weights
 from tests.conftest import compose_train, run_python

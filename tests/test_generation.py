@@ -19,22 +19,19 @@ import torch
 
 from brdfgan.core.exposure import auto_expose
 from brdfgan.core.render import FlashCapture, render_flash
-from brdfgan.data.loading.augment import CropSampling
-from brdfgan.data.phone.conditions import CaptureDraw
-from brdfgan.data.phone.environments import LightingConfig, LightingDraw, LightingError
-from brdfgan.data.phone.flash import blackbody_rgb
-from brdfgan.data.storage.generation import (
-    SPLITS,
-    DatasetConfigError,
-    DatasetSpec,
+from brdfgan.data.generation.generation import (
     MitsubaPhotographer,
     PhotographFn,
     dataset_ready,
     ensure_dataset,
     plan_shards,
     run_generation,
-    split_materials,
 )
+from brdfgan.data.materials.augment import CropSampling
+from brdfgan.data.phone.conditions import CaptureDraw
+from brdfgan.data.phone.environments import LightingConfig, LightingDraw, LightingError
+from brdfgan.data.phone.flash import blackbody_rgb
+from brdfgan.data.spec.dataset_spec import SPLITS, DatasetSpec, split_materials
 from brdfgan.data.storage.shards import (
     Sample,
     digest_path,
@@ -46,6 +43,7 @@ from brdfgan.data.storage.shards import (
     verify_shard,
     write_manifest,
 )
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 from brdfgan.io.images import write_image
 from tests.conftest import run_python
 
@@ -241,7 +239,7 @@ def test_a_png_corrupted_in_place_is_found_rewritten_and_reported(
         (tmp_path / "train" / "manifest.json").unlink()
 
     counting = TorchPhotographer(spec)
-    with caplog.at_level(logging.WARNING, logger="brdfgan.data.storage.generation"):
+    with caplog.at_level(logging.WARNING, logger="brdfgan.data.generation.generation"):
         summary = run_generation(spec, tmp_path, progress=False, photographer=lambda _: counting)
     assert summary.repaired == [shard] and summary.written == [shard]
     assert counting.calls == plan_shards(spec)[1].sample_count(spec)  # only that shard is redone

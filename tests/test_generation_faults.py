@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from brdfgan.data.storage.generation import SPEC_FILE, dataset_ready, run_generation
+from brdfgan.data.generation.generation import SPEC_FILE, dataset_ready, run_generation
 from brdfgan.data.storage.shards import digest_path, shard_path
 from brdfgan.errors import DiskFullError
 from tests.test_generation import shard_hashes, tiny_spec, torch_photographer

@@ -59,7 +59,17 @@ def test_no_command_line_modules_outside_the_console(subpackage: str) -> None:
     assert not mains, f"run these through `brdfgan <command>` instead: {mains}"
 
 
-DATA_ROOMS = {"materials", "phone", "storage", "loading", "tools"}
+# The rooms of data/, bottom to top: a module may import its own room and the levels below it,
+# never a room above it nor a sibling on its own level (materials and phone stay independent).
+DATA_LAYERS: tuple[tuple[str, ...], ...] = (
+    ("storage",),  # the shard format and the spec checks
+    ("materials", "phone"),  # what is photographed, and the simulated phone that photographs it
+    ("spec",),  # a dataset's spec, its splits, each material's maps, the seeds
+    ("loading",),  # what training and evaluation read
+    ("generation",),  # writing a dataset
+    ("tools",),  # statistics, contact sheets, converters over written datasets
+)
+DATA_ROOMS = {room for level in DATA_LAYERS for room in level}
 # Per-command roles, one per command package (training/, evaluation/, inference/…), named alike on
 # purpose; every other module name is unique in the package.
 ROLE_NAMES = {"__init__.py", "config.py", "run.py", "pipeline.py"}
@@ -73,6 +83,35 @@ def test_data_modules_live_in_a_room_by_concern() -> None:
     assert rooms == DATA_ROOMS
     for room in rooms:
         assert (data / room / "__init__.py").read_text().startswith('"""'), f"data/{room} says what it holds"
+
+
+def _data_room(name: str) -> str | None:
+    """The data/ room of a dotted module name (``brdfgan.data.<room>…``), or None outside data/."""
+    parts = name.split(".")
+    return parts[2] if len(parts) > 2 and parts[:2] == ["brdfgan", "data"] else None
+
+
+def data_imports_up(package: Path = PACKAGE) -> list[str]:
+    """Every import of a data/ module that runs up the layers (or across to a sibling room)."""
+    level = {room: depth for depth, rooms in enumerate(DATA_LAYERS) for room in rooms}
+    offending = []
+    for path in sorted((package / "data").rglob("*.py")):
+        own = path.relative_to(package / "data").parts[0]
+        if own not in level:
+            continue  # data/__init__.py
+        for name in sorted(_imports(path, package.parent)):
+            room = _data_room(name)
+            if room is None or room == own:
+                continue
+            if room not in level or level[room] >= level[own]:
+                offending.append(f"data/{path.relative_to(package / 'data')} ({own}) imports {name}")
+    return offending
+
+
+def test_data_rooms_import_only_down() -> None:
+    """The shard format and the spec checks are the bottom of data/, writing a dataset is near its
+    top (only the tools over written datasets sit above): no import, lazy or not, runs up."""
+    assert not data_imports_up(), "; ".join(data_imports_up())
 
 
 def test_module_names_do_not_collide() -> None:

@@ -11,10 +11,11 @@ import pytest
 import torch
 
 from brdfgan.core.svbrdf import encode_normal, split_maps
+from brdfgan.data.generation.generation import run_generation
 from brdfgan.data.materials.mixing import MixingConfig
 from brdfgan.data.materials.recolor import RecolorConfig
 from brdfgan.data.materials.scanned import read_scanned_material
-from brdfgan.data.storage.generation import DatasetSpec, run_generation, split_materials
+from brdfgan.data.spec.dataset_spec import DatasetSpec, split_materials
 from brdfgan.data.storage.shards import iter_shard, list_shards
 from brdfgan.data.storage.spec_checks import DatasetConfigError
 from brdfgan.io.images import write_image

@@ -16,7 +16,7 @@ from torch import Tensor
 
 from brdfgan.core.lighting import Environment, SunLight, environment_lights, upper_hemisphere_irradiance_rgb
 from brdfgan.core.svbrdf import NORMAL, flat_maps, normalize_normal, validate_maps
-from brdfgan.data.loading.augment import random_crops
+from brdfgan.data.generation.generation import MitsubaPhotographer
 from brdfgan.data.loading.rendered import (
     MaterialBank,
     ReliefSampling,
@@ -29,6 +29,7 @@ from brdfgan.data.loading.rendered import (
     sample_relief,
     scene_tensors,
 )
+from brdfgan.data.materials.augment import random_crops
 from brdfgan.data.phone.conditions import CaptureDraw, CaptureSampling
 from brdfgan.data.phone.environments import (
     LightingConfig,
@@ -40,7 +41,8 @@ from brdfgan.data.phone.environments import (
     sunsky_spec,
 )
 from brdfgan.data.phone.flash import blackbody_rgb
-from brdfgan.data.storage.generation import DatasetSpec, MitsubaPhotographer, material_seed, paint_material
+from brdfgan.data.spec.dataset_spec import DatasetSpec, paint_material
+from brdfgan.data.spec.determinism import material_seed
 from brdfgan.data.storage.shards import decode_maps
 from brdfgan.data.storage.spec_checks import DatasetConfigError
 from tests.conftest import compose_train, random_maps, run_python

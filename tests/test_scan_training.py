@@ -7,16 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from brdfgan.data.loading.augment import CropSampling
+from brdfgan.data.generation.generation import run_generation
+from brdfgan.data.materials.augment import CropSampling
 from brdfgan.data.materials.recolor import RecolorConfig
 from brdfgan.data.materials.source import ScanSampling
-from brdfgan.data.storage.generation import (
-    DatasetSpec,
-    run_generation,
-    scan_materials,
-    split_materials,
-    split_scan_sets,
-)
+from brdfgan.data.spec.dataset_spec import DatasetSpec, scan_materials, split_materials, split_scan_sets
 from brdfgan.data.storage.shards import iter_shard, list_shards
 from brdfgan.data.storage.spec_checks import DatasetConfigError
 from tests.conftest import random_maps

@@ -19,15 +19,9 @@ import zstandard
 from hydra import compose, initialize_config_dir
 
 from brdfgan.core.svbrdf import encode_normal, split_maps
+from brdfgan.data.generation.generation import SPEC_FILE, dataset_ready, run_generation
 from brdfgan.data.loading.datamodule import ShardDataModule
-from brdfgan.data.storage.generation import (
-    SPEC_FILE,
-    DatasetConfigError,
-    DatasetSpec,
-    dataset_ready,
-    run_generation,
-    spec_from_config,
-)
+from brdfgan.data.spec.dataset_spec import DatasetSpec, spec_from_config
 from brdfgan.data.storage.shards import (
     FORMAT_MEMBERS,
     Sample,
@@ -40,6 +34,7 @@ from brdfgan.data.storage.shards import (
     verify_shard,
     write_shard,
 )
+from brdfgan.data.storage.spec_checks import DatasetConfigError
 from tests.conftest import random_maps
 from tests.test_generation import shard_hashes, tiny_spec, torch_photographer
 from tests.test_shards import write_raw_shard
@@ -266,7 +261,7 @@ def test_generation_writes_and_records_the_format_and_an_old_dataset_keeps_its_o
     assert dataset_ready(u16z_spec, old)
     shard_path(old, "train", 0).unlink()
     shutil.rmtree(new)
-    with caplog.at_level(logging.WARNING, logger="brdfgan.data.storage.generation"):
+    with caplog.at_level(logging.WARNING, logger="brdfgan.data.generation.generation"):
         summary = run_generation(u16z_spec, old, progress=False, photographer=torch_photographer)
     assert summary.written == [shard_path(old, "train", 0)]
     assert shard_hashes(old) == clean

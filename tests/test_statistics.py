@@ -10,9 +10,9 @@ import pytest
 import torch
 
 from brdfgan.cli import main
+from brdfgan.data.generation.generation import run_generation
 from brdfgan.data.materials.source import ScanSampling
 from brdfgan.data.phone.conditions import CaptureSampling
-from brdfgan.data.storage.generation import run_generation
 from brdfgan.data.storage.shards import Sample, shard_path, write_shard
 from brdfgan.data.tools.statistics import (
     CAPTURE_QUANTITIES,

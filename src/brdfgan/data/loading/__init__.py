@@ -1,2 +1,2 @@
-"""What training and evaluation read: the shard DataModule (``datamodule``), its crops and turns
-(``augment``), and photos rendered on the fly from a material bank (``rendered``)."""
+"""What training and evaluation read: the shard DataModule (``datamodule``) and photos rendered
+on the fly from a material bank (``rendered``)."""

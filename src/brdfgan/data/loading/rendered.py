@@ -1,7 +1,7 @@
 """Training photos rendered on the fly: a bank of material maps, fresh capture conditions for every
 draw, the project's torch renderer.
 
-Shards (:mod:`brdfgan.data.storage.generation`) photograph each training material once or a few times,
+Shards (:mod:`brdfgan.data.generation.generation`) photograph each training material once or a few times,
 under one light each, and cost every fresh machine the whole generation before its first step.
 Here a training sample is drawn anew every time:
 
@@ -57,7 +57,6 @@ from brdfgan.core.relight import SKY_LIGHT_DISTANCE
 from brdfgan.core.render import PointLights, render_point_lights, view_grid, warp_maps_to_view, warp_to_view
 from brdfgan.core.sampling import log_uniform
 from brdfgan.core.svbrdf import BASECOLOR, NORMAL, normalize_normal
-from brdfgan.data.loading.augment import random_crops
 from brdfgan.data.loading.datamodule import (
     EpochStream,
     ShardDataModule,
@@ -65,6 +64,7 @@ from brdfgan.data.loading.datamodule import (
     random_crop,
     sensed_sample,
 )
+from brdfgan.data.materials.augment import random_crops
 from brdfgan.data.materials.base import height_to_normal
 from brdfgan.data.materials.noise import fbm
 from brdfgan.data.materials.scanned import read_scanned_material, scanned_material_folders
@@ -79,16 +79,14 @@ from brdfgan.data.phone.environments import (
     load_environment,
 )
 from brdfgan.data.phone.flash import blackbody_rgb
-from brdfgan.data.storage.generation import (
+from brdfgan.data.spec.dataset_spec import (
     DatasetSpec,
-    derive_seed,
-    material_seed,
     paint_material,
     scan_materials,
-    single_torch_thread,
     split_materials,
     split_scan_sets,
 )
+from brdfgan.data.spec.determinism import derive_seed, material_seed, single_torch_thread
 from brdfgan.data.storage.shards import Sample, ShardError, decode_maps, encode_maps
 from brdfgan.data.storage.spec_checks import DatasetConfigError, in_range, integer, ordered
 from brdfgan.io.atomic import atomic_replace, write_text_atomic
@@ -538,7 +536,7 @@ def draw_scene(
 ) -> PhotoScene:
     """One training photo's scene, a pure function of ``seed``: a bank material and a crop of it,
     the capture, flash and lighting draws of the spec (as
-    :func:`~brdfgan.data.storage.generation.material_samples` draws them for a Mitsuba render)
+    :func:`~brdfgan.data.generation.generation.material_samples` draws them for a Mitsuba render)
     with the environment as ``environment_lights_count`` distant lights plus its sun."""
     spec = bank.spec
     generator = torch.Generator().manual_seed(seed)

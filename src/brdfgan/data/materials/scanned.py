@@ -45,7 +45,7 @@ no normal), several candidate files for one map, a corrupt file, mismatched or n
 
 The sets feed datasets through :func:`read_scanned_material`, resized (linear-light base colour,
 renormalised normals) to the dataset's ``material_resolution``; a dataset of scanned materials
-is test only (:func:`brdfgan.data.storage.generation.split_materials`).
+is test only (:func:`brdfgan.data.spec.dataset_spec.split_materials`).
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.svbrdf import BASECOLOR, METALLIC
-from brdfgan.data.loading.augment import CropSampling
+from brdfgan.data.materials.augment import CropSampling
 from brdfgan.data.materials.base import MaterialFamily, layers_to_maps
 from brdfgan.data.materials.mixing import MixingConfig, draw_mix, mix_layers, mixture_mask
 from brdfgan.data.materials.recolor import RecolorConfig, draw_recolor, recolor_basecolor, recolor_layers

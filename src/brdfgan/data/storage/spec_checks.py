@@ -1,6 +1,6 @@
 """Range checks of the dataset spec, each naming the key as it is typed on the command line.
 
-The spec dataclasses (:class:`~brdfgan.data.storage.generation.DatasetSpec` and the flash, crop and
+The spec dataclasses (:class:`~brdfgan.data.spec.dataset_spec.DatasetSpec` and the flash, crop and
 lighting specs nested in it) call these from ``__post_init__``, so a bad value fails when the
 config is composed, before ``generate.py`` writes ``dataset.json`` or starts Mitsuba; the
 corrected command then runs in the same output directory. Messages read

@@ -387,7 +387,7 @@ def convert_deschaintre_folder(
     if not shards:
         raise DeschaintreDatasetError(f"{src}: none of the {len(files)} .png files is a valid sample")
 
-    from brdfgan.data.storage.generation import code_version  # heavy imports, needed only here
+    from brdfgan.data.generation.generation import code_version  # heavy imports, needed only here
 
     count = sum(info.count for info in shards)
     manifest = {

@@ -1,5 +1,5 @@
 """The typed top level of ``conf/generate.yaml``: a wrong key or type is one line at composition.
-The ``dataset_spec`` node is type-checked against :class:`~brdfgan.data.storage.generation.DatasetSpec` by
+The ``dataset_spec`` node is type-checked against :class:`~brdfgan.data.spec.dataset_spec.DatasetSpec` by
 :func:`brdfgan.config_check.check_config`, then range-checked by the spec itself."""
 
 from __future__ import annotations
