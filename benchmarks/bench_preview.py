@@ -17,7 +17,7 @@ the cores each can stall for a scheduler slice). The compiled row is timed only 
 
 Quality: the environment tile (auto-exposed, 8-bit sRGB, as in ``preview.png``) with 16, 32 and 64
 (the default) sky lights, and with 64 lights rendered at 128² and upsampled bilinearly, against a
-4×-sample reference (256 lights at 256²), on the map sets of ``tests/test_preview.py``
+4×-sample reference (256 lights at 256²), on the map sets of ``tests/inference/outputs/test_preview.py``
 (``quality_maps``). RMSE in 8-bit levels; the time is the whole still rendering (4 point lights + the
 sky) with that setting, median of ``--repeats``.
 
@@ -182,7 +182,7 @@ def _environment_tile(hdr: torch.Tensor) -> torch.Tensor:
 
 
 def quality(repeats: int) -> None:
-    from tests.test_preview import quality_maps
+    from tests.inference.outputs.test_preview import quality_maps
 
     from brdfgan.core.sky import ProceduralSky
     from brdfgan.core.svbrdf import resize_maps

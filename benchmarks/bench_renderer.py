@@ -1,7 +1,7 @@
 """Renderer forward+backward benchmark: the rendering-loss workload of one training step.
 
 Modes: ``direct`` is the renderer before issue 16 (full ``(B, V, 3, H, W)`` vector fields, kept in
-``tests/render_reference.py``), ``eager`` the library's factored renderer, ``compiled`` the same
+``tests/core/render_reference.py``), ``eager`` the library's factored renderer, ``compiled`` the same
 through ``torch.compile``.
 
 Each case runs in a fresh subprocess so its peak resident memory is its own (CPU); on CUDA the
@@ -33,7 +33,7 @@ def _measure(
     resolution: int, batch: int, configs: int, mode: int, device: str, repeats: int
 ) -> dict[str, float]:
     from tests.conftest import random_maps
-    from tests.render_reference import render_point_lights_direct
+    from tests.core.render_reference import render_point_lights_direct
 
     from brdfgan.core.render import PointLightRenderer
     from brdfgan.core.sampling import RenderingLossSampling, log_transform, sample_rendering_loss_configs

@@ -11,7 +11,7 @@ valid maps, their flash photos from the project's renderer) in a fresh subproces
   and of the generator's forward+backward (timed alone, same shape).
 
 Variants: ``before`` is the step as it was (the direct vector-field renderer of
-``tests/render_reference.py``, eager, Adam's default loop); ``eager`` the factored renderer without
+``tests/core/render_reference.py``, eager, Adam's default loop); ``eager`` the factored renderer without
 compilation; ``after`` the training configs' defaults (the compiled loss, fused Adam), and rows
 with one option changed each (Adam not fused, ``channels_last``) so each option's effect is
 measured in the same run. Recipes: the default GAN step, v3's supervised step, v4's two stages
@@ -181,7 +181,7 @@ def _step_timer(warmup: int, steps: int, profiled: int) -> Any:
 def _measure(case: Case, steps: int) -> dict[str, Any]:
     import hydra
     import lightning as L
-    from tests.render_reference import render_point_lights_direct
+    from tests.core.render_reference import render_point_lights_direct
     from torch.utils.data import DataLoader
 
     import brdfgan.losses.rendering as rendering_module

@@ -2,7 +2,7 @@
 bad values and a corrupt environment file, each against the real command on the tiny dataset.
 
 The unit-level versions (injected ENOSPC, in-process corruption) are in
-``tests/test_generation.py`` and ``tests/test_generation_faults.py``.
+``tests/data/generation/test_generation.py`` and ``tests/data/generation/test_generation_faults.py``.
 """
 
 from __future__ import annotations

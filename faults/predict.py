@@ -4,7 +4,7 @@ photos that cannot give a material, a resolution that cannot fit in memory.
 Every row runs the installed console script (or, for the two kills inside the result swap, the
 same ``main`` with one function patched to SIGKILL the process at that exact point) on the sample
 photos at 128², outputs in the scenario's workdir. The unit-level versions are in
-``tests/test_predict_faults.py``.
+``tests/inference/test_predict_faults.py``.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ values — each against the real command on the tiny dataset (``debug=default``:
 batches, a checkpoint after every batch).
 
 A resumed run must end with the weights of a straight run, bit for bit. The unit-level versions
-are in ``tests/test_resume.py``, ``tests/test_checkpoint_io.py``, ``tests/test_runs.py`` and
+are in ``tests/training/test_resume.py``, ``tests/training/test_checkpoint_io.py``, ``tests/test_runs.py`` and
 ``tests/test_config_check.py``.
 """
 

@@ -36,4 +36,4 @@ $PY scripts/grid_figure.py $OUT/eval_test docs/default_model_grid.png --models v
 $PY -m brdfgan.cli export-weights $OUT/v3 --out src/brdfgan/weights/default.safetensors \
     --model-id brdfgan-default-v3 --metrics $OUT/eval_test/metrics.json --metrics-model v3 \
     --hardware "2 vCPU x86_64 (no GPU), 2 threads, one training at a time"
-$PY -m tests.test_shipped_weights                                        # refresh the stored statistics
+$PY -m tests.inference.model.test_shipped_weights  # refresh the stored statistics

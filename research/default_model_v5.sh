@@ -83,7 +83,7 @@ export_weights() {
   $PY -m brdfgan.cli export-weights $SHIPPED --out src/brdfgan/weights/default.safetensors \
     --model-id brdfgan-default-v5 --metrics $RUNS_OUT/eval_test_procedural/metrics.json --metrics-model v5 \
     --hardware "2 vCPU x86_64 (no GPU), 2 threads, one training at a time"
-  $PY -m tests.test_shipped_weights  # refresh the stored statistics
+  $PY -m tests.inference.model.test_shipped_weights  # refresh the stored statistics
 }
 
 ablation() {  # what costs v5 its base colour: v4's recipe, then one of v5's changes added at a time

@@ -171,7 +171,7 @@ export_weights() {
   $PY -m brdfgan.cli export-weights $SHIPPED --out src/brdfgan/weights/default.safetensors \
     --model-id brdfgan-default-v4 --metrics $OUT/eval_test_procedural/metrics.json --metrics-model v4 \
     --hardware "2 vCPU x86_64 (no GPU), 2 threads, one training at a time"
-  $PY -m tests.test_shipped_weights                                        # refresh the stored statistics
+  $PY -m tests.inference.model.test_shipped_weights  # refresh the stored statistics
 }
 
 # v3, the model v4 replaces, from the history.

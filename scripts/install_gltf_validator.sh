@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Install the Khronos glTF validator (npm package gltf-validator) into the project-local, git-ignored
-# .node/ folder, for tests/test_gltf.py. Optional tooling: this script always exits 0, so a machine
+# .node/ folder, for tests/inference/outputs/test_gltf.py. Optional tooling: this script always exits 0, so a machine
 # without npm or without network access still builds; the validator test then skips with a reason.
 set -u
 

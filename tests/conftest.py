@@ -64,7 +64,11 @@ def relative_l1(a: Tensor, b: Tensor) -> float:
     return float((a - b).abs().sum() / b.abs().sum())
 
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+# The project, wherever a test file sits under tests/: test modules take their paths from here.
+ROOT = Path(__file__).resolve().parents[1]
+CONF = ROOT / "conf"
+GOLDEN = ROOT / "tests" / "expected"  # stored golden values
+SHARED = ROOT.parent / "shared"  # data beside the checkout (scans, the OOD sets), where present
 register_configs()
 register_generate_configs()
 register_evaluate_configs()

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import torch
 from tests.conftest import random_maps
-from tests.test_views_fit import FAST, corrupted, map_errors, truth_maps
-from tests.test_views_register import smooth_texture
+from tests.inference.views.test_views_fit import FAST, corrupted, map_errors, truth_maps
+from tests.inference.views.test_views_register import smooth_texture
 from torch import Tensor
 
 from brdfgan.cli import main

@@ -8,9 +8,9 @@ large ones tile by tile.
 **Why tiles need frozen statistics.** Every ``InstanceNorm2d`` normalises with the per-channel mean
 and variance of its *whole* input. Run tile by tile, every tile would get its own statistics: a dark
 tile would be brightened, a smooth one sharpened, and neighbouring tiles would disagree by far more
-than any blending can hide (see ``tests/test_tiling.py``: with per-tile statistics the error near
-seams is orders of magnitude above the frozen-statistics error). So the photo is processed in two
-steps:
+than any blending can hide (see ``tests/inference/model/test_tiling.py``: with per-tile statistics
+the error near seams is orders of magnitude above the frozen-statistics error). So the photo is
+processed in two steps:
 
 1. :func:`norm_statistics`: one pass over the whole photo, downscaled so that its longer side is at
    most ``stats_resolution``, while forward pre-hooks record the per-channel mean and biased
@@ -94,13 +94,14 @@ class TilingConfig:
 
     The defaults keep peak memory at that of an untiled 1024² run (a tile, and the statistics pass,
     are 1024² images) and come from measuring the padding influence of randomly initialised
-    generators (no trained weights to measure on; ``tests/test_tiling.py`` has the method): with
-    frozen statistics a tile's output differs from the untiled output by more than 1e-3 up to 110 px
-    inside a tile edge for the paper architecture (width 64, 9 residual blocks; its receptive field
-    reaches 164 px), 73 px for ``model=default`` (width 16, 4 blocks). A 96 px ``margin`` and a 64 px
-    ramp bound the blended error of the paper model by 2e-4 (measured: mean 2e-6, max 6e-4 over a
-    1024² photo in 512² tiles); ``model=default`` would do with ``margin=48, overlap=160``
-    (bound 8e-4). A 1024² tile with a 256 px overlap computes each pixel (1024 / 768)² ≈ 1.8 times.
+    generators (no trained weights to measure on; ``tests/inference/model/test_tiling.py`` has the
+    method): with frozen statistics a tile's output differs from the untiled output by more than
+    1e-3 up to 110 px inside a tile edge for the paper architecture (width 64, 9 residual blocks;
+    its receptive field reaches 164 px), 73 px for ``model=default`` (width 16, 4 blocks). A 96 px
+    ``margin`` and a 64 px ramp bound the blended error of the paper model by 2e-4 (measured: mean
+    2e-6, max 6e-4 over a 1024² photo in 512² tiles); ``model=default`` would do with ``margin=48,
+    overlap=160`` (bound 8e-4). A 1024² tile with a 256 px overlap computes each pixel (1024 / 768)²
+    ≈ 1.8 times.
 
     Args:
         tile: tile side in pixels; a multiple of the model's ``size_multiple`` (and at least twice it).

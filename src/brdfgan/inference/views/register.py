@@ -388,7 +388,7 @@ def marker_homography(
     found = [
         # Unlike OpenCV's other refinements, the AprilTag fit reports pixel-edge coordinates,
         # the project's convention (a tag filling pixels 70…149 has its corner at 70, not 69.5):
-        # no half-pixel shift (tests/test_views_register.py pins this).
+        # no half-pixel shift (tests/inference/views/test_views_register.py pins this).
         (board_corners[int(tag)], np.reshape(tag_corners, (4, 2)).astype(np.float64))
         for tag_corners, tag in zip(corners, np.ravel(ids), strict=True)
         if int(tag) in board_corners
