@@ -382,17 +382,18 @@ class ReliefSampling:
       ``[bump_slope_min, bump_slope_max]``, its slopes added to the crop's;
     - ``plain_albedo_probability``: the base colour's texture is faded toward its mean (per
       channel, contrast uniform in ``[0, 1)``), so the photo's variation is mostly the relief's
-      shading. Relief under a uniform albedo is what a network learns from fastest (docs/data.md,
-      "Relief"); the faded crops teach what relief shading looks like, the others to tell it
-      from a texture;
+      shading. Relief under a uniform albedo is what a network learns from fastest
+      (research/notes/2026-12-relief-investigation.md); the faded crops teach what relief shading
+      looks like, the others to tell it from a texture;
     - ``flat_probability``: the crop's own relief is removed (its normals set flat) unless swapped,
       so the base colour's texture appears over a flat surface — wood grain, marble veins, print:
       the near-flat held-out scans on which every model drew relief from the texture
-      (docs/default_model.md). Bumps, when drawn, are added after it;
+      (research/notes/2026-12-v5-candidate.md). Bumps, when drawn, are added after it;
     - ``invert_probability``: the crop's relief (its own, swapped or flat) is turned inside out,
       its slopes negated, so grooves become ridges under the same base colour. Whether a dark line
       is low or high is then not in the base colour — the training scans disagree on it
-      (docs/data.md) — and only the photo's shading tells. Bumps are added after it.
+      (research/notes/2026-12-relief-investigation.md) — and only the photo's shading tells. Bumps
+      are added after it.
 
     Checked on construction, naming the keys under ``data.relief``.
     """

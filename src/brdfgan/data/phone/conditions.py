@@ -277,8 +277,8 @@ def maps_as_photographed(maps: torch.Tensor, meta: Mapping[str, Any]) -> torch.T
     Why: a randomised capture looks at the sample from a few per cent closer and up to a few
     degrees tilted, so in texture space a texel lies up to ~5 px (at 256²) away from where the photo
     shows it. Fine relief then has no fixed relation to the photo, and a network learns only what
-    survives that blur (``docs/default_model_v3.md``, "The maps were not where the photos showed
-    them", has the correlations before and after). Unchanged (the same tensor) for samples
+    survives that blur (``research/notes/2026-12-default-model-v3.md``, "The maps were not where
+    the photos showed them", has the correlations before and after). Unchanged (the same tensor) for samples
     without a recorded camera.
 
     Shape:

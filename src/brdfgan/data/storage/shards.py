@@ -99,20 +99,21 @@ _KNOWN_MEMBERS = frozenset(name for names in FORMAT_MEMBERS.values() for name in
 MANIFEST_NAME = "manifest.json"
 # Two generations of one spec write the same maps and metadata, but Mitsuba's LLVM variant renders
 # a rare pixel one 16-bit code apart from run to run (the order of its parallel sums), so a shard's
-# SHA-256 can differ: photos are compared within this many codes (docs/data.md, determinism).
+# SHA-256 can differ: photos are compared within this many codes (docs/data.md#determinism).
 PHOTO_CODE_TOLERANCE = 1
 DIGEST_SUFFIX = ".sha256"
 _HEX_DIGEST = re.compile(r"[0-9a-f]{64}")
 # zlib level 1: noisy 16-bit renders barely compress further at higher levels, which encode slower
-# and decode no faster (docs/data.md#the-shard-format has the measurements).
+# and decode no faster (research/notes/2026-12-training-data.md has the measurements).
 PNG_COMPRESSION = 1
 # Run-length matching only (Z_RLE) after the Paeth row filter on every row: the filter does the
 # work, long matches are rare in noisy renders, and encoding is about twice as fast as zlib's
-# default matching after libpng's per-row filter search (docs/data.md#the-shard-format). Lossless.
+# default matching after libpng's per-row filter search (measured: research/notes/2026-12-training-data.md).
+# Lossless.
 PNG_STRATEGY = cv2.IMWRITE_PNG_STRATEGY_RLE
 PNG_FILTER = cv2.IMWRITE_PNG_FILTER_PAETH
 # Zstandard level 1 of the shuffled bytes: the fast-decoding end of the size/speed trade-off
-# (docs/data.md#the-shard-format compares zlib, lz4 and other levels). Readers do not depend on
+# (research/notes/2026-12-training-data.md compares zlib, lz4 and other levels). Readers do not depend on
 # the level (a Zstandard frame describes itself).
 U16Z_LEVEL = 1
 _U16Z_MAGIC = b"U16Z"
