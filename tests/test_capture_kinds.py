@@ -11,6 +11,7 @@ import torch
 from brdfgan.capture import (
     CAPTURE_KINDS,
     FLASH_PHOTO,
+    NO_FLASH_PHOTO,
     SINGLE_PHOTO,
     TRAINING_CAPTURE,
     VIEWS,
@@ -28,10 +29,10 @@ from brdfgan.models import PHOTO_CHANNELS
 from brdfgan.models.heads import network_photos
 from tests.conftest import random_maps
 
-# The flash + no-flash pair, as its issue will declare it: the seam must take it as one entry.
-NO_FLASH_PHOTO = CapturePhoto(PhotoRole.NO_FLASH, member="input_noflash", batch_key="photo_noflash")
+# The flash + no-flash pair with the generator seeing both: the seam derives it from one entry.
+NETWORK_NO_FLASH = CapturePhoto(PhotoRole.NO_FLASH, member="input_noflash", batch_key="photo_noflash")
 PAIR = CaptureKind(
-    "pair", (FLASH_PHOTO, NO_FLASH_PHOTO), "a flash photo and a no-flash photo", flag="--no-flash"
+    "pair", (FLASH_PHOTO, NETWORK_NO_FLASH), "a flash photo and a no-flash photo", flag="--no-flash"
 )
 
 
@@ -71,7 +72,7 @@ def test_a_pair_kind_derives_its_members_keys_and_channels() -> None:
 @pytest.mark.parametrize(
     ("photos", "message"),
     [
-        ((NO_FLASH_PHOTO,), "its first photo must be the flash photo"),
+        ((NETWORK_NO_FLASH,), "its first photo must be the flash photo"),
         ((FLASH_PHOTO, CapturePhoto(PhotoRole.NO_FLASH, "input", "b")), "repeated member"),
         ((FLASH_PHOTO, CapturePhoto(PhotoRole.NO_FLASH, "m", "photo")), "repeated batch_key"),
     ],

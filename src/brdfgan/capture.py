@@ -114,6 +114,11 @@ class CaptureKind:
 
 
 FLASH_PHOTO = CapturePhoto(PhotoRole.FLASH, member="input", batch_key="photo")
+# The flash + no-flash pair's second photo: what a fit reads (the room light to subtract, its
+# side-lit shading); the shipped generator does not see it.
+NO_FLASH_PHOTO = CapturePhoto(
+    PhotoRole.NO_FLASH, member="input_noflash", batch_key="photo_noflash", network=False
+)
 
 SINGLE_PHOTO = CaptureKind(
     "single",
