@@ -1,0 +1,380 @@
+"""A flash + no-flash pair → the surface's relief, by a fit that needs no training (issue 59).
+
+The two photos of one surface differ only in their light. Where the surface is diffuse, each
+photo is the albedo times a shading: the flash-only image (the flash photo less the room light,
+:mod:`brdfgan.inference.pair.intake`) ``F = g · A · S_f(n)`` with the head-on flash's shading
+``S_f(n) = max(n·l, 0) / d²`` (``l`` towards the flash at the lens, ``d`` the distance in camera
+distances, :func:`~brdfgan.core.delit.flash_render`'s geometry), and the room light's share of the
+flash photo ``R = A · E(n)`` with ``E`` the room's irradiance, a low-order function of the normal
+(real spherical harmonics to order 2: a sky, a window, a lamp to the side). Their ratio cancels
+the albedo:
+
+    log R − log F = log E(n) − log S_f(n) − log g,
+
+one equation per pixel and channel in the surface normal, in which the room light's side-lit
+shading is first order in the slope where the flash's, at its hotspot, is second order. The fit
+(:func:`fit_pair`) finds the height ``h`` whose normals ``n ∝ (−∂h/∂x, −∂h/∂y, 1)`` (+y up the rows,
+:func:`~brdfgan.core.height.height_slope_channels`) and the harmonics' 9 × 3 coefficients (``g``
+folded in) that explain the ratio, by Adam on a robust (Charbonnier) loss, coarse to fine, with
+
+- a height, not two free slopes per pixel: integrable normals, and masked pixels filled smoothly;
+- a prior toward flat (the slopes' squares) where the ratio constrains little;
+- glints and metal masked: where the network's maps make the flash's specular lobe a large share
+  of the flat render, or the metallic map is metal, the photo is not ``A · S_f``;
+- a guard on pixels the fit never saw: a fifth of the finest level's pixels are held out, and when
+  the fitted relief does not lower their residual below the flat surface's (with the light
+  refitted for it) by :attr:`PairFitConfig.min_improvement`, the network's normals are kept
+  (``kept="prediction"``). On the fitted pixels alone, a relief fitted to noise would pass.
+
+The base colour is then the network's divided by the relief's shading ratio ``S_f(n)/S_f(flat)``
+(the de-lit flash-only image's shading taken out, as the fit found it), roughness and metallic the
+network's. The fit runs at the levels' sizes (at most the maps'), and its height is carried up to
+the maps' size.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any, Literal
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from brdfgan.core.brdf import evaluate_brdf
+from brdfgan.core.checks import check_shape
+from brdfgan.core.flash_geometry import check_flash_frame, flash_offset_channels, resize_flash_frame
+from brdfgan.core.height import height_slope_channels
+from brdfgan.core.render import linear_basecolor_maps
+from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, ROUGHNESS, check_map_shape, linear_to_srgb
+from brdfgan.inference.refine import cosine_decay
+
+Kept = Literal["fit", "prediction"]
+
+# Real spherical harmonics to order 2, the constants of Ramamoorthi & Hanrahan 2001: irradiance
+# from any distant light is within a few per cent of its projection on these nine.
+_SH_CONSTANTS = (0.282095, 0.488603, 0.488603, 0.488603, 1.092548, 1.092548, 0.315392, 1.092548, 0.546274)
+SH_TERMS = len(_SH_CONSTANTS)
+# Below this (linear, of the flash photo's range) a photo's value is noise: left out of the ratio.
+VALUE_FLOOR = 2e-3
+# The share of the finest level's pixels the guard holds out (module docstring), drawn from a fixed
+# seed so that a fit is repeatable.
+HOLDOUT_FRACTION = 0.2
+HOLDOUT_SEED = 59
+# Charbonnier's ε, in log units: residuals beyond ~0.05 count linearly (glints, shadows the model
+# lacks), below quadratically.
+ROBUST_EPSILON = 0.05
+
+
+@dataclass(frozen=True)
+class PairFitConfig:
+    """The pair fit's settings (module docstring)."""
+
+    levels: tuple[int, ...] = (64, 128, 256)
+    steps: tuple[int, ...] = (200, 150, 100)
+    learning_rate: float = 0.02
+    flat_prior: float = 0.02  # weight of the slopes' mean square (tan² of the tilt)
+    specular_share: float = 0.3  # a pixel whose flat flash render is more than this specular is masked
+    metal_level: float = 0.5  # … as is one the network calls metal
+    min_improvement: float = 0.02  # relative drop of the residual the relief must bring to be kept
+
+    def __post_init__(self) -> None:
+        if len(self.levels) != len(self.steps) or not self.levels:
+            raise ValueError(f"levels {self.levels} and steps {self.steps}: one count per level")
+        if list(self.levels) != sorted(set(self.levels)) or self.levels[0] < 8:
+            raise ValueError(f"levels {self.levels}: increasing sizes of at least 8")
+
+
+@dataclass(frozen=True)
+class PairFitResult:
+    """The maps with the fitted relief, and the record of the fit (``material.json``'s ``pair_fit``)."""
+
+    maps: Tensor  # (8, N, N)
+    kept: Kept
+    residual_flat: float  # the ratio's robust residual of a flat surface on the held-out pixels
+    residual_fit: float  # … of the fitted relief
+    masked_fraction: float  # share of pixels the ratio could not use (invalid, glint, metal, dark)
+    room_light: tuple[tuple[float, ...], ...]  # 3 × 9 harmonic coefficients (relative to the flash)
+    levels: tuple[int, ...]
+    seconds: float
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        out = {k: v for k, v in asdict(self).items() if k not in ("maps", "room_light", "levels")}
+        out["room_light"] = [list(row) for row in self.room_light]
+        out["levels"] = list(self.levels)
+        return out
+
+
+# --- pure pieces -----------------------------------------------------------------------------------
+
+
+def sh_basis(normal: Tensor) -> Tensor:
+    """The nine real harmonics of order ≤ 2 at each unit normal.
+
+    Shape: ``(B, 3, H, W)`` → ``(B, 9, H, W)``.
+
+    Example:
+        Straight up, only the constant, ``z`` and ``3z² − 1`` terms are non-zero:
+
+        >>> up = torch.tensor([0.0, 0.0, 1.0]).view(1, 3, 1, 1)
+        >>> [round(v, 4) for v in sh_basis(up).flatten().tolist()]
+        [0.2821, 0.0, 0.4886, 0.0, 0.0, 0.0, 0.6308, 0.0, 0.0]
+    """
+    check_shape(normal, "B 3 H W", name="normal")
+    x, y, z = normal.unbind(1)
+    terms = (torch.ones_like(x), y, z, x, x * y, y * z, 3 * z * z - 1, x * z, x * x - y * y)
+    return torch.stack([c * t for c, t in zip(_SH_CONSTANTS, terms, strict=True)], dim=1)
+
+
+def normals_of_height(height: Tensor) -> Tensor:
+    """Unit normals of a height in pixel units (a rise of 1 over one pixel is 45°).
+
+    Shape: ``(B, 1, n, n)`` → ``(B, 3, n, n)``."""
+    normal = torch.cat([height_slope_channels(height), torch.ones_like(height)], dim=1)
+    return normal / normal.norm(dim=1, keepdim=True)
+
+
+def flash_shading(normal: Tensor, frame: Tensor) -> Tensor:
+    """The head-on flash's diffuse shading ``max(n·l, 0) / d²`` (module docstring).
+
+    Shape: normal ``(B, 3, H, W)``, frame ``(B, 3)`` → ``(B, 1, H, W)``."""
+    offsets = flash_offset_channels(frame.to(normal.dtype), normal.shape[-2], normal.shape[-1])
+    distance_squared = 1.0 + offsets.square().sum(dim=1, keepdim=True)
+    towards_flash = torch.cat([-offsets, torch.ones_like(offsets[:, :1])], dim=1) / distance_squared.sqrt()
+    return (normal * towards_flash).sum(dim=1, keepdim=True).clamp_min(1e-4) / distance_squared
+
+
+def usable_ratio_mask(
+    flash_only: Tensor, room: Tensor, valid: Tensor, maps: Tensor, frame: Tensor, config: PairFitConfig
+) -> Tensor:
+    """Where the ratio of the room light to the flash is the diffuse model's: valid, above the
+    noise floor in both, not a glint of the flash's specular lobe, not metal.
+
+    Shape: ``(3, N, N)``, ``(3, N, N)``, ``(1, N, N)``, ``(8, N, N)``, ``(1, 3)`` → ``(1, N, N)`` float."""
+    flat = torch.zeros_like(maps[NORMAL])
+    flat[2] = 1.0
+    offsets = flash_offset_channels(frame, maps.shape[-2], maps.shape[-1])[0]
+    towards = torch.cat([-offsets, torch.ones_like(offsets[:1])]) / (1 + offsets.square().sum(0)).sqrt()
+    basecolor = linear_basecolor_maps(maps[None])[0][BASECOLOR]
+    lobes = [
+        evaluate_brdf(
+            basecolor,
+            flat,
+            maps[ROUGHNESS],
+            maps[METALLIC],
+            towards,
+            towards,
+            diffuse_lobe=diffuse,
+            specular_lobe=not diffuse,
+        ).mean(0)
+        for diffuse in (True, False)
+    ]
+    specular = lobes[1] / (lobes[0] + lobes[1]).clamp_min(1e-8)
+    bright = (flash_only.min(0).values > VALUE_FLOOR) & (room.min(0).values > VALUE_FLOOR)
+    usable = (
+        (valid[0] > 0.5)
+        & bright
+        & (specular < config.specular_share)
+        & (maps[METALLIC][0] < config.metal_level)
+    )
+    return usable.float()[None]
+
+
+def _robust(residual: Tensor) -> Tensor:
+    return (residual.square() + ROBUST_EPSILON**2).sqrt() - ROBUST_EPSILON
+
+
+def _downsample(image: Tensor, size: int) -> Tensor:
+    return image if image.shape[-1] == size else F.interpolate(image, size=(size, size), mode="area")
+
+
+@dataclass
+class _Level:
+    """One working size's fixed inputs."""
+
+    log_ratio: Tensor  # (1, 3, n, n)
+    weight: Tensor  # (1, 1, n, n), 1 where the ratio is used
+    frame: Tensor  # (1, 3)
+
+    @classmethod
+    def of(cls, log_ratio: Tensor, usable: Tensor, frame: Tensor, size: int) -> _Level:
+        weight = _downsample(usable[None], size)
+        ratio = _downsample(log_ratio[None] * usable[None], size) / weight.clamp_min(1e-6)
+        return cls(ratio, (weight > 0.999).float(), resize_flash_frame(frame, size / log_ratio.shape[-1]))
+
+    def split(self) -> tuple[_Level, _Level]:
+        """This level's pixels as the ones fitted and the ones held out (:data:`HOLDOUT_FRACTION`)."""
+        generator = torch.Generator().manual_seed(HOLDOUT_SEED)
+        held = (torch.rand(self.weight.shape, generator=generator) < HOLDOUT_FRACTION).float()
+        return _Level(self.log_ratio, self.weight * (1 - held), self.frame), _Level(
+            self.log_ratio, self.weight * held, self.frame
+        )
+
+    def residual(self, height: Tensor, light: Tensor) -> Tensor:
+        """The mean robust residual of the ratio model over the used pixels."""
+        normal = normals_of_height(height)
+        irradiance = torch.einsum("ck,bkhw->bchw", light, sh_basis(normal)).clamp_min(1e-4)
+        model = irradiance.log() - flash_shading(normal, self.frame).log()
+        return (_robust(model - self.log_ratio) * self.weight).sum() / (3 * self.weight.sum().clamp_min(1))
+
+
+# The height's correction at a level is a pyramid of grids this many octaves deep, summed after
+# enlarging: Adam moves every grid's values alike, so broad relief converges as fast as fine.
+PYRAMID_OCTAVES = 5
+
+
+def _pyramid_height(start: Tensor, grids: list[Tensor]) -> Tensor:
+    size = start.shape[-1]
+    enlarged = [F.interpolate(g, size=(size, size), mode="bilinear", align_corners=False) for g in grids]
+    return start + torch.stack(enlarged).sum(0)
+
+
+def _fit_light(level: _Level, height: Tensor, light: Tensor, steps: int, config: PairFitConfig) -> Tensor:
+    """Adam on the room light alone, the height held."""
+    light = light.detach().clone().requires_grad_(True)
+    optimizer = torch.optim.Adam([light], lr=config.learning_rate)
+    for step in range(steps):
+        optimizer.param_groups[0]["lr"] = config.learning_rate * cosine_decay(step, steps)
+        optimizer.zero_grad()
+        level.residual(height, light).backward()
+        optimizer.step()
+    return light.detach()
+
+
+def _fit_level(
+    level: _Level, start: Tensor, light: Tensor, steps: int, config: PairFitConfig
+) -> tuple[Tensor, Tensor]:
+    """Adam on the room light and a pyramid correction of the height ``start`` (pixel units) at
+    one working size; the height is returned with its mean (a ramp-free sample's) removed."""
+    size = start.shape[-1]
+    grids = [
+        torch.zeros(1, 1, max(size >> octave, 2), max(size >> octave, 2), requires_grad=True)
+        for octave in range(PYRAMID_OCTAVES)
+    ]
+    light = light.detach().clone().requires_grad_(True)
+    optimizer = torch.optim.Adam([light, *grids], lr=config.learning_rate)
+    for step in range(steps):
+        for group in optimizer.param_groups:
+            group["lr"] = config.learning_rate * cosine_decay(step, steps)
+        optimizer.zero_grad()
+        height = _pyramid_height(start, grids)
+        slopes = height_slope_channels(height)
+        loss = level.residual(height, light) + config.flat_prior * slopes.square().mean()
+        loss.backward()
+        optimizer.step()
+    with torch.no_grad():
+        height = _pyramid_height(start, grids)
+    return height - height.mean(), light.detach()
+
+
+def _initial_light(level: _Level, height: Tensor) -> Tensor:
+    """The constant harmonic that explains the median ratio over a flat surface."""
+    with torch.no_grad():
+        shading = flash_shading(normals_of_height(height), level.frame)
+        used = level.weight[0, 0] > 0
+        light = torch.zeros(3, SH_TERMS)
+        for channel in range(3):
+            ratio = (level.log_ratio[0, channel] + shading[0, 0].log())[used]
+            light[channel, 0] = (
+                ratio.median().exp() if ratio.numel() else torch.tensor(1.0)
+            ) / _SH_CONSTANTS[0]
+    return light
+
+
+def fit_pair(
+    flash_only: Tensor,
+    room: Tensor,
+    valid: Tensor,
+    maps: Tensor,
+    frame: Tensor,
+    config: PairFitConfig | None = None,
+    on_step: Callable[[int, int], None] | None = None,
+) -> PairFitResult:
+    """The relief that explains a pair's ratio (module docstring), in the network's ``maps``.
+
+    Args:
+        flash_only: the flash photo less the room light, linear (any exposure).
+        room: the room light's share of the flash photo (the registered no-flash photo times the
+            exposure ratio and white-balance gains), linear, in ``flash_only``'s units.
+        valid: 1 where both photos are usable (seen, unclipped).
+        maps: the network's maps from the flash-only image: roughness, metallic and the glint mask
+            come from them, and the result is them with the fitted normals.
+        frame: the flash frame of these pixels.
+        config: the settings (default ``PairFitConfig()``).
+        on_step: called with ``(step, of steps)`` over all levels.
+
+    Shape:
+        - flash_only, room: ``(3, N, N)``; valid: ``(1, N, N)``; maps: ``(8, N, N)``; frame: ``(1, 3)``
+        - output maps: ``(8, N, N)``
+    """
+    started = time.perf_counter()
+    config = config or PairFitConfig()
+    size = check_shape(flash_only, "3 N N", name="flash_only")["N"]
+    check_shape(room, "3 N N", name="room", dims={"N": size})
+    check_shape(valid, "1 N N", name="valid", dims={"N": size})
+    check_map_shape(maps)
+    check_flash_frame(frame, 1)
+    flash_only, room, valid, maps, frame = (
+        t.detach().float() for t in (flash_only, room, valid, maps, frame)
+    )
+    usable = usable_ratio_mask(flash_only, room, valid, maps, frame, config)
+    log_ratio = room.clamp_min(VALUE_FLOOR).log() - flash_only.clamp_min(VALUE_FLOOR).log()
+    sizes = [min(level, size) for level in config.levels]
+    total, done = sum(config.steps), 0
+    height = torch.zeros(1, 1, sizes[0], sizes[0])  # pixel units of the working size
+    light = _initial_light(_Level.of(log_ratio, usable, frame, sizes[0]), height)
+    flat_light = light
+    fitted, held_out = _Level.of(log_ratio, usable, frame, sizes[-1]).split()
+    for level_size, steps in zip(sizes, config.steps, strict=True):
+        # The finest level fits its pixels less the held-out ones; coarser levels average them in.
+        level = fitted if level_size == sizes[-1] else _Level.of(log_ratio, usable, frame, level_size)
+        # Twice the pixels across: the same rise is twice as many (smaller) pixels high.
+        height = _enlarge(height, level_size)
+        flat_light = _fit_light(level, torch.zeros_like(height), flat_light, steps // 2, config)
+        height, light = _fit_level(level, height, light, steps, config)
+        done += steps
+        if on_step is not None:
+            on_step(done, total)
+    with torch.no_grad():
+        residual_flat = float(held_out.residual(torch.zeros_like(height), flat_light))
+        residual_fit = float(held_out.residual(height, light))
+    kept: Kept = "fit" if residual_fit < (1 - config.min_improvement) * residual_flat else "prediction"
+    result = with_relief(maps, height, frame) if kept == "fit" else maps.clone()
+    return PairFitResult(
+        maps=result,
+        kept=kept,
+        residual_flat=residual_flat,
+        residual_fit=residual_fit,
+        masked_fraction=float(1 - usable.mean()),
+        room_light=tuple(tuple(round(float(v), 6) for v in row) for row in light),
+        levels=tuple(dict.fromkeys(sizes)),
+        seconds=time.perf_counter() - started,
+        settings=asdict(config),
+    )
+
+
+def _enlarge(height: Tensor, size: int) -> Tensor:
+    """A height in pixel units at another size, in that size's pixel units."""
+    if height.shape[-1] == size:
+        return height
+    scale = size / height.shape[-1]
+    return F.interpolate(height, size=(size, size), mode="bicubic", align_corners=False) * scale
+
+
+def with_relief(maps: Tensor, height: Tensor, frame: Tensor) -> Tensor:
+    """``maps`` with the normals of ``height`` (pixel units, carried up to the maps' size) and the
+    base colour divided by the relief's flash shading over a flat surface's (module docstring).
+
+    Shape: ``(8, N, N)``, ``(1, 1, n, n)``, ``(1, 3)`` → ``(8, N, N)``."""
+    normal = normals_of_height(_enlarge(height, maps.shape[-1]))
+    flat = torch.zeros_like(normal)
+    flat[:, 2] = 1.0
+    relief_shading = flash_shading(normal, frame) / flash_shading(flat, frame)
+    out = maps.clone()
+    out[NORMAL] = normal[0]
+    linear = linear_basecolor_maps(maps[None])[0][BASECOLOR] / relief_shading[0].clamp(0.25, 4.0)
+    out[BASECOLOR] = linear_to_srgb(linear.clamp(0.0, 1.0))
+    return out

@@ -1,0 +1,77 @@
+"""The pair fit reads relief from the ratio of the room light to the flash (brdfgan.inference.pair.fit)."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from brdfgan.core.delit import flash_render
+from brdfgan.core.flash_geometry import centred_flash_frame
+from brdfgan.core.svbrdf import join_maps, linear_to_srgb
+from brdfgan.inference.pair.fit import (
+    SH_TERMS,
+    PairFitConfig,
+    fit_pair,
+    normals_of_height,
+    sh_basis,
+    usable_ratio_mask,
+)
+
+SIZE = 64
+FAST = PairFitConfig(levels=(32, 64), steps=(150, 100))
+
+
+def mean_angle(a: torch.Tensor, b: torch.Tensor) -> float:
+    return float(torch.rad2deg(torch.acos((a * b).sum(0).clamp(-1, 1))).mean())
+
+
+def pair_of(height_px: torch.Tensor, *, metal: float = 0.0) -> tuple[torch.Tensor, ...]:
+    """A diffuse surface with a blocky albedo, its flash-only image and its room light's share
+    (a side-lit order-2 irradiance) — the model the fit assumes, rendered by the project's flash."""
+    normal = normals_of_height(height_px)
+    generator = torch.Generator().manual_seed(0)
+    albedo = (0.3 + 0.4 * torch.rand(1, 3, SIZE // 8, SIZE // 8, generator=generator)).repeat_interleave(8, 2)
+    albedo = albedo.repeat_interleave(8, 3)
+    frame = centred_flash_frame(1, SIZE, SIZE, fov_deg=50.0)
+    roughness, metallic = torch.full((1, 1, SIZE, SIZE), 0.8), torch.full((1, 1, SIZE, SIZE), metal)
+    flash_only = flash_render(albedo, normal, roughness, metallic, frame)[0]
+    light = torch.zeros(3, SH_TERMS)
+    light[:, 0], light[:, 3], light[:, 1] = 1.0, 0.6, 0.3  # constant, from +x, from +y
+    room = 0.2 * albedo[0] * torch.einsum("ck,bkhw->bchw", light, sh_basis(normal))[0].clamp_min(0)
+    flat = torch.tensor([0.0, 0.0, 1.0]).view(3, 1, 1).expand(3, SIZE, SIZE)
+    maps = join_maps(linear_to_srgb(albedo[0]), flat, roughness[0], metallic[0])
+    return flash_only, room, maps, frame, normal[0]
+
+
+def test_the_fit_reads_relief_the_flash_alone_leaves_ambiguous() -> None:
+    y, x = torch.meshgrid(torch.linspace(0, 1, SIZE), torch.linspace(0, 1, SIZE), indexing="ij")
+    height = (2.0 * torch.sin(2 * math.pi * 2 * x) * torch.sin(2 * math.pi * 1.5 * y))[None, None]
+    flash_only, room, maps, frame, truth = pair_of(height)
+    result = fit_pair(flash_only, room, torch.ones(1, SIZE, SIZE), maps, frame, FAST)
+    flat = maps[3:6]
+    assert result.kept == "fit" and result.residual_fit < 0.5 * result.residual_flat
+    assert mean_angle(result.maps[3:6], truth) < 0.6 * mean_angle(flat, truth)
+    fitted, true = (-n[:2] / n[2:] for n in (result.maps[3:6], truth))
+    assert float((fitted * true).sum() / (fitted.norm() * true.norm())) > 0.8  # slope cosine
+    # The base colour loses the relief's flash shading: closer to the albedo than the network's.
+    record = result.to_json()
+    assert record["kept"] == "fit" and len(record["room_light"]) == 3 and record["levels"] == [32, 64]
+
+
+def test_a_flat_surface_keeps_the_networks_normals() -> None:
+    flash_only, room, maps, frame, _ = pair_of(torch.zeros(1, 1, SIZE, SIZE))
+    noise = torch.Generator().manual_seed(1)
+    room = room * (1 + 0.01 * torch.randn(room.shape, generator=noise))
+    result = fit_pair(flash_only, room, torch.ones(1, SIZE, SIZE), maps, frame, FAST)
+    assert result.kept == "prediction" and torch.equal(result.maps, maps)
+
+
+def test_metal_glints_and_invalid_pixels_are_not_read() -> None:
+    flash_only, room, maps, frame, _ = pair_of(torch.zeros(1, 1, SIZE, SIZE), metal=1.0)
+    valid = torch.ones(1, SIZE, SIZE)
+    assert not usable_ratio_mask(flash_only, room, valid, maps, frame, FAST).any()
+    flash_only, room, maps, frame, _ = pair_of(torch.zeros(1, 1, SIZE, SIZE))
+    valid[:, :, : SIZE // 2] = 0
+    usable = usable_ratio_mask(flash_only, room, valid, maps, frame, FAST)
+    assert not usable[:, :, : SIZE // 2].any() and usable[:, :, SIZE // 2 :].all()
