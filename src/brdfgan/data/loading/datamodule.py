@@ -29,10 +29,11 @@ import webdataset as wds
 from lightning.pytorch.loops.progress import _ProcessedTracker
 from torch.utils.data import DataLoader, IterableDataset, get_worker_info
 
-from brdfgan.capture import TRAINING_CAPTURE
+from brdfgan.capture import NO_FLASH_PHOTO, TRAINING_CAPTURE
 from brdfgan.core.flash_geometry import pixel_scale
 from brdfgan.core.render import FlashCapture
 from brdfgan.data.phone.conditions import sample_as_photographed
+from brdfgan.data.phone.pairs import pair_batch, pair_record, sensed_pair_meta, twin_sensor
 from brdfgan.data.phone.sensor import SensorEffects
 from brdfgan.data.storage.shards import (
     MANIFEST_NAME,
@@ -118,11 +119,16 @@ _SAMPLES, _ERRORS = 0, 1
 
 
 def collate_samples(samples: Sequence[Sample]) -> dict[str, Any]:
-    """Stack samples into a batch dict; ``meta`` stays a list of dicts.
+    """Stack samples into a batch dict; ``meta`` stays a list of dicts. When every sample has a
+    no-flash twin, the batch holds the pair too: the twins under ``NO_FLASH_PHOTO.batch_key``
+    (``photo_noflash``) and :func:`~brdfgan.data.phone.pairs.pair_batch`'s tensors; otherwise
+    (any single photo among them) it is the single-photo batch.
 
     Shape:
         - output["photo"]: ``(B, 3, H, W)`` float32; output["maps"]: ``(B, 8, H, W)`` float32
         - output["key"]: list of B str; output["meta"]: list of B dict
+        - pairs: output["photo_noflash"]: ``(B, 3, H, W)`` float32; output["exposure_ratio"]:
+          ``(B,)``; output["white_balance"]: ``(B, 2, 3)`` (flash shot, no-flash shot)
     """
     if not samples:
         raise ValueError("cannot collate an empty list of samples")
@@ -134,7 +140,7 @@ def collate_samples(samples: Sequence[Sample]) -> dict[str, Any]:
         )
     meta = [dict(sample.meta) for sample in samples]
     height, width = samples[0].photo.shape[-2:]
-    return {
+    batch = {
         # The flash photo under its batch key (brdfgan.capture: what a batch of the capture holds).
         TRAINING_CAPTURE.reference.batch_key: torch.stack([sample.photo for sample in samples]).float(),
         "maps": torch.stack([sample.maps for sample in samples]).float(),
@@ -142,6 +148,11 @@ def collate_samples(samples: Sequence[Sample]) -> dict[str, Any]:
         "key": [sample.key for sample in samples],
         "meta": meta,
     }
+    twins = [sample.no_flash for sample in samples if sample.no_flash is not None]
+    if len(twins) == len(samples):
+        batch[NO_FLASH_PHOTO.batch_key] = torch.stack(twins).float()
+        batch.update(pair_batch(meta, [sample.key for sample in samples]))
+    return batch
 
 
 # Samples without meta["capture"] come from datasets made before the capture randomisation, all
@@ -172,13 +183,27 @@ def flash_frames(meta: Sequence[Mapping[str, Any]], height: int, width: int) -> 
 def sensed_sample(sample: Sample, sensor: SensorEffects, seed: int) -> Sample:
     """The sample with ``sensor`` applied to its photo, seeded by ``seed``, under the flash colour
     its meta records (for the auto white balance; ``None`` if it records none); what was drawn in
-    ``meta["sensor"]``."""
+    ``meta["sensor"]``.
+
+    A no-flash twin gets the sensor too, seeded from ``seed`` on its own, through the flash shot's
+    lens and file type (:func:`~brdfgan.data.phone.pairs.twin_sensor`) and without the auto white
+    balance to the flash (it shows no flash); what was drawn goes in ``meta["sensor_noflash"]`` and
+    ``meta["pair"]`` takes the sensor's exposures and gains in
+    (:func:`~brdfgan.data.phone.pairs.sensed_pair_meta`)."""
     photo, record = sensor.apply(
         sample.photo,
         torch.Generator().manual_seed(seed),
         illuminant_rgb=sensor.flash_illuminant(sample.meta),
     )
-    return Sample(sample.key, photo, sample.maps, {**sample.meta, "sensor": record}, check=False)
+    meta = {**sample.meta, "sensor": record}
+    no_flash = sample.no_flash
+    if no_flash is not None:
+        no_flash, twin_record = twin_sensor(sensor, record).apply(
+            no_flash, torch.Generator().manual_seed(_mix(seed, "no_flash"))
+        )
+        meta["sensor_noflash"] = twin_record
+        meta["pair"] = sensed_pair_meta(pair_record(sample.meta, sample.key), record, twin_record)
+    return Sample(sample.key, photo, sample.maps, meta, check=False, no_flash=no_flash)
 
 
 class EpochStream(IterableDataset):
@@ -413,7 +438,8 @@ def random_crop(sample: Sample, size: int, rng: random.Random) -> Sample:
     The generator is fully convolutional, so training on crops of the rendered photos is
     training on smaller photos with the flash hotspot anywhere in (or outside) the window.
     ``meta["train_crop"]`` records the window as ``[x, y, size]`` and ``meta["photo_size"]`` the
-    sample's ``[width, height]`` before the crop (the flash frame's scale needs it).
+    sample's ``[width, height]`` before the crop (the flash frame's scale needs it). A no-flash
+    twin is cut at the same window.
 
     Shape:
         - sample.photo: ``(3, H, W)``, sample.maps: ``(8, H, W)`` with ``H, W >= size``
@@ -426,7 +452,8 @@ def random_crop(sample: Sample, size: int, rng: random.Random) -> Sample:
     x = rng.randrange(width - size + 1)
     window = (..., slice(y, y + size), slice(x, x + size))
     meta = {**sample.meta, "train_crop": [x, y, size], "photo_size": [width, height]}
-    return Sample(sample.key, sample.photo[window], sample.maps[window], meta, check=False)
+    no_flash = None if sample.no_flash is None else sample.no_flash[window]
+    return Sample(sample.key, sample.photo[window], sample.maps[window], meta, check=False, no_flash=no_flash)
 
 
 def _batches(samples: Iterator[Sample], batch_size: int, *, partial: bool) -> Iterator[dict[str, Any]]:

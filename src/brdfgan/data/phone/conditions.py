@@ -292,4 +292,5 @@ def maps_as_photographed(maps: torch.Tensor, meta: Mapping[str, Any]) -> torch.T
 def sample_as_photographed(sample: Sample) -> Sample:
     """The sample with :func:`maps_as_photographed` maps; ``meta["maps_view"] = "photo"`` says so."""
     maps = maps_as_photographed(sample.maps, sample.meta)
-    return Sample(sample.key, sample.photo, maps, {**sample.meta, "maps_view": "photo"}, check=False)
+    meta = {**sample.meta, "maps_view": "photo"}
+    return Sample(sample.key, sample.photo, maps, meta, check=False, no_flash=sample.no_flash)

@@ -1,6 +1,7 @@
-"""The on-disk dataset format: WebDataset tar shards of (flash photo, ground-truth maps, metadata),
-with a ``manifest.json`` per split and each shard's SHA-256 beside it. The layout, the two sample
-formats (``u16z``, ``png``) and the ``.u16z`` byte layout: docs/data.md#the-shard-format.
+"""The on-disk dataset format: WebDataset tar shards of (flash photo, ground-truth maps, metadata,
+and optionally the photo's no-flash twin), with a ``manifest.json`` per split and each shard's
+SHA-256 beside it. The layout, the two sample formats (``u16z``, ``png``) and the ``.u16z`` byte
+layout: docs/data.md#the-shard-format.
 
 Both formats store the same 16-bit values, so a sample decodes to bit-identical tensors from
 either; readers tell them apart per sample by the member names (:data:`FORMAT_MEMBERS`). Writing
@@ -29,7 +30,7 @@ import torch
 import zstandard
 from torch import Tensor
 
-from brdfgan.capture import TRAINING_CAPTURE, known_shard_members
+from brdfgan.capture import NO_FLASH_PHOTO, TRAINING_CAPTURE, known_shard_members
 from brdfgan.core.checks import check_shape
 from brdfgan.core.svbrdf import (
     NORMAL,
@@ -48,6 +49,7 @@ __all__ = [
     "FORMAT_MEMBERS",
     "LEGACY_SHARD_FORMAT",
     "MANIFEST_NAME",
+    "OPTIONAL_MEMBERS",
     "PHOTO_CODE_TOLERANCE",
     "PNG_COMPRESSION",
     "SAMPLE_MEMBERS",
@@ -91,11 +93,18 @@ FORMAT_MEMBERS: Mapping[str, tuple[str, ...]] = {
         "meta.json",
     ),
 }
+# The no-flash twin of a flash + no-flash pair (``dataset_spec.pairs``): a member of its own after
+# the flash photo's, only in samples that have one, so a dataset without pairs keeps its bytes and
+# a reader of such a dataset never looks for it.
+_TWIN = NO_FLASH_PHOTO.member
+OPTIONAL_MEMBERS: Mapping[str, tuple[str, ...]] = {
+    extension: (f"{_TWIN}.{extension}",) for extension in SHARD_FORMATS
+}
 # The members of a PNG sample (the only format before u16z; kept under its old name).
 SAMPLE_MEMBERS: tuple[str, ...] = FORMAT_MEMBERS["png"]
-_KNOWN_MEMBERS = frozenset(name for names in FORMAT_MEMBERS.values() for name in names).union(
-    *(known_shard_members(extension) for extension in SHARD_FORMATS)
-)
+_KNOWN_MEMBERS = frozenset(
+    name for table in (FORMAT_MEMBERS, OPTIONAL_MEMBERS) for names in table.values() for name in names
+).union(*(known_shard_members(extension) for extension in SHARD_FORMATS))
 MANIFEST_NAME = "manifest.json"
 # Two generations of one spec write the same maps and metadata, but Mitsuba's LLVM variant renders
 # a rare pixel one 16-bit code apart from run to run (the order of its parallel sums), so a shard's
@@ -139,10 +148,14 @@ class Sample:
     intensity/temperature, exposure, …). The constructor validates everything; ``check=False``
     skips the tensor checks (:func:`decode_sample` uses it: decoded 16-bit values are finite and
     in [0, 1] by construction, and it checks the rest itself, at a fraction of the cost).
+    ``no_flash`` is the photo's no-flash twin of a flash + no-flash pair (the same surface and
+    room light with the flash off, exposed on its own; ``meta["pair"]`` says how:
+    :mod:`brdfgan.data.phone.pairs`), ``None`` for a single photo.
 
     Shape:
         - photo: ``(3, H, W)`` floating point, linear LDR in [0, 1]
         - maps: ``(8, H, W)`` floating point, the layout of :mod:`brdfgan.core.svbrdf`
+        - no_flash: ``(3, H, W)`` like ``photo``, or ``None``
     """
 
     key: str
@@ -150,6 +163,8 @@ class Sample:
     maps: Tensor
     meta: Mapping[str, Any]
     check: InitVar[bool] = True
+    # After ``check``: a positional ``check`` argument keeps its meaning.
+    no_flash: Tensor | None = None
 
     def __post_init__(self, check: bool) -> None:
         if not isinstance(self.key, str) or not KEY_PATTERN.fullmatch(self.key):
@@ -174,12 +189,23 @@ class Sample:
             raise ShardError(
                 f"{where}: photo {tuple(self.photo.shape)} and maps {tuple(self.maps.shape)} differ in size"
             )
-        if not torch.isfinite(self.photo).all() or self.photo.min() < 0.0 or self.photo.max() > 1.0:
-            raise ShardError(f"{where}: photo must be finite linear LDR in [0, 1] (clip after exposure)")
+        _check_photo(self.photo, f"{where}: photo")
+        if self.no_flash is not None:
+            if not isinstance(self.no_flash, Tensor) or not self.no_flash.is_floating_point():
+                raise ShardError(f"{where}: no_flash must be a floating point (3, H, W) tensor or None")
+            if self.no_flash.shape != self.photo.shape:
+                shapes = f"{tuple(self.no_flash.shape)} and photo {tuple(self.photo.shape)}"
+                raise ShardError(f"{where}: no_flash {shapes} differ in size")
+            _check_photo(self.no_flash, f"{where}: no_flash")
         try:
             validate_maps(self.maps)
         except InvalidMapsError as error:
             raise ShardError(f"{where}: {error}") from error
+
+
+def _check_photo(photo: Tensor, where: str) -> None:
+    if not torch.isfinite(photo).all() or photo.min() < 0.0 or photo.max() > 1.0:
+        raise ShardError(f"{where} must be finite linear LDR in [0, 1] (clip after exposure)")
 
 
 @dataclass(frozen=True)
@@ -197,7 +223,9 @@ class ShardInfo:
 
 
 def encode_sample(sample: Sample, shard_format: str = "png") -> dict[str, bytes]:
-    """Encode a sample into its member files, keyed by the names of ``FORMAT_MEMBERS[shard_format]``.
+    """Encode a sample into its member files, keyed by the names of ``FORMAT_MEMBERS[shard_format]``
+    in their order, with the no-flash twin (:data:`OPTIONAL_MEMBERS`) after the photo when the
+    sample has one.
 
     Every channel is rounded to the nearest of 65536 levels, the same in every format, and stored
     as 16-bit PNGs (``png``) or byte-shuffled Zstandard planes (``u16z``, layout in
@@ -205,7 +233,7 @@ def encode_sample(sample: Sample, shard_format: str = "png") -> dict[str, bytes]
     metadata gives equal bytes.
 
     Shape:
-        - sample.photo: ``(3, H, W)``; sample.maps: ``(8, H, W)``
+        - sample.photo, sample.no_flash: ``(3, H, W)``; sample.maps: ``(8, H, W)``
     """
     if shard_format not in FORMAT_MEMBERS:
         raise ShardError(f"unknown shard format {shard_format!r}: expected one of {', '.join(SHARD_FORMATS)}")
@@ -217,10 +245,14 @@ def encode_sample(sample: Sample, shard_format: str = "png") -> dict[str, bytes]
         raise ShardError(f"sample {sample.key!r}: meta is not JSON-serialisable ({error})") from error
     photo = _quantise(sample.photo)
     maps = _quantise_maps(sample.maps)
+    encode = _encode_u16z if shard_format == "u16z" else _encode_png
+    photos = {f"{_PHOTO}.{shard_format}": encode(photo)}
+    if sample.no_flash is not None:
+        photos[f"{_TWIN}.{shard_format}"] = encode(_quantise(sample.no_flash))
     if shard_format == "u16z":
-        return {f"{_PHOTO}.u16z": _encode_u16z(photo), "maps.u16z": _encode_u16z(maps), "meta.json": meta}
+        return {**photos, "maps.u16z": _encode_u16z(maps), "meta.json": meta}
     return {
-        f"{_PHOTO}.png": _encode_png(photo),
+        **photos,
         "basecolor.png": _encode_png(maps[0:3]),
         "normal.png": _encode_png(maps[3:6]),
         "roughness.png": _encode_png(maps[6:7]),
@@ -242,10 +274,12 @@ def decode_sample(record: Mapping[str, Any]) -> Sample:
     sample (``"__url__"``, when present, is only used to name the shard in errors); the format is
     told from the member names (:func:`sample_format`). Normals are renormalised after
     quantisation; what decoding cannot guarantee (images of one size, normals pointing out of the
-    surface, the key) is validated again, the rest holds by construction.
+    surface, the key) is validated again, the rest holds by construction. The no-flash twin is
+    read when the record holds it (``output.no_flash``; ``None`` otherwise, as for every sample
+    written before pairs existed).
 
     Shape:
-        - output.photo: ``(3, H, W)`` float32; output.maps: ``(8, H, W)`` float32
+        - output.photo, output.no_flash: ``(3, H, W)`` float32; output.maps: ``(8, H, W)`` float32
     """
     key = record.get("__key__")
     where = f"sample {key!r}" + (f" in {record['__url__']}" if "__url__" in record else "")
@@ -263,7 +297,15 @@ def decode_sample(record: Mapping[str, Any]) -> Sample:
             _decode_png(record[name], count, f"{where} {name}")
             for name, count in zip(members[:5], (3, 3, 3, 1, 1), strict=True)
         ]
-    sizes = {image.shape[1:] for image in images}
+    twin_member = f"{_TWIN}.{shard_format}"
+    twin = record.get(twin_member)
+    no_flash = None
+    if twin is not None:
+        if not isinstance(twin, bytes | bytearray):
+            raise ShardError(f"{where}: member {twin_member} is not bytes")
+        decode = _decode_u16z if shard_format == "u16z" else _decode_png
+        no_flash = decode(bytes(twin), 3, f"{where} {twin_member}")
+    sizes = {image.shape[1:] for image in (*images, *([] if no_flash is None else [no_flash]))}
     if len(sizes) != 1:
         raise ShardError(f"{where}: member images differ in size {sorted(sizes)}")
     if shard_format == "png":
@@ -278,7 +320,14 @@ def decode_sample(record: Mapping[str, Any]) -> Sample:
         maps, f"{where} {'maps.u16z' if shard_format == 'u16z' else 'normal.png'}"
     )
     try:
-        return Sample(key=str(key), photo=_unit_float(photo), maps=unit_maps, meta=meta, check=False)
+        return Sample(
+            key=str(key),
+            photo=_unit_float(photo),
+            maps=unit_maps,
+            meta=meta,
+            check=False,
+            no_flash=None if no_flash is None else _unit_float(no_flash),
+        )
     except ShardError as error:
         raise ShardError(f"{where}: {error}") from error
 
@@ -471,9 +520,8 @@ def write_shard(
             if sample.key in keys:
                 raise ShardError(f"{path}: duplicate sample key {sample.key!r}")
             keys.add(sample.key)
-            files = encode_sample(sample, shard_format)
-            for member in FORMAT_MEMBERS[shard_format]:
-                _add_member(tar, f"{sample.key}.{member}", files[member])
+            for member, data in encode_sample(sample, shard_format).items():
+                _add_member(tar, f"{sample.key}.{member}", data)
     return ShardInfo(path=path, count=len(keys), bytes=path.stat().st_size, sha256=sha256_file(path))
 
 
@@ -581,8 +629,9 @@ def shard_differences(
     first: str | os.PathLike[str], second: str | os.PathLike[str], photo_codes: int = PHOTO_CODE_TOLERANCE
 ) -> list[str]:
     """How two shards of the same samples differ beyond the generation's tolerance, one line per
-    difference (empty when they agree): keys, maps and metadata exactly, photos within
-    ``photo_codes`` 16-bit codes per channel (:data:`PHOTO_CODE_TOLERANCE`).
+    difference (empty when they agree): keys, maps and metadata exactly, photos (and no-flash
+    twins, which both must have or lack) within ``photo_codes`` 16-bit codes per channel
+    (:data:`PHOTO_CODE_TOLERANCE`).
 
     Raises:
         ShardError: naming the file, when either is unreadable or a sample is malformed.
@@ -596,13 +645,22 @@ def shard_differences(
             differences.append(f"sample {a.key!r}: metadata differs")
         if a.maps.shape != b.maps.shape or not torch.equal(a.maps, b.maps):
             differences.append(f"sample {a.key!r}: maps differ")
-        if a.photo.shape != b.photo.shape:
-            differences.append(f"sample {a.key!r}: photos differ in size")
-            continue
-        codes = np.abs(_quantise(a.photo).astype(np.int32) - _quantise(b.photo).astype(np.int32)).max()
-        if codes > photo_codes:
-            differences.append(f"sample {a.key!r}: photos differ by {codes} codes (tolerance {photo_codes})")
+        differences += _photo_difference(a.key, "photos", a.photo, b.photo, photo_codes)
+        if (a.no_flash is None) != (b.no_flash is None):
+            differences.append(f"sample {a.key!r}: only one has a no-flash twin")
+        elif a.no_flash is not None and b.no_flash is not None:
+            differences += _photo_difference(a.key, "no-flash twins", a.no_flash, b.no_flash, photo_codes)
     return differences
+
+
+def _photo_difference(key: str, what: str, first: Tensor, second: Tensor, photo_codes: int) -> list[str]:
+    """A line when two photos of sample ``key`` differ in size or by more than ``photo_codes``."""
+    if first.shape != second.shape:
+        return [f"sample {key!r}: {what} differ in size"]
+    codes = np.abs(_quantise(first).astype(np.int32) - _quantise(second).astype(np.int32)).max()
+    if codes > photo_codes:
+        return [f"sample {key!r}: {what} differ by {codes} codes (tolerance {photo_codes})"]
+    return []
 
 
 def _scan_members(tar: tarfile.TarFile, path: Path, size: int, decode: bool) -> int:
@@ -643,9 +701,11 @@ def _check_member(info: tarfile.TarInfo, path: Path, size: int) -> str:
 
 
 def _check_sample(path: Path, key: str, record: dict[str, Any], decode: bool) -> None:
-    """A sample's members are exactly one format's (and decode, with ``decode``)."""
-    members = FORMAT_MEMBERS[sample_format(record)]
-    mixed = [name for name in record if name not in members]
+    """A sample's members are exactly one format's, its optional ones aside (and decode, with
+    ``decode``)."""
+    shard_format = sample_format(record)
+    members = FORMAT_MEMBERS[shard_format]
+    mixed = [name for name in record if name not in members + OPTIONAL_MEMBERS[shard_format]]
     if mixed:
         raise ShardError(f"{path}: sample {key!r} mixes formats ({', '.join(mixed)} beside {members[0]})")
     missing = [name for name in members if name not in record]
