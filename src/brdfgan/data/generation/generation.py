@@ -20,6 +20,8 @@ The protocol, and where each step lives:
    geometry and exposure error drawn per photo (off by default: today's fixed camera) — rendered
    with Mitsuba and auto-exposed to linear LDR — :mod:`brdfgan.data.phone.environments`,
    :mod:`brdfgan.data.phone.conditions`, :mod:`brdfgan.mitsuba_render.photos`, :mod:`brdfgan.core.exposure`.
+   With ``pairs``, each photo also gets its no-flash twin: the same render with the flash off,
+   auto-exposed on its own off by an exposure error of its own — :mod:`brdfgan.data.phone.pairs`.
 5. Materials are grouped ``materials_per_shard`` at a time into WebDataset shards
    ``<split>/<split>-NNNNNN.tar``, their samples stored in ``shard_format`` —
    :mod:`brdfgan.data.storage.shards`. A shard is the unit of work
@@ -45,7 +47,7 @@ import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import torch
 from torch import Tensor
@@ -65,6 +67,7 @@ from brdfgan.data.phone.environments import (
     realize_lighting,
 )
 from brdfgan.data.phone.flash import blackbody_rgb
+from brdfgan.data.phone.pairs import draw_exposure_ev, pair_meta
 from brdfgan.data.spec.dataset_spec import SPLITS, DatasetSpec, paint_material, split_materials
 from brdfgan.data.spec.determinism import derive_seed, material_seed, single_torch_thread
 from brdfgan.data.storage.shards import (
@@ -114,9 +117,24 @@ def plan_shards(spec: DatasetSpec) -> list[ShardJob]:
     return jobs
 
 
-# (maps (8, R, R), lighting, flash radiant intensity W/sr, flash temperature K, capture geometry
-#  and exposure error, render seed) -> (linear LDR photo (3, R, R), exposure scale applied)
-PhotographFn = Callable[[Tensor, LightingDraw, float, float, CaptureDraw, int], tuple[Tensor, float]]
+class PhotographFn(Protocol):
+    """(maps (8, R, R), lighting, flash radiant intensity W/sr, flash temperature K, capture
+    geometry and exposure error, render seed) -> (linear LDR photo (3, R, R), exposure scale
+    applied). ``flash=False`` takes the photo's no-flash twin: the same room light, balanced
+    against the same flash, with the flash off (only asked of it for ``dataset_spec.pairs``)."""
+
+    def __call__(
+        self,
+        maps: Tensor,
+        lighting: LightingDraw,
+        flash_intensity: float,
+        temperature_k: float,
+        capture: CaptureDraw,
+        seed: int,
+        /,
+        *,
+        flash: bool = True,
+    ) -> tuple[Tensor, float]: ...
 
 
 class MitsubaPhotographer:
@@ -145,19 +163,24 @@ class MitsubaPhotographer:
         temperature_k: float,
         capture: CaptureDraw,
         seed: int,
+        /,
+        *,
+        flash: bool = True,
     ) -> tuple[Tensor, float]:
         from brdfgan.mitsuba_render.photos import render_capture
 
         r, g, b = blackbody_rgb(temperature_k)
-        flash = (flash_intensity * r, flash_intensity * g, flash_intensity * b)
+        flash_rgb = (flash_intensity * r, flash_intensity * g, flash_intensity * b)
         position = capture.flash_position
-        centre_irradiance = flash_centre_irradiance(flash, position)
+        # The room light is balanced against the flash whether or not it fires: a twin shows the
+        # room of its flash photo.
+        centre_irradiance = flash_centre_irradiance(flash_rgb, position)
         environment = realize_lighting(lighting, centre_irradiance, self.environment_resolution)
         result = render_capture(
             self.renderer,
             maps,
             environment,
-            flash,
+            flash_rgb if flash else (0.0, 0.0, 0.0),
             seed=seed,
             camera=capture.camera,
             flash_position=position,
@@ -180,7 +203,9 @@ def material_samples(
     Keys are ``<split>-m<material>-c<crop>-r<render>``; metadata records everything needed to
     reproduce or filter a sample (family, parameters, seeds, crop transform, environment id,
     rotation and balance ratio, flash intensity and temperature, capture geometry with the
-    flash hotspot's pixel, exposure scale).
+    flash hotspot's pixel, exposure scale; with ``spec.pairs`` the twin's in ``pair``:
+    :func:`~brdfgan.data.phone.pairs.pair_meta`, its ``no_flash`` holding the twin's exposure
+    scale, exposure error and render seed).
     """
     seed = material_seed(spec.seed, material_index)
     generator = torch.Generator().manual_seed(seed)
@@ -203,11 +228,18 @@ def material_samples(
             # lighting and flash draw, so turning the randomisation on would change those too.
             capture_generator = torch.Generator().manual_seed(derive_seed(seed, "capture", c, r))
             capture = spec.capture.sample(capture_generator)
-            photo, exposure = photograph(crop, lighting, flash_intensity, temperature, capture, render_seed)
+            scene = (crop, lighting, flash_intensity, temperature)
+            photo, exposure = photograph(*scene, capture, render_seed)
+            no_flash, pair = None, {}
+            if spec.pairs:
+                no_flash, pair["pair"] = _no_flash_twin(
+                    spec, photograph, scene, capture, exposure, (seed, c, r)
+                )
             yield Sample(
                 key=f"{split}-m{material_index:06d}-c{c}-r{r}",
                 photo=photo,
                 maps=crop,
+                no_flash=no_flash,
                 meta={
                     "split": split,
                     "material_index": material_index,
@@ -221,8 +253,32 @@ def material_samples(
                     "flash": {"intensity_w_sr": flash_intensity, "temperature_k": temperature},
                     "capture": capture.to_json(spec.resolution),
                     "exposure_scale": exposure,
+                    **pair,
                 },
             )
+
+
+def _no_flash_twin(
+    spec: DatasetSpec,
+    photograph: PhotographFn,
+    scene: tuple[Tensor, LightingDraw, float, float],
+    capture: CaptureDraw,
+    flash_exposure: float,
+    photo_id: tuple[int, int, int],
+) -> tuple[Tensor, dict[str, Any]]:
+    """The no-flash twin of the photo of ``scene`` (maps, lighting, flash intensity and
+    temperature) taken as ``capture`` with exposure scale ``flash_exposure``, and the sample's
+    ``meta["pair"]``. ``photo_id`` is (material seed, crop, render): the twin's exposure error and
+    render seed come from streams of their own, drawn only for pairs, so a spec without them keeps
+    its bytes."""
+    material, crop, render = photo_id
+    stream = torch.Generator().manual_seed(derive_seed(material, "no-flash", crop, render))
+    exposure_ev = draw_exposure_ev(spec.capture, float(torch.rand((), generator=stream, dtype=torch.float64)))
+    seed = derive_seed(material, "render-no-flash", crop, render) & 0xFFFFFFFF
+    twin_capture = dataclasses.replace(capture, exposure_ev=exposure_ev)
+    no_flash, exposure = photograph(*scene, twin_capture, seed, flash=False)
+    twin = {"exposure_scale": exposure, "exposure_ev": exposure_ev, "seed": seed}
+    return no_flash, pair_meta(flash_exposure, twin)
 
 
 @dataclass

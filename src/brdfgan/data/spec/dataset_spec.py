@@ -70,9 +70,14 @@ class DatasetSpec:
     # PNG shards; conf/dataset_spec/default.yaml makes new datasets "u16z". Not part of a dataset's
     # identity: an existing dataset is finished and repaired in the format it records.
     shard_format: str = LEGACY_SHARD_FORMAT
+    # Every photo with its no-flash twin (the flash off, the room light alone, exposed on its own;
+    # brdfgan.data.phone.pairs): a flash + no-flash pair. Twice the renders.
+    pairs: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "families", tuple(self.families))
+        if not isinstance(self.pairs, bool):
+            raise DatasetConfigError(f"dataset_spec.pairs={self.pairs!r}: must be true or false")
         if self.shard_format not in SHARD_FORMATS:
             raise DatasetConfigError(
                 f"dataset_spec.shard_format={self.shard_format!r}: must be one of {', '.join(SHARD_FORMATS)}"
@@ -144,8 +149,8 @@ class DatasetSpec:
         """A JSON-ready description (recorded in ``dataset.json`` and the manifests). An empty
         family list is recorded resolved, as the registry's names: a dataset made before a family
         joined the registry then differs from today's, and is not taken for it. Options added
-        since (scans, mirrored crops, crops inside the source) are recorded only when used, so a
-        dataset made before them keeps its identity."""
+        since (scans, mirrored crops, crops inside the source, pairs) are recorded only when used, so
+        a dataset made before them keeps its identity."""
         description = json.loads(json.dumps(dataclasses.asdict(self)))
         if self.scanned is None:
             description["families"] = [family.name for family in resolve_families(self.families)]
@@ -154,6 +159,8 @@ class DatasetSpec:
         for option in ("mirror", "inside"):
             if not description["crop"][option]:
                 del description["crop"][option]
+        if not self.pairs:
+            del description["pairs"]
         return description
 
     def renders_per_crop(self, split: str) -> int:
