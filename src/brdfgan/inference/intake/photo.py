@@ -61,7 +61,7 @@ import os
 import struct
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 from warnings import catch_warnings, filterwarnings
 
 import cv2
@@ -73,6 +73,7 @@ from brdfgan.core.checks import check_shape
 from brdfgan.core.exposure import LUMINANCE_WEIGHTS
 from brdfgan.core.svbrdf import srgb_decoding_table, srgb_to_linear
 from brdfgan.errors import UserError
+from brdfgan.inference.intake.exposure_settings import ExposureSettings, exposure_settings_from_exif
 from brdfgan.inference.intake.lens import Lens, lens_from_exif
 from brdfgan.io.images import ImageIOError, read_image
 
@@ -169,6 +170,9 @@ class Photo:
         warnings: human-readable warnings for the user.
         lens: the focal length the EXIF states (JPEG/PNG/HEIF/TIFF), for the refinement's field of view
             (:mod:`brdfgan.inference.intake.lens`); ``None`` when there is none.
+        exposure: the exposure time, ISO and f-number the EXIF states (JPEG/PNG/HEIF/TIFF, and
+            TIFF-based RAW files Pillow can open), for a flash + no-flash pair's exposure ratio
+            (:mod:`brdfgan.inference.intake.exposure_settings`); ``None`` when it states none.
     """
 
     path: Path
@@ -179,6 +183,7 @@ class Photo:
     orientation: int
     warnings: tuple[str, ...]
     lens: Lens | None = None
+    exposure: ExposureSettings | None = None
 
     @property
     def height(self) -> int:
@@ -198,6 +203,7 @@ class Photo:
             "exif_orientation": self.orientation,
             "size": [self.width, self.height],
             "lens": None if self.lens is None else self.lens.to_json(),
+            "exposure": None if self.exposure is None else self.exposure.to_json(),
         }
 
 
@@ -366,10 +372,10 @@ def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
     warnings: list[str] = []
     if _is_heif(data):
         source: Source = "heif"
-        stored, bit_depth, orientation, lens = _decode_heif(path, data, warnings)
+        stored, bit_depth, orientation, facts = _decode_heif(path, data, warnings)
         pending = 1  # libheif has turned the pixels already
     else:
-        source, stored, orientation, lens = _decode_identified(path, data, warnings)
+        source, stored, orientation, facts = _decode_identified(path, data, warnings)
         bit_depth = 16 if stored.dtype == np.uint16 else 8
         pending = orientation
     levels = (1 << bit_depth) - 1
@@ -405,15 +411,29 @@ def _read_ldr_photo(path: Path, colorspace: Colorspace | None) -> Photo:
         colorspace=colorspace,
         orientation=orientation,
         warnings=tuple(warnings),
-        lens=lens,
+        lens=facts.lens,
+        exposure=facts.exposure,
     )
+
+
+class _ExifFacts(NamedTuple):
+    """What a photo's EXIF states besides its orientation."""
+
+    lens: Lens | None
+    exposure: ExposureSettings | None
+
+
+def _exif_facts(exif: Image.Exif | None, stored_width: int) -> _ExifFacts:
+    if exif is None:
+        return _ExifFacts(None, None)
+    return _ExifFacts(lens_from_exif(exif, stored_width), exposure_settings_from_exif(exif))
 
 
 def _decode_identified(
     path: Path, data: bytes, warnings: list[str]
-) -> tuple[Source, np.ndarray, int, Lens | None]:
+) -> tuple[Source, np.ndarray, int, _ExifFacts]:
     """A JPEG, PNG or TIFF, identified by Pillow: its format, stored pixels ``(H, W, C)`` (uint8
-    or uint16, not yet turned), the EXIF orientation and the lens the EXIF states."""
+    or uint16, not yet turned), the EXIF orientation and the lens and exposure the EXIF states."""
     try:
         # Pillow warns (a UserWarning, printed with a line of its source) about the corrupt or
         # truncated TIFF tags it tolerates; the checks here report what matters, in one line.
@@ -425,29 +445,29 @@ def _decode_identified(
                     source: Source = "jpeg"
                     exif = image.getexif()
                     orientation = _orientation_tag(exif.get(_EXIF_ORIENTATION_TAG, 1), warnings)
-                    lens = lens_from_exif(exif, width)
+                    facts = _exif_facts(exif, width)
                     _check_mode(path, mode)
                     if mode != "RGB":
                         raise PhotoError(path, f"unsupported JPEG mode {mode!r}, expected RGB")
                     _check_size(path, width, height)
                     image.load()  # raises "image file is truncated" instead of decoding grey
-                    return source, np.asarray(image), orientation, lens
+                    return source, np.asarray(image), orientation, facts
                 if pil_format == "PNG":
                     _check_mode(path, mode)
                     _check_size(path, width, height)
                     png_exif = _png_exif(data)
                     stated = 1 if png_exif is None else png_exif.get(_EXIF_ORIENTATION_TAG, 1)
                     orientation = _orientation_tag(stated, warnings)
-                    lens = None if png_exif is None else lens_from_exif(png_exif, width)
-                    return "png", _decode_opencv(path, data, "PNG"), orientation, lens
+                    facts = _exif_facts(png_exif, width)
+                    return "png", _decode_opencv(path, data, "PNG"), orientation, facts
                 if pil_format == "TIFF":
                     _check_mode(path, mode)  # 16-bit RGB reads as mode "RGB" here
                     _check_size(path, width, height)
                     exif = image.getexif()  # a TIFF's own tags (orientation) and its EXIF IFD
                     orientation = _orientation_tag(exif.get(_EXIF_ORIENTATION_TAG, 1), warnings)
-                    lens = lens_from_exif(exif, width)
+                    facts = _exif_facts(exif, width)
                     stored = _decode_opencv(path, _tiff_without_orientation(data), "TIFF")
-                    return "tiff", stored, orientation, lens
+                    return "tiff", stored, orientation, facts
                 raise PhotoError(
                     path,
                     f"file content is {pil_format or 'an unknown'} image, expected JPEG, PNG, HEIF or TIFF",
@@ -599,9 +619,10 @@ def _is_heif(data: bytes) -> bool:
     return bool(pillow_heif.is_supported(data[:64]))
 
 
-def _decode_heif(path: Path, data: bytes, warnings: list[str]) -> tuple[np.ndarray, int, int, Lens | None]:
+def _decode_heif(path: Path, data: bytes, warnings: list[str]) -> tuple[np.ndarray, int, int, _ExifFacts]:
     """A HEIF's primary image: its codes ``(H, W, C)`` as displayed (libheif applied the container's
-    rotation and mirroring), their bit depth, the EXIF orientation and the lens the EXIF states."""
+    rotation and mirroring), their bit depth, the EXIF orientation and the lens and exposure the
+    EXIF states."""
     import pillow_heif  # imported lazily: libheif is only needed for HEIF photos
 
     try:
@@ -627,14 +648,14 @@ def _decode_heif(path: Path, data: bytes, warnings: list[str]) -> tuple[np.ndarr
     exif = _exif_from_bytes(info.get("exif"), warnings)
     orientation = _orientation_tag(exif.get(_EXIF_ORIENTATION_TAG, 1), warnings)
     # The EXIF's pixel dimensions describe the image before it was turned.
-    lens = lens_from_exif(exif, stored.shape[1] if orientation <= 4 else stored.shape[0])
+    facts = _exif_facts(exif, stored.shape[1] if orientation <= 4 else stored.shape[0])
     transfer = (info.get("nclx_profile") or {}).get("transfer_characteristics")
     if transfer in _HDR_TRANSFERS:
         warnings.append(
             f"the photo states the HDR transfer curve {_HDR_TRANSFERS[transfer]}: its values are not "
             "sRGB-encoded and its tones will be misread; export an SDR (sRGB or Display P3) copy"
         )
-    return stored, bit_depth, orientation, lens
+    return stored, bit_depth, orientation, facts
 
 
 def _exif_from_bytes(raw: bytes | None, warnings: list[str]) -> Image.Exif:
@@ -772,4 +793,17 @@ def _read_raw_photo(path: Path) -> Photo:
         colorspace="linear",
         orientation=_LIBRAW_FLIP_TO_EXIF.get(flip, 1),
         warnings=tuple(warnings),
+        exposure=_raw_exposure_settings(path),
     )
+
+
+def _raw_exposure_settings(path: Path) -> ExposureSettings | None:
+    """The exposure a RAW file's EXIF states where Pillow can read its tags (TIFF-based formats:
+    DNG, CR2, NEF, ARW…; opening reads the tags, not the sensor data), else ``None``."""
+    try:
+        with catch_warnings():
+            filterwarnings("ignore", category=UserWarning, module=r"PIL\.TiffImagePlugin")
+            with Image.open(path) as image:
+                return exposure_settings_from_exif(image.getexif())
+    except (OSError, Image.DecompressionBombError, SyntaxError, ValueError, EOFError, struct.error):
+        return None  # not TIFF-based (CR3, RAF…) or unreadable tags: no exposure stated

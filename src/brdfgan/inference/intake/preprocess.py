@@ -54,6 +54,7 @@ __all__ = [
     "find_hotspot",
     "hotspot_crop",
     "preprocess",
+    "resize_crop",
 ]
 
 # Hotspot search: long side of the downscaled working copy, blur sigma as a fraction of its long
@@ -396,7 +397,7 @@ def preprocess(
         resolution = resolution.side(crop.size)
     stats = _hotspot_stats(photo, region, placement, warnings, clipped_is_saturated=clipped_is_saturated)
 
-    resized = _resize(region.float(), resolution)
+    resized = resize_crop(region.float(), resolution)
     if crop.size < resolution:
         warnings.append(
             f"upscaled from {crop.size}×{crop.size} to {resolution}×{resolution} pixels: "
@@ -503,8 +504,11 @@ def _check_image(linear: Tensor) -> None:
         raise ValueError(f"expected a non-empty image, got shape {tuple(linear.shape)}")
 
 
-def _resize(region: Tensor, resolution: int) -> Tensor:
-    """Linear-space resize of a square crop. Shape: ``(3, S, S)`` → ``(3, N, N)``."""
+def resize_crop(region: Tensor, resolution: int) -> Tensor:
+    """Linear-space resize of a square crop, as :func:`preprocess` resizes the photo's (other
+    images of the crop, e.g. a pair's registered no-flash photo, follow it exactly).
+
+    Shape: ``(C, S, S)`` → ``(C, N, N)``."""
     size = region.shape[-1]
     if size == resolution:
         return region.clone()
