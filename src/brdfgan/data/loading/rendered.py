@@ -25,6 +25,13 @@ Here a training sample is drawn anew every time:
 5. **The phone** (``sensor``, :class:`~brdfgan.data.phone.sensor.SensorEffects`) and the train crop, as
    for shard photos.
 
+With ``pairs`` (:class:`~brdfgan.data.phone.pairs.PairSampling`, off by default) every draw is a
+flash + no-flash pair (:func:`photograph_pairs`): the same scene with the flash and the room light,
+and with the room light alone, each shot auto-exposed off by its own drawn error and
+white-balanced on its own, the no-flash shot moved a little as a handheld phone moves it, and
+each through the phone on its own. Its draws come from a stream of their own, so the flash
+photo's scene is the one drawn without pairs.
+
 Validation and test stay Mitsuba shards (only those splits are generated), so no model is graded
 by the renderer it trained on. Every draw is a pure function of ``(seed, epoch, rank, batch,
 position)``: a resumed run sees the same photos as an uninterrupted one.
@@ -50,7 +57,7 @@ import torch
 from torch import Tensor
 from torch.utils.data import DataLoader
 
-from brdfgan.capture import TRAINING_CAPTURE
+from brdfgan.capture import NO_FLASH_PHOTO, TRAINING_CAPTURE
 from brdfgan.core.exposure import auto_exposure_scale
 from brdfgan.core.lighting import Environment, SunLight, environment_lights
 from brdfgan.core.relight import SKY_LIGHT_DISTANCE
@@ -79,6 +86,7 @@ from brdfgan.data.phone.environments import (
     load_environment,
 )
 from brdfgan.data.phone.flash import blackbody_rgb
+from brdfgan.data.phone.pairs import PAIR_BATCH_KEYS, PairDraw, PairSampling, misregister, pair_meta
 from brdfgan.data.spec.dataset_spec import (
     DatasetSpec,
     paint_material,
@@ -99,12 +107,17 @@ __all__ = [
     "RenderedStream",
     "capture_scene",
     "draw_scene",
+    "pair_tensors",
+    "photograph_pairs",
     "photograph_scenes",
     "render_scenes",
     "scene_tensors",
 ]
 
 log = logging.getLogger(__name__)
+
+# Pairs off: every draw a single flash photo (the default).
+SINGLE_PHOTOS = PairSampling()
 
 BANK_VERSION = 1
 INDEX_FILE = "bank.json"
@@ -510,7 +523,7 @@ def sample_relief(
 
 @dataclass(frozen=True)
 class PhotoScene:
-    """Everything one training photo is rendered from.
+    """Everything one training photo is rendered from (and its no-flash twin, with ``pair``).
 
     Shape:
         - maps: ``(8, R, R)`` texture space; camera_position: ``(3,)``
@@ -526,6 +539,7 @@ class PhotoScene:
     grid: Tensor
     exposure_ev: float
     meta: dict[str, Any]
+    pair: PairDraw | None = None
 
 
 def draw_scene(
@@ -534,11 +548,14 @@ def draw_scene(
     seed: int,
     environment_lights_count: int,
     relief: ReliefSampling = ReliefSampling(),
+    pairs: PairSampling = SINGLE_PHOTOS,
 ) -> PhotoScene:
     """One training photo's scene, a pure function of ``seed``: a bank material and a crop of it,
     the capture, flash and lighting draws of the spec (as
     :func:`~brdfgan.data.generation.generation.material_samples` draws them for a Mitsuba render)
-    with the environment as ``environment_lights_count`` distant lights plus its sun."""
+    with the environment as ``environment_lights_count`` distant lights plus its sun; with
+    ``pairs`` enabled, the no-flash twin's draw (from a stream of its own: the rest is the scene
+    drawn without pairs)."""
     spec = bank.spec
     generator = torch.Generator().manual_seed(seed)
     material = bank.draw(generator)
@@ -568,7 +585,11 @@ def draw_scene(
     maps, relief_record = sample_relief(bank, crops[0], relief, generator)
     if relief_record:
         meta["relief"] = relief_record
-    return capture_scene(key, maps, capture, flash_rgb, lights, meta)
+    scene = capture_scene(key, maps, capture, flash_rgb, lights, meta)
+    if not pairs.enabled:
+        return scene
+    pair = pairs.sample(torch.Generator().manual_seed(_mix(seed, "pair")), spec.capture)
+    return replace(scene, pair=pair)
 
 
 def capture_scene(
@@ -630,6 +651,46 @@ def render_scenes(
     return warp_to_view(hdr, grids).clamp_min(0.0)
 
 
+def photograph_pairs(
+    maps: Tensor,
+    camera_position: Tensor,
+    light_position: Tensor,
+    light_rgb: Tensor,
+    grids: Tensor,
+    exposure_ev: Tensor,
+    no_flash_ev: Tensor,
+    white_balance: Tensor,
+    misregistration: Tensor,
+    render: Callable[..., Tensor] = render_point_lights,
+) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Flash + no-flash pairs of a batch of scenes: the flash (light 0) and the room light (the
+    others) rendered apart (:func:`render_scenes`, as many lights as one photo), the flash shot
+    their sum and the no-flash shot the room light alone; each auto-exposed off by its own error
+    (``exposure_ev``, ``no_flash_ev``), times its white-balance gains and clipped
+    (``clip(hdr · scale · 2^ev · g, 0, 1)``); the no-flash shot then moved by
+    :func:`~brdfgan.data.phone.pairs.misregister`.
+
+    Returns:
+        ``(photos, no_flash, maps_in_view, exposure_scale)``: the flash photos, the no-flash
+        photos, the maps as the flash photos show them, the scales applied (flash shot, no-flash
+        shot; a black shot's is 0).
+
+    Shape:
+        - maps: ``(B, 8, R, R)``; camera_position: ``(B, 3)``
+        - light_position, light_rgb: ``(B, K, 3)``; grids: ``(B, R, R, 2)``
+        - exposure_ev, no_flash_ev: ``(B,)``; white_balance: ``(B, 2, 3)``; misregistration: ``(B, 3)``
+        - output: ``(B, 3, R, R)``, ``(B, 3, R, R)``, ``(B, 8, R, R)``, ``(B, 2)``
+    """
+    flash = render_scenes(maps, camera_position, light_position[:, :1], light_rgb[:, :1], grids, render)
+    room = render_scenes(maps, camera_position, light_position[:, 1:], light_rgb[:, 1:], grids, render)
+    hdr = torch.stack([flash + room, room], dim=1)
+    stops = torch.stack([exposure_ev, no_flash_ev], dim=1).to(hdr)
+    scale = auto_exposure_scale(hdr) * torch.pow(2.0, stops)
+    shots = (hdr * scale[..., None, None, None] * white_balance.to(hdr)[..., None, None]).clamp(0.0, 1.0)
+    no_flash = misregister(shots[:, 1], misregistration.to(hdr))
+    return shots[:, 0], no_flash, warp_maps_to_view(maps, grids), scale
+
+
 def photograph_scenes(
     maps: Tensor,
     camera_position: Tensor,
@@ -679,16 +740,26 @@ def scene_tensors(batch: Mapping[str, Any]) -> tuple[Tensor, Tensor, Tensor, Ten
     )
 
 
+def pair_tensors(batch: Mapping[str, Any]) -> tuple[Tensor, Tensor, Tensor]:
+    """A :func:`collate_scenes` batch of pairs' twin draws, in the order :func:`photograph_pairs`
+    takes them after :func:`scene_tensors`: no-flash exposure errors, white-balance gains,
+    misregistrations."""
+    return batch["no_flash_ev"], batch["white_balance"], batch["misregistration"]
+
+
 def collate_scenes(scenes: Sequence[PhotoScene]) -> dict[str, Any]:
-    """A batch of scenes (what :class:`RenderedStream` yields, before rendering).
+    """A batch of scenes (what :class:`RenderedStream` yields, before rendering); scenes of pairs
+    add their twins' draws (:func:`pair_tensors`).
 
     Shape:
         - output["scene_maps"]: ``(B, 8, R, R)``; output["camera_position"]: ``(B, 3)``
         - output["light_position"], output["light_rgb"]: ``(B, K, 3)``
         - output["grid"]: ``(B, R, R, 2)``; output["exposure_ev"]: ``(B,)``
         - output["key"]: list of B str; output["meta"]: list of B dict
+        - pairs: output["no_flash_ev"]: ``(B,)``; output["white_balance"]: ``(B, 2, 3)``;
+          output["misregistration"]: ``(B, 3)``
     """
-    return {
+    batch = {
         "scene_maps": torch.stack([scene.maps for scene in scenes]).float(),
         "camera_position": torch.stack([scene.camera_position for scene in scenes]),
         "light_position": torch.stack([scene.light_position for scene in scenes]),
@@ -698,6 +769,15 @@ def collate_scenes(scenes: Sequence[PhotoScene]) -> dict[str, Any]:
         "key": [scene.key for scene in scenes],
         "meta": [scene.meta for scene in scenes],
     }
+    pairs = [scene.pair for scene in scenes if scene.pair is not None]
+    if not pairs:
+        return batch
+    if len(pairs) != len(scenes):
+        raise ValueError("a batch of scenes mixes pairs and single photos")
+    batch["no_flash_ev"] = torch.tensor([pair.exposure_ev for pair in pairs], dtype=torch.float32)
+    batch["white_balance"] = torch.tensor([pair.white_balance for pair in pairs], dtype=torch.float32)
+    batch["misregistration"] = torch.tensor([pair.misregistration() for pair in pairs], dtype=torch.float32)
+    return batch
 
 
 class RenderedStream(EpochStream):
@@ -718,10 +798,12 @@ class RenderedStream(EpochStream):
         rank: int = 0,
         environment_lights: int = 16,
         relief: ReliefSampling = ReliefSampling(),
+        pairs: PairSampling = SINGLE_PHOTOS,
     ) -> None:
         super().__init__()
         self.bank = bank
         self.relief = relief
+        self.pairs = pairs
         self.batch_size = batch_size
         self.batches_per_epoch = batches_per_epoch
         self.seed = seed
@@ -741,7 +823,9 @@ class RenderedStream(EpochStream):
             for position in range(self.batch_size):
                 key = f"train-e{epoch}-r{self.rank}-b{batch}-{position}"
                 seed = _mix(self.seed, "rendered", epoch, self.rank, batch, position)
-                scenes.append(draw_scene(self.bank, key, seed, self.environment_lights, self.relief))
+                scenes.append(
+                    draw_scene(self.bank, key, seed, self.environment_lights, self.relief, self.pairs)
+                )
             yield collate_scenes(scenes)
 
 
@@ -755,6 +839,8 @@ class RenderedDataModule(ShardDataModule):
             generated with).
         environment_lights: distant lights each photo's environment becomes.
         relief: relief laid over the drawn materials (:class:`ReliefSampling`; default: none).
+        pairs: flash + no-flash pairs (:class:`~brdfgan.data.phone.pairs.PairSampling`; default:
+            single flash photos).
         compile_renderer: render through ``torch.compile`` (training photos have one shape, so
             it compiles once; worth it for runs of more than a few hundred steps).
         epoch_samples: training photos an epoch (there is no split to count).
@@ -769,6 +855,7 @@ class RenderedDataModule(ShardDataModule):
         epoch_samples: int,
         environment_lights: int = 16,
         relief: ReliefSampling | None = None,
+        pairs: PairSampling | None = None,
         compile_renderer: bool = False,
         **kwargs: Any,
     ) -> None:
@@ -778,6 +865,8 @@ class RenderedDataModule(ShardDataModule):
         self.relief = relief or ReliefSampling()
         self.hparams.pop("bank", None)  # checkpoints hold plain values only
         self.hparams["relief"] = asdict(self.relief)
+        self.pairs = pairs or PairSampling()
+        self.hparams["pairs"] = asdict(self.pairs)
         self.bank = bank
         self.environment_lights = environment_lights
         self._render = (
@@ -815,6 +904,7 @@ class RenderedDataModule(ShardDataModule):
             rank=self._rank,
             environment_lights=self.environment_lights,
             relief=self.relief,
+            pairs=self.pairs,
         )
         stream.epoch, stream.skip_batches = self._train_position()
         self.teardown("fit")
@@ -831,15 +921,30 @@ class RenderedDataModule(ShardDataModule):
         """A batch of scenes as the training batch of
         :func:`~brdfgan.data.loading.datamodule.collate_samples`: rendered
         (:func:`photograph_scenes`, on the batch's device), through ``sensor`` and the train crop
-        on the CPU, back on the batch's device."""
+        on the CPU, back on the batch's device. Scenes of pairs are rendered as pairs
+        (:func:`photograph_pairs`): each sample holds its twin and ``meta["pair"]``, and the batch
+        the pair's keys."""
         device = batch["scene_maps"].device
+        pairs = "no_flash_ev" in batch
+        twins: Sequence[Tensor | None]
+        records: Sequence[dict[str, Any] | None]
         with torch.no_grad():
-            photos, maps, scales = photograph_scenes(*scene_tensors(batch), self._render)
+            if pairs:
+                photos, twin_photos, maps, scales = photograph_pairs(
+                    *scene_tensors(batch), *pair_tensors(batch), self._render
+                )
+                flash_scales, twins = scales[:, 0].tolist(), list(twin_photos.cpu())
+                records = _pair_records(batch, scales.cpu())
+            else:
+                photos, maps, scales = photograph_scenes(*scene_tensors(batch), self._render)
+                flash_scales = scales.tolist()
+                twins, records = [None] * len(flash_scales), [None] * len(flash_scales)
         samples = []
-        for key, photo, aligned, scale, meta in zip(
-            batch["key"], photos.cpu(), maps.cpu(), scales.tolist(), batch["meta"], strict=True
+        for key, photo, aligned, scale, meta, twin, record in zip(
+            batch["key"], photos.cpu(), maps.cpu(), flash_scales, batch["meta"], twins, records, strict=True
         ):
-            sample = Sample(key, photo, aligned, {**meta, "exposure_scale": scale}, check=False)
+            exposed = {**meta, "exposure_scale": scale} | ({} if record is None else {"pair": record})
+            sample = Sample(key, photo, aligned, exposed, check=False, no_flash=twin)
             seed = int(meta["render"]["seed"])
             if self.sensor is not None and self.sensor.enabled:
                 sample = sensed_sample(sample, self.sensor, _mix(seed, "sensor"))
@@ -847,6 +952,32 @@ class RenderedDataModule(ShardDataModule):
                 sample = random_crop(sample, self.train_crop, random.Random(_mix(seed, "crop")))
             samples.append(sample)
         collated = collate_samples(samples)
-        for name in (*(photo.batch_key for photo in TRAINING_CAPTURE.photos), "maps", "flash"):
+        tensors = (*(photo.batch_key for photo in TRAINING_CAPTURE.photos), "maps", "flash")
+        for name in (*tensors, *((NO_FLASH_PHOTO.batch_key, *PAIR_BATCH_KEYS) if pairs else ())):
             collated[name] = collated[name].to(device)
         return collated
+
+
+def _pair_records(batch: Mapping[str, Any], scales: Tensor) -> list[dict[str, Any]]:
+    """The ``meta["pair"]`` of every pair of a :func:`collate_scenes` batch rendered with exposure
+    ``scales`` (:func:`photograph_pairs`'): what was drawn for the twin, as applied.
+
+    Shape:
+        - scales: ``(B, 2)``
+    """
+    records = []
+    for (flash_scale, twin_scale), stops, gains, (dx, dy, angle) in zip(
+        scales.tolist(),
+        batch["no_flash_ev"].tolist(),
+        batch["white_balance"].tolist(),
+        batch["misregistration"].tolist(),
+        strict=True,
+    ):
+        twin = {
+            "exposure_scale": twin_scale,
+            "exposure_ev": stops,
+            "shift_px": [dx, dy],
+            "rotation_deg": angle,
+        }
+        records.append(pair_meta(flash_scale, twin, gains))
+    return records
