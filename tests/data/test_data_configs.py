@@ -176,3 +176,15 @@ def test_the_phone_delivered_data_configs() -> None:
     assert (
         dataclasses.replace(close_spec, capture=standard_spec.capture) == standard_spec
     )  # only the FOV differs
+
+
+@pytest.mark.integration
+@NEEDS_SCANS
+def test_the_ood_benchmarks_make_pairs_and_the_other_datasets_do_not() -> None:
+    # Issue 59: the OOD variants hold each photo's no-flash twin; every other dataset keeps its
+    # identity (pairs is recorded only when on).
+    for name, pairs in (("ood", True), ("ood_close", True), ("default", False), ("tiny", False)):
+        spec = spec_from_config(_compose([f"dataset_spec={name}"]).dataset_spec)
+        assert spec.pairs is pairs and ("pairs" in spec.to_json()) is pairs, name
+    data = hydra.utils.instantiate(_compose(["data=ood_close"], "train").data, _convert_="all")
+    assert data._prepare.keywords["spec"].pairs
