@@ -12,6 +12,7 @@ from brdfgan.capture import (
     CAPTURE_KINDS,
     FLASH_PHOTO,
     NO_FLASH_PHOTO,
+    PAIR,
     SINGLE_PHOTO,
     TRAINING_CAPTURE,
     VIEWS,
@@ -24,23 +25,26 @@ from brdfgan.capture import (
 from brdfgan.data.loading.datamodule import collate_samples
 from brdfgan.data.storage.shards import FORMAT_MEMBERS, Sample, encode_sample
 from brdfgan.errors import UserError
-from brdfgan.inference.dispatch import CAPTURE_PIPELINES, Capture, group_captures
+from brdfgan.inference.dispatch import CAPTURE_PIPELINES, Capture, all_photos_together, group_captures
 from brdfgan.models import PHOTO_CHANNELS
 from brdfgan.models.heads import network_photos
 from tests.conftest import random_maps
 
-# The flash + no-flash pair with the generator seeing both: the seam derives it from one entry.
+# A flash + no-flash pair with the generator seeing both (a pair model's kind): the seam derives it
+# from one entry.
 NETWORK_NO_FLASH = CapturePhoto(PhotoRole.NO_FLASH, member="input_noflash", batch_key="photo_noflash")
-PAIR = CaptureKind(
-    "pair", (FLASH_PHOTO, NETWORK_NO_FLASH), "a flash photo and a no-flash photo", flag="--no-flash"
+NETWORK_PAIR = CaptureKind(
+    "network_pair", (FLASH_PHOTO, NETWORK_NO_FLASH), "a flash photo and a no-flash photo", flag="--no-flash"
 )
 
 
 def test_every_kind_has_one_pipeline_and_the_training_capture_is_the_single_photo() -> None:
-    assert set(CAPTURE_PIPELINES) == set(CAPTURE_KINDS) == {"single", "views"}
-    assert TRAINING_CAPTURE is SINGLE_PHOTO and capture_kind("views") is VIEWS
-    with pytest.raises(UserError, match=r"^capture kind 'pair': expected one of single, views$"):
-        capture_kind("pair")
+    assert set(CAPTURE_PIPELINES) == set(CAPTURE_KINDS) == {"single", "views", "pair"}
+    assert (
+        TRAINING_CAPTURE is SINGLE_PHOTO and capture_kind("views") is VIEWS and capture_kind("pair") is PAIR
+    )
+    with pytest.raises(UserError, match=r"^capture kind 'stereo': expected one of single, views, pair$"):
+        capture_kind("stereo")
 
 
 def test_the_generator_shard_and_batch_read_the_training_capture() -> None:
@@ -54,19 +58,26 @@ def test_the_generator_shard_and_batch_read_the_training_capture() -> None:
 
 
 def test_a_pair_kind_derives_its_members_keys_and_channels() -> None:
-    assert PAIR.shard_members("u16z") == ("input.u16z", "input_noflash.u16z")
-    assert PAIR.network_channels == 6 and PAIR.roles(2) == (PhotoRole.FLASH, PhotoRole.NO_FLASH)
+    assert NETWORK_PAIR.shard_members("u16z") == ("input.u16z", "input_noflash.u16z")
+    assert NETWORK_PAIR.network_channels == 6
+    assert NETWORK_PAIR.roles(2) == (PhotoRole.FLASH, PhotoRole.NO_FLASH)
     flash, no_flash = torch.zeros(2, 3, 4, 4), torch.ones(2, 3, 4, 4)
-    stacked = network_photos({"photo": flash, "photo_noflash": no_flash}, PAIR)
+    stacked = network_photos({"photo": flash, "photo_noflash": no_flash}, NETWORK_PAIR)
     assert stacked.shape == (2, 6, 4, 4) and torch.equal(stacked[:, 3:], no_flash)
-    fit_only = CaptureKind(
-        "pair_fit", (FLASH_PHOTO, CapturePhoto(PhotoRole.NO_FLASH, "n", "n", network=False)), ""
-    )
-    assert fit_only.network_channels == 3
     with pytest.raises(UserError, match=r"^--no-flash takes at most 2 photos of one surface, got 3$"):
-        PAIR.roles(3)
+        NETWORK_PAIR.roles(3)
+
+
+def test_the_pair_kind_is_the_flash_photo_and_the_no_flash_photo_the_fit_reads() -> None:
+    """predict --no-flash: the shipped generator sees the flash(-only) photo, the fit both."""
+    assert PAIR.photos == (FLASH_PHOTO, NO_FLASH_PHOTO) and PAIR.network_channels == 3
+    assert (PAIR.flag, PAIR.flag_value, PAIR.refines) == ("--no-flash", "NOFLASH", False)
+    assert PAIR.roles(1) == (PhotoRole.FLASH,)  # a flash photo whose no-flash photo was not found
     # Shards of every kind's photos are readable: the reader knows their members.
-    assert "input_noflash.u16z" not in known_shard_members("u16z")  # not a kind yet
+    assert "input_noflash.u16z" in known_shard_members("u16z")
+    assert "input_noflash.png" in known_shard_members("png")
+    with pytest.raises(ValueError, match="only a flag of a two-photo kind names a photo"):
+        CaptureKind("bad", (FLASH_PHOTO,), "", flag="--x", flag_value="X")
 
 
 @pytest.mark.parametrize(
@@ -95,3 +106,16 @@ def test_photos_group_into_captures_by_kind(tmp_path: Path) -> None:
     assert views.roles == (PhotoRole.FLASH, PhotoRole.VIEW, PhotoRole.VIEW)
     with pytest.raises(UserError, match=r"^--views takes at most 12 photos of one surface, got 13$"):
         group_captures(VIEWS, photos * 4 + photos[:1])
+
+
+def test_pairs_group_by_name_or_as_named(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A folder run pairs <stem> with <stem>_noflash; --no-flash NOFLASH names the partner."""
+    photos = [tmp_path / name for name in ("wood.jpg", "wood_noflash.png", "tiles.jpg", "lone_noflash.jpg")]
+    assert group_captures(PAIR, photos) == [
+        Capture(PAIR, (photos[0], photos[1]), "wood"),
+        Capture(PAIR, (photos[2],), "tiles"),
+    ]
+    assert any("lone_noflash.jpg: no flash photo" in record.getMessage() for record in caplog.records)
+    named = all_photos_together(PAIR, [photos[2], tmp_path / "IMG_0043.jpg"])
+    assert named == [Capture(PAIR, (photos[2], tmp_path / "IMG_0043.jpg"), "tiles")]
+    assert named[0].roles == (PhotoRole.FLASH, PhotoRole.NO_FLASH)

@@ -1,8 +1,8 @@
 """What a capture is: the photos one sample of a surface holds, and what each is for.
 
 One type for every kind of capture, read by every stage that handles photos, so that a new kind
-(the flash + no-flash pair is the next) is one entry in :data:`CAPTURE_KINDS` plus the code that
-uses its new photos — not a hunt through the package:
+(the flash + no-flash pair, :data:`PAIR`, was one) is one entry in :data:`CAPTURE_KINDS` plus the
+code that uses its new photos — not a hunt through the package:
 
 - ``brdfgan predict`` groups its inputs into captures of one kind
   (:func:`brdfgan.inference.dispatch.group_captures`) and runs the kind's pipeline from one table
@@ -57,6 +57,9 @@ class CaptureKind:
     """A kind of capture: its photos and how ``brdfgan predict`` takes it.
 
     ``flag`` is predict's option that selects it (``None``: the default, one capture per photo);
+    ``flag_value``, for a flag that may name a photo, is that photo's placeholder in ``--help``
+    (``--no-flash NOFLASH``: the second photo of the run's one capture; the flag given bare pairs
+    a run's files by name instead, :func:`brdfgan.inference.dispatch.pair_by_name`);
     ``more_views`` is ``(least, most)`` further photos of role ``VIEW`` after :attr:`photos`
     (``None``: none); ``refines`` says whether ``--refine`` applies (a kind with a fit of its own
     says why not in ``no_refine_reason``)."""
@@ -65,11 +68,14 @@ class CaptureKind:
     photos: tuple[CapturePhoto, ...]
     description: str
     flag: str | None = None
+    flag_value: str | None = None
     more_views: tuple[int, int] | None = None
     refines: bool = True
     no_refine_reason: str = ""
 
     def __post_init__(self) -> None:
+        if self.flag_value is not None and (self.flag is None or len(self.photos) != 2 or self.more_views):
+            raise ValueError(f"capture kind {self.name!r}: only a flag of a two-photo kind names a photo")
         if not self.photos or self.photos[0].role is not PhotoRole.FLASH:
             raise ValueError(f"capture kind {self.name!r}: its first photo must be the flash photo")
         for attribute in ("member", "batch_key"):
@@ -119,6 +125,9 @@ FLASH_PHOTO = CapturePhoto(PhotoRole.FLASH, member="input", batch_key="photo")
 NO_FLASH_PHOTO = CapturePhoto(
     PhotoRole.NO_FLASH, member="input_noflash", batch_key="photo_noflash", network=False
 )
+# A folder run's no-flash photo is named for its flash photo: wood.jpg and wood_noflash.jpg (any
+# format predict reads, any case).
+NO_FLASH_SUFFIX = "_noflash"
 
 SINGLE_PHOTO = CaptureKind(
     "single",
@@ -137,8 +146,18 @@ VIEWS = CaptureKind(
     no_refine_reason="the multi-view fit refines the maps",
 )
 
+PAIR = CaptureKind(
+    "pair",
+    (FLASH_PHOTO, NO_FLASH_PHOTO),
+    "a flash photo and a no-flash photo of one surface, taken from the same spot (docs/predict.md)",
+    flag="--no-flash",
+    flag_value="NOFLASH",
+    refines=False,
+    no_refine_reason="the pair fit refines the maps",
+)
+
 # Every kind, by name: predict's dispatch table and the evaluators are keyed by these names.
-CAPTURE_KINDS: Mapping[str, CaptureKind] = {kind.name: kind for kind in (SINGLE_PHOTO, VIEWS)}
+CAPTURE_KINDS: Mapping[str, CaptureKind] = {kind.name: kind for kind in (SINGLE_PHOTO, VIEWS, PAIR)}
 
 # The kind the training data, the shipped generator and the evaluators read today.
 TRAINING_CAPTURE = SINGLE_PHOTO

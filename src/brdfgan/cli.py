@@ -56,6 +56,10 @@ examples:
       a linear PNG, a given 1024² square at x=120, y=80, 16-bit PNG textures
   brdfgan predict --views top.jpg left.jpg right.jpg --out materials/
       three photos of one surface → one material fitted to all of them, materials/top/
+  brdfgan predict wood.jpg --no-flash wood_off.jpg --out materials/
+      a flash photo and a no-flash photo from the same spot → the relief fitted to both lights
+  brdfgan predict shots/ --no-flash --out materials/
+      every <name>.jpg in shots/ with its <name>_noflash.jpg (any format)
 """
 
 
@@ -170,6 +174,26 @@ def _add_predict_input(predict: argparse.ArgumentParser) -> None:
         help="the photos are views of one flat surface (2-12, flash on; the first is the reference): "
         "one material fitted to all of them, in OUT/<first photo's name>/; a photo that does not "
         "register is left out with a warning (docs/views.md)",
+    )
+    group.add_argument(
+        "--no-flash",
+        nargs="?",
+        const=True,
+        type=Path,
+        metavar="NOFLASH",
+        help="NOFLASH is a photo of the same surface with the flash off, taken from the same spot as "
+        "the one flash photo given: the room light is taken out and the relief fitted to both lights "
+        "(docs/predict.md); given bare (after the inputs), each photo is paired with its "
+        "<name>_noflash photo (any format; a folder, or beside the photo). Where a pair cannot serve, "
+        "a warning says why and the flash photo gets its single-photo prediction",
+    )
+    group.add_argument(
+        "--exposure-ratio",
+        type=_positive_float,
+        metavar="R",
+        help="with --no-flash: the flash photo's exposure over the no-flash photo's "
+        "(time × ISO / f-number², e.g. 1/60 s at ISO 400 over 1/15 s at ISO 400: 0.25), for photos "
+        "whose EXIF does not state it (default: from the EXIF)",
     )
     group.add_argument(
         "--crop",
@@ -488,7 +512,6 @@ def _add_eval_captures(commands: Commands) -> None:
 
 
 def predict_command(args: argparse.Namespace) -> int:
-    from brdfgan.inference.dispatch import group_captures
     from brdfgan.inference.pipeline import collect_photos
 
     kind = _capture_kind(args)
@@ -500,7 +523,7 @@ def predict_command(args: argparse.Namespace) -> int:
     if not photos:
         print("error: no photos to process", file=sys.stderr)
         return USER_ERROR_EXIT_CODE
-    captures = group_captures(kind, photos)
+    captures = _group(args, kind, photos)
     if not args.quiet:
         model = predictor.model
         print(
@@ -515,12 +538,34 @@ def predict_command(args: argparse.Namespace) -> int:
 def _capture_kind(args: argparse.Namespace) -> CaptureKind:
     """The kind of capture predict's flags select (brdfgan.capture.CAPTURE_KINDS); the default
     is one capture per photo."""
-    from brdfgan.capture import CAPTURE_KINDS, SINGLE_PHOTO
+    from brdfgan.capture import CAPTURE_KINDS, PAIR, SINGLE_PHOTO
 
-    chosen = [kind for kind in CAPTURE_KINDS.values() if kind.flag and getattr(args, _flag_dest(kind.flag))]
+    chosen = [
+        kind
+        for kind in CAPTURE_KINDS.values()
+        if kind.flag and getattr(args, _flag_dest(kind.flag)) not in (None, False)
+    ]
     if len(chosen) > 1:
         raise UserError(f"choose one kind of capture: {' or '.join(str(kind.flag) for kind in chosen)}")
+    if args.exposure_ratio is not None and chosen != [PAIR]:
+        raise UserError(f"--exposure-ratio applies to a flash + no-flash pair ({PAIR.flag})")
     return chosen[0] if chosen else SINGLE_PHOTO
+
+
+def _group(args: argparse.Namespace, kind: CaptureKind, photos: list[Path]) -> list[Capture]:
+    """The run's captures: a flag that names a photo (``--no-flash NOFLASH``) makes the one input
+    and it one capture; otherwise the kind's grouping (brdfgan.inference.dispatch.group_captures)."""
+    from brdfgan.inference.dispatch import all_photos_together, group_captures
+
+    named = getattr(args, _flag_dest(kind.flag)) if kind.flag_value is not None and kind.flag else None
+    if not isinstance(named, Path):
+        return group_captures(kind, photos)
+    if len(photos) != 1:
+        raise UserError(
+            f"{kind.flag} {kind.flag_value} goes with one photo, got {len(photos)}; to pair several, "
+            f"give {kind.flag} alone after them (each <name> with its <name>_noflash)"
+        )
+    return all_photos_together(kind, [photos[0], named])
 
 
 def _flag_dest(flag: str) -> str:
@@ -557,6 +602,7 @@ def _predict_options(args: argparse.Namespace, kind: CaptureKind) -> tuple[Predi
         animate=args.animate,
         refine=None if args.refine is None else RefineConfig(steps=args.refine),
         field_of_view=FieldOfView(args.fov, args.focal_length_35mm),
+        exposure_ratio=args.exposure_ratio,
     )
     return options, device
 

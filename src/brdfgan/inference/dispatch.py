@@ -14,8 +14,10 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from brdfgan.capture import SINGLE_PHOTO, VIEWS, CaptureKind, PhotoRole
+from brdfgan.capture import NO_FLASH_SUFFIX, PAIR, SINGLE_PHOTO, VIEWS, CaptureKind, PhotoRole
 from brdfgan.errors import UserError, disk_full_message, is_disk_full, one_line
+from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS
+from brdfgan.inference.pair.pipeline import predict_pair
 from brdfgan.inference.pipeline import (
     BatchResult,
     PhotoFailure,
@@ -86,6 +88,61 @@ def all_photos_together(kind: CaptureKind, photos: Sequence[Path]) -> list[Captu
     return [Capture(kind, tuple(photos), output_names(photos[:1])[0])]
 
 
+def pair_by_name(kind: CaptureKind, photos: Sequence[Path]) -> list[Capture]:
+    """One capture per flash photo with its no-flash photo, named ``<stem>_noflash`` (any format
+    predict reads, any case) in the same folder: among ``photos`` (a folder run), else beside the
+    flash photo on disk (``predict wood.jpg --no-flash``). A flash photo with none is a capture of
+    one photo (the pair's pipeline warns and gives its single-photo prediction); a no-flash photo
+    without its flash photo is left out with a warning. Named by the flash photos' stems.
+    """
+    suffix = NO_FLASH_SUFFIX.lower()
+    flashes: list[Path] = []
+    no_flash: dict[tuple[Path, str], list[Path]] = {}
+    for photo in photos:
+        stem = photo.stem.lower()
+        if stem.endswith(suffix) and len(stem) > len(suffix):
+            no_flash.setdefault((photo.parent, stem[: -len(suffix)]), []).append(photo)
+        else:
+            flashes.append(photo)
+    paired: set[Path] = set()
+    captures = []
+    for flash, name in zip(flashes, output_names(flashes), strict=True):
+        candidates = no_flash.get((flash.parent, flash.stem.lower())) or _no_flash_beside(flash)
+        # The same format first: wood.jpg with wood_noflash.jpg, wood.dng with wood_noflash.dng.
+        partner = min(
+            candidates,
+            key=lambda path: (path.suffix.lower() != flash.suffix.lower(), str(path)),
+            default=None,
+        )
+        if partner is None:
+            captures.append(Capture(kind, (flash,), name))
+        else:
+            paired.add(partner)
+            captures.append(Capture(kind, (flash, partner), name))
+    for orphans in no_flash.values():
+        for orphan in orphans:
+            if orphan not in paired:
+                log.warning(
+                    "%s: no flash photo %s.* beside it: left out",
+                    orphan,
+                    orphan.parent / orphan.stem[: -len(suffix)],
+                )
+    return captures
+
+
+def _no_flash_beside(flash: Path) -> list[Path]:
+    """The files ``<stem>_noflash.<a photo extension>`` in the flash photo's folder (any case)."""
+    wanted = f"{flash.stem}{NO_FLASH_SUFFIX}".lower()
+    try:
+        return sorted(
+            path
+            for path in flash.parent.iterdir()
+            if path.stem.lower() == wanted and path.suffix.lower() in PHOTO_EXTENSIONS and path.is_file()
+        )
+    except OSError:  # a missing or unreadable folder: the flash photo's own read reports it
+        return []
+
+
 def _predict_single(
     capture: Capture, out_dir: Path, predictor: Predictor, on_step: StepProgress | None
 ) -> PhotoResult:
@@ -108,10 +165,22 @@ def _predict_views(
     return predict_views(capture.files, out_dir, predictor, on_fit_step=None if on_step is None else progress)
 
 
+def _predict_pair(
+    capture: Capture, out_dir: Path, predictor: Predictor, on_step: StepProgress | None
+) -> PhotoResult:
+    def progress(step: int, steps: int) -> None:
+        assert on_step is not None
+        on_step(f"fitting the pair of {capture.reference.name}", step, steps)
+
+    return predict_pair(capture.files, out_dir, predictor, on_fit_step=None if on_step is None else progress)
+
+
 # predict's one dispatch table, by capture kind name (brdfgan.capture.CAPTURE_KINDS).
 CAPTURE_PIPELINES: Mapping[str, CapturePipeline] = {
     SINGLE_PHOTO.name: CapturePipeline(each_photo_alone, _predict_single),
     VIEWS.name: CapturePipeline(all_photos_together, _predict_views),
+    # `--no-flash NOFLASH` names the one flash photo's partner: all_photos_together (brdfgan.cli).
+    PAIR.name: CapturePipeline(pair_by_name, _predict_pair),
 }
 
 

@@ -19,6 +19,7 @@ This is the single-photo capture's pipeline, and the write-out every kind of cap
 from __future__ import annotations
 
 import logging
+import math
 import os
 import re
 import time
@@ -90,10 +91,17 @@ class PredictOptions:
     # The largest side an anchored network runs at for the default (crop-sized) output; larger
     # outputs are carried up guided by the photo (inference/model/guided.py). None: never.
     network_cap: int | None = DEFAULT_NETWORK_CAP
+    # --exposure-ratio: a flash + no-flash pair's exposure ratio, instead of the photos' EXIF
+    # (brdfgan.inference.pair.intake.exposure_ratio). None: from the EXIF.
+    exposure_ratio: float | None = None
 
     def __post_init__(self) -> None:
         if self.network_cap is not None and self.network_cap < 1:
             raise ValueError(f"network_cap must be positive or None, got {self.network_cap}")
+        if self.exposure_ratio is not None and not (
+            math.isfinite(self.exposure_ratio) and self.exposure_ratio > 0
+        ):
+            raise ValueError(f"exposure_ratio must be positive and finite, got {self.exposure_ratio}")
 
 
 @dataclass(frozen=True)
