@@ -11,12 +11,20 @@ where
 - ``r`` is the exposure ratio (:func:`exposure_ratio`): the flash photo's exposure over the
   no-flash photo's, ``ExposureTime × ISO / FNumber²`` from each one's EXIF, or ``--exposure-ratio``;
 - ``G`` are per-channel white-balance gains (:func:`white_balance`): phones set the white balance
-  per shot, so the room light's colour differs between the two files. They are the intercept, at
-  zero flash, of the per-channel ratio ``F / (r N)`` against the flat surface's flash falloff: on a
-  diffuse surface that ratio is ``G + k · falloff / E`` (``k`` the flash's strength, ``E`` the room's
-  irradiance, slowly varying), so the flash's share is extrapolated away rather than assumed
-  small. ``G`` is normalised to green = 1: a camera balances white by scaling red and blue against
-  green, so green follows the exposure alone; ``r`` sets the level, ``G`` the colour;
+  per shot, so the room light's colour differs between the two files. ``G`` is green = 1: a camera
+  balances white by scaling red and blue against green, so green follows the exposure alone and
+  ``r`` sets the level, ``G`` the colour. On a diffuse surface under one flash and one room light
+  (each of one colour, of any strength across the crop), each pixel's flash-only colour is its
+  no-flash colour times one constant ``κ`` (``G`` times the flash's colour over the room's), so
+  per channel
+
+      F_c / (r N_c) = G_c + κ_c · x,   x = F_g / (r N_g) − 1   (green's flash over room)
+
+  a line in ``x`` whose intercept, at no flash, is ``G_c``: the flash's share is extrapolated
+  away, whatever its falloff, rather than assumed small anywhere. An error of ``r`` by a factor
+  ``β`` moves ``G_c`` by ``(κ_c − G_c)(1 − 1/β)``: nothing when flash and room are one colour.
+  (The intercept against the flat surface's flash falloff, tried first, needs the field of view
+  and a diffuse falloff: 5 % off the field of view moved the gains 7–13 % on synthetic pairs.);
 - ``N(registered)`` is the no-flash photo warped into the flash photo's crop
   (:func:`register_no_flash`: the views' feature registration, the flash highlight masked on the
   flash photo, only clipped pixels on the no-flash photo, a homography, and the checks of
@@ -41,7 +49,6 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from brdfgan.core.exposure import luminance
-from brdfgan.core.flash_geometry import flash_offset_channels, resize_flash_frame
 from brdfgan.inference.intake.exposure_settings import ExposureSettings
 from brdfgan.inference.intake.photo import Photo
 from brdfgan.inference.intake.preprocess import Crop, resize_crop
@@ -56,7 +63,7 @@ from brdfgan.inference.views.register import (
 from brdfgan.inference.views.warp import warp_to_reference
 
 RatioSource = Literal["exif", "option"]
-BalanceMethod = Literal["falloff intercept", "outer median", "assumed equal"]
+BalanceMethod = Literal["colour consistency", "assumed equal"]
 
 # A linear value at or above this in any channel of either photo is clipped (issue 59): the
 # difference of two photos is wrong wherever one of them lost its top.
@@ -76,17 +83,18 @@ MIN_VALID_FRACTION = 0.5
 
 # Sharpness is measured on copies this long (px), so that photos of different sizes compare.
 SHARPNESS_LONG_SIDE = 1024
-# The white balance is fitted on the crop area-averaged to at most this side, in this many bins
-# of the falloff (quantiles), leaving out the flash's highlight (this fraction of the crop's side
-# around the hotspot: a glossy surface's specular lobe is no diffuse ratio) and room-lit values
-# below ROOM_FLOOR (the flash photo's linear units: noise).
-STATISTICS_SIDE = 256
+# The white balance is fitted on the crop area-averaged to at most this side (JPEG's block noise
+# averages out before any ratio is taken: at 256² its gains were 2-5 % further off), in this many bins
+# of green's flash-over-room ratio (quantiles), leaving out the flash's highlight (this fraction
+# of the crop's side around the hotspot: a glossy surface's specular lobe has the flash's colour,
+# not the albedo's) and room-lit values below ROOM_FLOOR (the flash photo's linear units: noise).
+STATISTICS_SIDE = 64
 BALANCE_BINS = 12
 HIGHLIGHT_RADIUS_FRACTION = 0.1
 ROOM_FLOOR = 2e-3
-# The falloff must span this much over the bins for its intercept to be extrapolated (a narrow
-# field of view has none); below it, the median ratio of the bin of least flash.
-MIN_FALLOFF_SPAN = 0.15
+# The bins' flash-over-room ratios must span this share of the largest for the line to be
+# extrapolated to no flash (a flash equally strong over the whole crop gives no line).
+MIN_FLASH_SPAN = 0.2
 # The channel a camera's white balance leaves alone (its gains are relative to green).
 GREEN = 1
 # Gains outside this range are not a white balance but a failed fit: none is applied.
@@ -219,28 +227,19 @@ def registration_record(registration: Registration) -> dict[str, Any]:
 @dataclass(frozen=True)
 class WhiteBalance:
     """Per-channel gains that take the no-flash photo's colour to the flash photo's (module
-    docstring), how they were found, and ``level``: the fitted ratio's green before the gains were
-    normalised (1 when the pixels agree with the exposure ratio; ``None`` when no fit)."""
+    docstring), how they were found, and ``flash_colour``: the fitted ``κ`` (the flash-only
+    colour over the no-flash photo's, green = 1; ``None`` when no fit)."""
 
     gains: tuple[float, float, float]
     method: BalanceMethod
-    level: float | None = None
+    flash_colour: tuple[float, float, float] | None = None
 
     def to_json(self) -> dict[str, Any]:
-        return {"gains": list(self.gains), "method": self.method, "level": self.level}
+        colour = None if self.flash_colour is None else list(self.flash_colour)
+        return {"gains": list(self.gains), "method": self.method, "flash_colour": colour}
 
 
 EQUAL_BALANCE = WhiteBalance((1.0, 1.0, 1.0), "assumed equal")
-
-
-def falloff(frame: Tensor, side: int) -> Tensor:
-    """A flat diffuse surface's flash falloff, 1 at the hotspot: ``(1 + |o|²)^(−3/2)`` for the offset
-    ``o`` of each pixel from the hotspot in camera distances (the cosine at the surface over the
-    squared distance, the flash at the lens).
-
-    Shape: frame ``(1, 3)`` → ``(1, side, side)``."""
-    offsets = flash_offset_channels(frame.float(), side, side)[0]
-    return (1.0 + (offsets**2).sum(dim=0, keepdim=True)) ** -1.5
 
 
 def _area_shrink(image: Tensor, side: int) -> Tensor:
@@ -249,10 +248,11 @@ def _area_shrink(image: Tensor, side: int) -> Tensor:
 
 def white_balance(flash: Tensor, room: Tensor, valid: Tensor, frame: Tensor) -> WhiteBalance:
     """The gains ``G`` (module docstring) from the flash photo's crop and ``room`` = ``r`` times the
-    registered no-flash photo, in its units: per channel, the intercept at zero falloff of a line
-    through the middle mean of the ratio ``flash / room`` in :data:`BALANCE_BINS` bins of the falloff,
-    normalised to green = 1. With too narrow a falloff the median ratio of the bin of least flash; with
-    too few pixels or gains out of :data:`GAIN_RANGE`, none (:data:`EQUAL_BALANCE`).
+    registered no-flash photo, in its units: per channel, the intercept at ``x = 0`` of a line
+    through the middle means (:func:`_middle_mean`) of ``flash / room`` and of ``x`` in
+    :data:`BALANCE_BINS` bins of ``x``. With too few pixels, too narrow a spread of ``x`` (less
+    than :data:`MIN_FLASH_SPAN` of its largest) or gains out of :data:`GAIN_RANGE`: none
+    (:data:`EQUAL_BALANCE`).
 
     Shape: flash, room ``(3, N, N)``; valid ``(1, N, N)``; frame ``(1, 3)`` of the crop."""
     side = int(flash.shape[-1])
@@ -260,10 +260,9 @@ def white_balance(flash: Tensor, room: Tensor, valid: Tensor, frame: Tensor) -> 
     flash_s, room_s = _area_shrink(flash, small), _area_shrink(room, small)
     # A shrunk pixel is valid when every pixel under it is.
     valid_s = _area_shrink(valid, small) >= 1.0 - 1e-6
-    small_frame = resize_flash_frame(frame.float(), small / side)
-    weight = falloff(small_frame, small)
+    hotspot = frame[0, :2].float() * (small / side)
     centre = torch.stack(torch.meshgrid(torch.arange(small) + 0.5, torch.arange(small) + 0.5, indexing="xy"))
-    distance = torch.linalg.vector_norm(centre - small_frame[0, :2, None, None], dim=0)[None]
+    distance = torch.linalg.vector_norm(centre - hotspot[:, None, None], dim=0)[None]
     usable = (
         valid_s
         & (distance > HIGHLIGHT_RADIUS_FRACTION * small)
@@ -272,36 +271,36 @@ def white_balance(flash: Tensor, room: Tensor, valid: Tensor, frame: Tensor) -> 
     )[0]
     if int(usable.sum()) < 4 * BALANCE_BINS:
         return EQUAL_BALANCE
-    ratio = (flash_s / room_s.clamp_min(ROOM_FLOOR))[:, usable].double()  # (3, P)
-    reach = weight[0][usable].double()
-    edges = torch.quantile(reach, torch.linspace(0, 1, BALANCE_BINS + 1, dtype=torch.float64))
-    bins = torch.bucketize(reach, edges[1:-1])
+    ratio = (flash_s / room_s)[:, usable].double()  # (3, P)
+    flash_over_room = ratio[GREEN] - 1.0
+    edges = torch.quantile(flash_over_room, torch.linspace(0, 1, BALANCE_BINS + 1, dtype=torch.float64))
+    bins = torch.bucketize(flash_over_room, edges[1:-1])
     x, y = [], []
     for index in range(BALANCE_BINS):
         members = bins == index
         if int(members.sum()) >= 3:
-            x.append(float(reach[members].mean()))
+            x.append(float(_middle_mean(flash_over_room[members][None])[0]))
             y.append(_middle_mean(ratio[:, members]))
     if len(x) < 2:
         return EQUAL_BALANCE
     xs, ys = torch.tensor(x, dtype=torch.float64), torch.stack(y, dim=1)  # (B,), (3, B)
-    method: BalanceMethod = "falloff intercept"
-    if float(xs.max() - xs.min()) >= MIN_FALLOFF_SPAN:
-        design = torch.stack([torch.ones_like(xs), xs], dim=1)  # (B, 2)
-        intercepts = torch.linalg.lstsq(design, ys.T).solution[0]  # (3,)
-    else:
-        intercepts = ys[:, int(torch.argmin(xs))]
-        method = "outer median"
-    if not bool((intercepts > 0).all()):  # a flash share the line cannot explain
-        intercepts, method = ys[:, int(torch.argmin(xs))], "outer median"
-    level = float(intercepts[GREEN])
-    if not level > 0:
+    if not float(xs.max() - xs.min()) >= MIN_FLASH_SPAN * max(float(xs.abs().max()), 1e-12):
         return EQUAL_BALANCE
-    gains = tuple(float(v) for v in intercepts / level)
+    design = torch.stack([torch.ones_like(xs), xs], dim=1)  # (B, 2)
+    intercepts, slopes = torch.linalg.lstsq(design, ys.T).solution  # (3,) each
+    # Green's line is y = x + 1 by construction; dividing by it removes the rounding.
+    if not (float(intercepts[GREEN]) > 0 and float(slopes[GREEN]) > 0):
+        return EQUAL_BALANCE
+    gains = intercepts / intercepts[GREEN]
+    colour = slopes / slopes[GREEN] if bool((slopes > 0).all()) else None
     low, high = GAIN_RANGE
-    if not all(low <= gain <= high for gain in gains):
-        return WhiteBalance(EQUAL_BALANCE.gains, "assumed equal", level)
-    return WhiteBalance((gains[0], gains[1], gains[2]), method, level)
+    if not all(low <= float(gain) <= high for gain in gains):
+        return EQUAL_BALANCE
+    return WhiteBalance(
+        (float(gains[0]), float(gains[1]), float(gains[2])),
+        "colour consistency",
+        None if colour is None else (float(colour[0]), float(colour[1]), float(colour[2])),
+    )
 
 
 def _middle_mean(values: Tensor) -> Tensor:

@@ -211,12 +211,7 @@ def _pair_images(
     record["registration"] = registration_record(registration)
     side = int(prepared.photo.shape[-1])
     images = pair_images(flash, no_flash, registration, prepared.crop, side, ratio.value, frame)
-    level = images.white_balance.level
-    record["white_balance"] = {
-        **images.white_balance.to_json(),
-        # What the pixels say r is: the fitted ratio's level times r (1× agrees with r).
-        "pixels_exposure_ratio": None if level is None else level * ratio.value,
-    }
+    record["white_balance"] = images.white_balance.to_json()
     record["flash_to_room"] = images.flash_to_room
     record["valid_fraction"] = images.valid_fraction
     problem = pair_problem(images)
