@@ -524,6 +524,9 @@ def predict_command(args: argparse.Namespace) -> int:
         print("error: no photos to process", file=sys.stderr)
         return USER_ERROR_EXIT_CODE
     captures = _group(args, kind, photos)
+    if not captures:  # --no-flash given only no-flash photos: each was left out with a warning
+        print("error: no flash photos to process", file=sys.stderr)
+        return USER_ERROR_EXIT_CODE
     if not args.quiet:
         model = predictor.model
         print(

@@ -150,6 +150,15 @@ def test_a_folder_run_pairs_each_photo_with_its_noflash_photo(
     assert "2 material(s)" in captured.err
 
 
+def test_only_no_flash_photos_are_a_one_line_error(
+    weights: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    lone = scene.save_jpeg(scene.make_pair().no_flash, tmp_path / "wood_noflash.jpg", None)
+    assert run(weights, tmp_path / "out", lone, "--no-flash") == USER_ERROR_EXIT_CODE
+    errors = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
+    assert errors == ["error: no flash photos to process"] and not (tmp_path / "out").exists()
+
+
 def test_photos_pair_by_name_in_a_folder_or_beside_the_flash_photo(tmp_path: Path) -> None:
     for name in (
         "a.jpg",
