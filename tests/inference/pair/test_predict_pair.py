@@ -25,8 +25,8 @@ from brdfgan.inference.dispatch import Capture, pair_by_name
 from brdfgan.inference.model.weights import load_model
 from brdfgan.inference.outputs import export
 from brdfgan.inference.pair import pipeline
-from brdfgan.inference.pair.fit import PairFitConfig, PairFitResult, fit_pair
 from brdfgan.inference.pair.pipeline import predict_pair
+from brdfgan.inference.pair.relief_fit import PairFitConfig, PairFitResult, fit_pair
 from brdfgan.inference.pipeline import PredictOptions, Predictor
 from brdfgan.models.generator import Generator
 from brdfgan.runs import save_weights

@@ -10,7 +10,7 @@
         light's share r·G·no-flash, the flash-only image and its valid pixels; the flash strong
         enough against the room light
       → the network on the flash-only crop, auto-exposed as preprocessing exposes a photo
-      → fit_pair: the relief from the two lights (pair.fit)
+      → fit_pair: the relief from the two lights (pair.relief_fit)
       → the single-photo write-out (pipeline.write_prediction: atomic, nothing half-written),
         material.json with ``pair`` (files, exposures, ratio, registration, gains, flash-to-room)
         and ``pair_fit``
@@ -38,7 +38,6 @@ from brdfgan.errors import UserError
 from brdfgan.inference.intake.lens import crop_field_of_view
 from brdfgan.inference.intake.photo import Photo, PhotoError, read_photo
 from brdfgan.inference.intake.preprocess import Preprocessed, preprocess
-from brdfgan.inference.pair.fit import PairFitConfig, PairFitResult, fit_pair
 from brdfgan.inference.pair.intake import (
     PairImages,
     exposure_ratio,
@@ -48,6 +47,7 @@ from brdfgan.inference.pair.intake import (
     register_no_flash,
     registration_record,
 )
+from brdfgan.inference.pair.relief_fit import PairFitConfig, PairFitResult, fit_pair
 from brdfgan.inference.pipeline import (
     PhotoResult,
     Predictor,
@@ -60,7 +60,7 @@ FitProgress = Callable[[int, int], None]  # (step, of steps)
 
 
 class PairFit(Protocol):
-    """:func:`~brdfgan.inference.pair.fit.fit_pair`'s signature (tests pass their own)."""
+    """:func:`~brdfgan.inference.pair.relief_fit.fit_pair`'s signature (tests pass their own)."""
 
     def __call__(
         self,
@@ -86,7 +86,7 @@ def predict_pair(
     ``out_dir`` (replaced atomically; module docstring). A lone flash photo (no no-flash photo was
     found for it) gets the single-photo prediction with a warning. The result's warnings are one
     line each and name their file. ``fit``: the pair fit (default
-    :func:`~brdfgan.inference.pair.fit.fit_pair`, looked up when called; tests pass their own).
+    :func:`~brdfgan.inference.pair.relief_fit.fit_pair`, looked up when called; tests pass their own).
 
     Raises:
         UserError: either photo cannot be read, or the flash photo cannot be used (one line, naming

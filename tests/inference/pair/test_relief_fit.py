@@ -1,4 +1,4 @@
-"""The pair fit reads relief from the ratio of the room light to the flash (brdfgan.inference.pair.fit)."""
+"""The pair fit reads relief from the ratio of the room light to the flash (inference.pair.relief_fit)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import torch
 from brdfgan.core.delit import flash_render
 from brdfgan.core.flash_geometry import centred_flash_frame
 from brdfgan.core.svbrdf import join_maps, linear_to_srgb
-from brdfgan.inference.pair.fit import (
+from brdfgan.inference.pair.relief_fit import (
     SH_TERMS,
     PairFitConfig,
     fit_pair,

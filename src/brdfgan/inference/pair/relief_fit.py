@@ -78,6 +78,9 @@ class PairFitConfig:
     flat_prior: float = 0.02  # weight of the slopes' mean square (tan² of the tilt)
     specular_share: float = 0.3  # a pixel whose flat flash render is more than this specular is masked
     metal_level: float = 0.5  # … as is one the network calls metal
+    # … and one glossier than this: a glossy surface mirrors the room's lamps and windows into the
+    # no-flash photo, which the diffuse model would read as relief
+    min_roughness: float = 0.0
     min_improvement: float = 0.02  # relative drop of the residual the relief must bring to be kept
 
     def __post_init__(self) -> None:
@@ -179,6 +182,7 @@ def usable_ratio_mask(
         & bright
         & (specular < config.specular_share)
         & (maps[METALLIC][0] < config.metal_level)
+        & (maps[ROUGHNESS][0] >= config.min_roughness)
     )
     return usable.float()[None]
 
@@ -341,7 +345,9 @@ def fit_pair(
     with torch.no_grad():
         residual_flat = float(held_out.residual(torch.zeros_like(height), flat_light))
         residual_fit = float(held_out.residual(height, light))
-    kept: Kept = "fit" if residual_fit < (1 - config.min_improvement) * residual_flat else "prediction"
+    # Nothing held out to judge by (every pixel masked): the network's normals stay.
+    improved = residual_flat > 0 and residual_fit < (1 - config.min_improvement) * residual_flat
+    kept: Kept = "fit" if improved else "prediction"
     result = with_relief(maps, height, frame) if kept == "fit" else maps.clone()
     return PairFitResult(
         maps=result,

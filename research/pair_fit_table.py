@@ -1,0 +1,235 @@
+"""The pair fit on held-out flash + no-flash pairs (issue 59, items 3-4): normals, base colour and
+the other maps of the pair fit beside its references, on photos rendered by the project's renderer.
+
+Held-out materials: the validation split's procedural materials and scan sets of
+``dataset_spec=procedural_and_scans`` (the shipped model's data) and the out-of-distribution scans
+(``../shared/ood/ambientcg`` or ``BRDFGAN_OOD_DIR``). Each crop is photographed as
+:func:`~brdfgan.data.loading.rendered.draw_scene` draws a training photo — the capture, the flash,
+a *test* environment as the room light at 0.05-1 × the flash — twice: flash and room light, and
+the room light alone, each auto-exposed on its own (the exposure ratio known, as EXIF gives it).
+No phone effects unless ``--sensor`` (the evaluation sensor on each shot, its own draws).
+
+Rows:
+- ``flat``: the true maps with flat normals (the angle every row is compared with);
+- ``v4 flash``: the shipped network on the flash photo (today's predict);
+- ``v4 flash-only``: on the flash-only image (the room light subtracted, re-exposed);
+- ``de-lit flash-only``: the de-lit reference on the flash-only image;
+- ``pair fit``: :func:`~brdfgan.inference.pair.relief_fit.fit_pair` started from ``v4 flash-only``.
+
+    python -m research.pair_fit_table --crops 4 --out outputs/pair_fit/table.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import hydra
+import torch
+from torch import Tensor, nn
+
+from brdfgan.core.exposure import auto_exposure_scale
+from brdfgan.core.render import warp_maps_to_view
+from brdfgan.core.svbrdf import NORMAL
+from brdfgan.data.loading.datamodule import flash_frames
+from brdfgan.data.loading.rendered import collate_scenes, draw_scene, render_scenes, scene_tensors
+from brdfgan.data.materials.scanned import read_scanned_material, scanned_material_folders
+from brdfgan.data.materials.source import PaintedMaterial
+from brdfgan.data.phone.environments import build_environment_pools
+from brdfgan.data.phone.sensor import SensorEffects
+from brdfgan.data.spec.dataset_spec import (
+    DatasetSpec,
+    paint_material,
+    scan_materials,
+    split_materials,
+    split_scan_sets,
+)
+from brdfgan.data.spec.determinism import derive_seed, material_seed
+from brdfgan.inference.model.weights import load_model
+from brdfgan.inference.pair.relief_fit import PairFitConfig, fit_pair
+from brdfgan.io.atomic import write_text_atomic
+from brdfgan.metrics import SVBRDFMetrics
+from research.relief_tables import HandfulBank, compose_config, log
+
+ROOT = Path(__file__).resolve().parents[1]
+OOD = Path(os.environ.get("BRDFGAN_OOD_DIR", ROOT.parent / "shared" / "ood" / "ambientcg"))
+DE_LIT = ROOT / "src" / "brdfgan" / "weights" / "references" / "de_lit.safetensors"
+CLIP = 0.98
+ROWS = ("flat", "v4 flash", "v4 flash-only", "de-lit flash-only", "pair fit")
+COLUMNS = (
+    ("angle / flat", "normal_angle_deg"),
+    ("observable / flat", "normal_angle_deg/observable"),
+    ("slope cos", "normal_slope_cosine"),
+    ("slope ratio", "normal_slope_ratio"),
+    ("base colour RMSE", "rmse/basecolor"),
+    ("roughness RMSE", "rmse/roughness"),
+    ("re-render", "rerender_rmse"),
+    ("false metal", "false_metal"),
+    ("relief leak", "relief_leak"),
+)
+
+
+@dataclass(frozen=True)
+class Pair:
+    """One held-out pair as the fit and the networks get it (all at the crop's size R)."""
+
+    flash: Tensor  # (3, R, R) the flash photo, linear LDR
+    flash_only: Tensor  # (3, R, R) flash − ratio · no-flash, re-exposed
+    room: Tensor  # (3, R, R) the room light's share, in flash_only's units
+    valid: Tensor  # (1, R, R) neither shot clipped
+    frame: Tensor  # (1, 3)
+    truth: Tensor  # (8, R, R) the maps as the photo shows them
+
+
+def held_out_sets(spec: DatasetSpec) -> dict[str, list[PaintedMaterial]]:
+    """The validation split's procedural materials and scan sets, and the OOD scans."""
+    scans = scan_materials(spec)
+    procedural = [
+        paint_material(spec, "val", index, torch.Generator().manual_seed(material_seed(spec.seed, index)))
+        for index in split_materials(spec)["val"]
+        if index not in scans
+    ]
+    folders = scanned_material_folders(str(spec.scans.folder), key="dataset_spec.scans.folder")
+
+    def scanned(folder: Path) -> PaintedMaterial:
+        maps = read_scanned_material(folder, spec.scans.resolution)
+        return PaintedMaterial(maps, f"scanned/{folder.name}", {}, {}, spec.scans.crop)
+
+    return {
+        "val procedural": procedural,
+        "val scans": [scanned(folders[i]) for i in split_scan_sets(spec)["val"]],
+        "OOD scans": [scanned(folder) for folder in scanned_material_folders(str(OOD))],
+    }
+
+
+def photograph_pair(
+    bank: HandfulBank, key: str, seed: int, lights: int, sensor: SensorEffects | None
+) -> Pair:
+    """The pair of one drawn scene (module docstring)."""
+    scene = draw_scene(bank, key, seed, lights)
+    maps, camera, position, rgb, grid, exposure_ev = scene_tensors(collate_scenes([scene]))
+    room_rgb = rgb.clone()
+    room_rgb[:, 0] = 0.0  # light 0 is the flash
+    shots = []
+    for index, light in enumerate((rgb, room_rgb)):
+        hdr = render_scenes(maps, camera, position, light, grid)
+        scale = auto_exposure_scale(hdr) * (torch.pow(2.0, exposure_ev) if index == 0 else 1.0)
+        photo = (hdr * scale[:, None, None, None]).clamp(0.0, 1.0)[0]
+        if sensor is not None:
+            generator = torch.Generator().manual_seed(
+                derive_seed(seed, "pair sensor", index) & 0x7FFFFFFFFFFFFFFF
+            )
+            illuminant = SensorEffects.flash_illuminant(scene.meta) if index == 0 else None
+            photo, record = sensor.apply(photo, generator, illuminant_rgb=illuminant)
+            scale = scale * (record["exposure_scale"] or 1.0)
+        shots.append((photo, float(scale)))
+    (flash, flash_scale), (no_flash, room_scale) = shots
+    ratio = flash_scale / room_scale  # the exposure ratio EXIF would give
+    hdr_flash_only = (flash - ratio * no_flash).clamp_min(0.0) / flash_scale
+    exposure = float(auto_exposure_scale(hdr_flash_only[None]))
+    valid = ((flash.amax(0) < CLIP) & (no_flash.amax(0) < CLIP)).float()[None]
+    return Pair(
+        flash=flash,
+        flash_only=(hdr_flash_only * exposure).clamp(0.0, 1.0),
+        room=no_flash * ratio / flash_scale * exposure,
+        valid=valid,
+        frame=flash_frames([scene.meta], flash.shape[-2], flash.shape[-1]),
+        truth=warp_maps_to_view(maps, grid)[0],
+    )
+
+
+def predictions(
+    pair: Pair, v4: nn.Module, de_lit: nn.Module, config: PairFitConfig
+) -> Iterator[tuple[str, Tensor]]:
+    flat = pair.truth.clone()
+    flat[NORMAL] = 0.0
+    flat[NORMAL.start + 2] = 1.0
+    yield "flat", flat
+    with torch.no_grad():
+        yield "v4 flash", v4(pair.flash[None], pair.frame)[0]
+        from_flash_only = v4(pair.flash_only[None], pair.frame)[0]
+        yield "v4 flash-only", from_flash_only
+        yield "de-lit flash-only", de_lit(pair.flash_only[None], pair.frame)[0]
+    yield (
+        "pair fit",
+        fit_pair(pair.flash_only, pair.room, pair.valid, from_flash_only, pair.frame, config).maps,
+    )
+
+
+def table(name: str, scores: dict[str, dict[str, float]], photos: int) -> str:
+    flat = scores["flat"]
+    lines = [f"**{name}** ({photos} pairs)\n", "| row | " + " | ".join(c for c, _ in COLUMNS) + " |"]
+    lines.append("|---" * (len(COLUMNS) + 1) + "|")
+    for row in ROWS:
+        values = scores[row]
+        cells = []
+        for column, key in COLUMNS:
+            value = values.get(key, float("nan"))
+            if column == "angle / flat":
+                value /= flat["normal_angle_deg"]
+            elif column == "observable / flat":
+                value = value / values.get("normal_angle_deg/observable_flat", float("nan"))
+            cells.append(f"{value:.3f}")
+        lines.append(f"| {row} | " + " | ".join(cells) + " |")
+    lines.append(f"\nflat map's angle {flat['normal_angle_deg']:.2f}°")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--crops", type=int, default=3, help="pairs per held-out material")
+    parser.add_argument("--limit", type=int, default=0, help="materials per set (0: all)")
+    parser.add_argument("--sensor", action="store_true", help="the evaluation sensor on each shot")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--sets", default="val procedural,val scans,OOD scans", help="comma-separated held-out sets to score"
+    )
+    parser.add_argument("--flat-prior", type=float, default=PairFitConfig.flat_prior)
+    parser.add_argument("--min-roughness", type=float, default=PairFitConfig.min_roughness)
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args(argv)
+    started = time.time()
+    cfg = compose_config()
+    spec: DatasetSpec = hydra.utils.instantiate(cfg.data.prepare.spec, _convert_="all")
+    sensor = hydra.utils.instantiate(cfg.data.eval_sensor) if args.sensor else None
+    lights = int(cfg.data.environment_lights)
+    test_environments = build_environment_pools(spec.lighting, derive_seed(spec.seed, "lighting")).test
+    v4, de_lit = (load_model(path).generator.eval() for path in (None, DE_LIT))
+    config = PairFitConfig(flat_prior=args.flat_prior, min_roughness=args.min_roughness)
+    report = [f"# The pair fit on held-out pairs ({'evaluation sensor' if args.sensor else 'no sensor'})\n"]
+    chosen = args.sets.split(",")
+    for name, materials in held_out_sets(spec).items():
+        if name not in chosen:
+            continue
+        materials = materials[: args.limit] if args.limit else materials
+        metrics = {row: SVBRDFMetrics(downscale_to=None) for row in ROWS}
+        photos = 0
+        for m, material in enumerate(materials):
+            bank = HandfulBank(spec, [material], int(cfg.data.bank.environment_resolution))
+            bank.scan_folders = ()
+            bank.environments = test_environments
+            for crop in range(args.crops):
+                seed = derive_seed(args.seed, "pair table", name, m, crop) & 0x7FFFFFFFFFFFFFFF
+                pair = photograph_pair(bank, f"pair-{m}-{crop}", seed, lights, sensor)
+                for row, maps in predictions(pair, v4, de_lit, config):
+                    metrics[row].update(
+                        maps[None], pair.truth[None], flash=pair.frame, photo=pair.flash[None]
+                    )
+                photos += 1
+            log(f"{name}: {m + 1}/{len(materials)} materials ({time.time() - started:.0f} s)")
+        scores = {row: {k: float(v) for k, v in metric.compute().items()} for row, metric in metrics.items()}
+        report.append(table(name, scores, photos))
+        write_text_atomic(args.out, "\n".join(report))
+    report.append(f"{time.time() - started:.0f} s in all")
+    write_text_atomic(args.out, "\n".join(report))
+    print("\n".join(report))
+
+
+if __name__ == "__main__":
+    main()
