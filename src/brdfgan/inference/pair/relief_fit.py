@@ -75,12 +75,15 @@ class PairFitConfig:
     levels: tuple[int, ...] = (64, 128, 256)
     steps: tuple[int, ...] = (200, 150, 100)
     learning_rate: float = 0.02
-    flat_prior: float = 0.02  # weight of the slopes' mean square (tan² of the tilt)
+    # Weight of the slopes' mean square (tan² of the tilt). This and min_roughness were chosen on
+    # the validation split's pairs (research/pair_fit_table.py; docs/predict.md has the table): at
+    # 0.02-0.2 the fit drew relief on the near-flat glossy procedural materials.
+    flat_prior: float = 1.0
     specular_share: float = 0.3  # a pixel whose flat flash render is more than this specular is masked
     metal_level: float = 0.5  # … as is one the network calls metal
     # … and one glossier than this: a glossy surface mirrors the room's lamps and windows into the
     # no-flash photo, which the diffuse model would read as relief
-    min_roughness: float = 0.0
+    min_roughness: float = 0.5
     min_improvement: float = 0.02  # relative drop of the residual the relief must bring to be kept
 
     def __post_init__(self) -> None:
@@ -337,7 +340,7 @@ def fit_pair(
         level = fitted if level_size == sizes[-1] else _Level.of(log_ratio, usable, frame, level_size)
         # Twice the pixels across: the same rise is twice as many (smaller) pixels high.
         height = _enlarge(height, level_size)
-        flat_light = _fit_light(level, torch.zeros_like(height), flat_light, steps // 2, config)
+        flat_light = _fit_light(level, torch.zeros_like(height), flat_light, steps, config)
         height, light = _fit_level(level, height, light, steps, config)
         done += steps
         if on_step is not None:
