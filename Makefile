@@ -94,6 +94,7 @@ bench: setup
 	$(PY) -m benchmarks.bench_preview
 	$(PY) -m benchmarks.bench_tiling
 	$(PY) -m benchmarks.bench_views
+	$(PY) -m benchmarks.bench_pair
 
 data: setup
 	$(PY) generate.py
