@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import pytest
@@ -111,6 +112,8 @@ def test_photos_group_into_captures_by_kind(tmp_path: Path) -> None:
 def test_pairs_group_by_name_or_as_named(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     """A folder run pairs <stem> with <stem>_noflash; --no-flash NOFLASH names the partner."""
     photos = [tmp_path / name for name in ("wood.jpg", "wood_noflash.png", "tiles.jpg", "lone_noflash.jpg")]
+    # An earlier in-process `predict --quiet` may have raised the package logger's level.
+    caplog.set_level(logging.WARNING, logger="brdfgan")
     assert group_captures(PAIR, photos) == [
         Capture(PAIR, (photos[0], photos[1]), "wood"),
         Capture(PAIR, (photos[2],), "tiles"),
