@@ -16,6 +16,10 @@ Rows:
 - ``de-lit flash-only``: the de-lit reference on the flash-only image;
 - ``pair fit``: :func:`~brdfgan.inference.pair.relief_fit.fit_pair` started from ``v4 flash-only``.
 
+``--shards DIR`` scores a generated dataset's Mitsuba pairs instead (``dataset_spec.pairs``: each
+test sample's no-flash twin, undone with its ``meta["pair"]``), e.g. the OOD benchmark's:
+``generate.py dataset_spec=ood out_dir=data/ood_pairs``, then ``--shards data/ood_pairs``.
+
     python -m research.pair_fit_table --crops 4 --out outputs/pair_fit/table.md
 """
 
@@ -39,6 +43,7 @@ from brdfgan.data.loading.datamodule import flash_frames
 from brdfgan.data.loading.rendered import collate_scenes, draw_scene, render_scenes, scene_tensors
 from brdfgan.data.materials.scanned import read_scanned_material, scanned_material_folders
 from brdfgan.data.materials.source import PaintedMaterial
+from brdfgan.data.phone.conditions import sample_as_photographed
 from brdfgan.data.phone.environments import build_environment_pools
 from brdfgan.data.phone.sensor import SensorEffects
 from brdfgan.data.spec.dataset_spec import (
@@ -49,6 +54,7 @@ from brdfgan.data.spec.dataset_spec import (
     split_scan_sets,
 )
 from brdfgan.data.spec.determinism import derive_seed, material_seed
+from brdfgan.data.storage.shards import iter_shard, list_shards
 from brdfgan.inference.model.weights import load_model
 from brdfgan.inference.pair.relief_fit import PairFitConfig, fit_pair
 from brdfgan.io.atomic import write_text_atomic
@@ -142,6 +148,42 @@ def photograph_pair(
     )
 
 
+def shard_pairs(root: Path, split: str = "test") -> Iterator[Pair]:
+    """The Mitsuba pairs of a generated dataset (module docstring), maps aligned as the evaluator does."""
+    for shard in list_shards(root, split):
+        for stored in iter_shard(shard):
+            if stored.no_flash is None:
+                raise SystemExit(f"{shard}: sample {stored.key} has no no-flash twin (dataset_spec.pairs)")
+            sample = sample_as_photographed(stored)
+            record = sample.meta["pair"]
+            flash_gain, room_gain = (torch.tensor(g).view(3, 1, 1) for g in record["white_balance"])
+            room = float(record["exposure_ratio"]) * stored.no_flash / room_gain
+            flash_only = (sample.photo / flash_gain - room).clamp_min(0.0)
+            exposure = float(auto_exposure_scale(flash_only[None]))
+            valid = ((sample.photo.amax(0) < CLIP) & (stored.no_flash.amax(0) < CLIP)).float()[None]
+            yield Pair(
+                flash=sample.photo,
+                flash_only=(flash_only * exposure).clamp(0.0, 1.0),
+                room=room * exposure,
+                valid=valid,
+                frame=flash_frames([sample.meta], sample.photo.shape[-2], sample.photo.shape[-1]),
+                truth=sample.maps,
+            )
+
+
+def score(
+    pairs: Iterator[Pair], v4: nn.Module, de_lit: nn.Module, config: PairFitConfig
+) -> tuple[dict[str, dict[str, float]], int]:
+    """Every row's metrics over ``pairs``, and how many there were."""
+    metrics = {row: SVBRDFMetrics(downscale_to=None) for row in ROWS}
+    count = 0
+    for pair in pairs:
+        for row, maps in predictions(pair, v4, de_lit, config):
+            metrics[row].update(maps[None], pair.truth[None], flash=pair.frame, photo=pair.flash[None])
+        count += 1
+    return {row: {k: float(v) for k, v in metric.compute().items()} for row, metric in metrics.items()}, count
+
+
 def predictions(
     pair: Pair, v4: nn.Module, de_lit: nn.Module, config: PairFitConfig
 ) -> Iterator[tuple[str, Tensor]]:
@@ -193,6 +235,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--flat-prior", type=float, default=PairFitConfig.flat_prior)
     parser.add_argument("--min-roughness", type=float, default=PairFitConfig.min_roughness)
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument(
+        "--shards", type=Path, default=None, help="a generated dataset with pairs (its test split)"
+    )
     args = parser.parse_args(argv)
     started = time.time()
     cfg = compose_config()
@@ -202,28 +247,33 @@ def main(argv: Sequence[str] | None = None) -> None:
     test_environments = build_environment_pools(spec.lighting, derive_seed(spec.seed, "lighting")).test
     v4, de_lit = (load_model(path).generator.eval() for path in (None, DE_LIT))
     config = PairFitConfig(flat_prior=args.flat_prior, min_roughness=args.min_roughness)
+    if args.shards is not None:
+        scores, count = score(shard_pairs(args.shards), v4, de_lit, config)
+        shard_report = [
+            f"# The pair fit on Mitsuba pairs: {args.shards} (no sensor)\n",
+            table("test split", scores, count),
+        ]
+        write_text_atomic(args.out, "\n".join(shard_report))
+        print("\n".join(shard_report))
+        return
     report = [f"# The pair fit on held-out pairs ({'evaluation sensor' if args.sensor else 'no sensor'})\n"]
     chosen = args.sets.split(",")
     for name, materials in held_out_sets(spec).items():
         if name not in chosen:
             continue
         materials = materials[: args.limit] if args.limit else materials
-        metrics = {row: SVBRDFMetrics(downscale_to=None) for row in ROWS}
-        photos = 0
-        for m, material in enumerate(materials):
-            bank = HandfulBank(spec, [material], int(cfg.data.bank.environment_resolution))
-            bank.scan_folders = ()
-            bank.environments = test_environments
-            for crop in range(args.crops):
-                seed = derive_seed(args.seed, "pair table", name, m, crop) & 0x7FFFFFFFFFFFFFFF
-                pair = photograph_pair(bank, f"pair-{m}-{crop}", seed, lights, sensor)
-                for row, maps in predictions(pair, v4, de_lit, config):
-                    metrics[row].update(
-                        maps[None], pair.truth[None], flash=pair.frame, photo=pair.flash[None]
-                    )
-                photos += 1
-            log(f"{name}: {m + 1}/{len(materials)} materials ({time.time() - started:.0f} s)")
-        scores = {row: {k: float(v) for k, v in metric.compute().items()} for row, metric in metrics.items()}
+
+        def rendered(name: str = name, materials: list[PaintedMaterial] = materials) -> Iterator[Pair]:
+            for m, material in enumerate(materials):
+                bank = HandfulBank(spec, [material], int(cfg.data.bank.environment_resolution))
+                bank.scan_folders = ()
+                bank.environments = test_environments
+                for crop in range(args.crops):
+                    seed = derive_seed(args.seed, "pair table", name, m, crop) & 0x7FFFFFFFFFFFFFFF
+                    yield photograph_pair(bank, f"pair-{m}-{crop}", seed, lights, sensor)
+                log(f"{name}: {m + 1}/{len(materials)} materials ({time.time() - started:.0f} s)")
+
+        scores, photos = score(rendered(), v4, de_lit, config)
         report.append(table(name, scores, photos))
         write_text_atomic(args.out, "\n".join(report))
     report.append(f"{time.time() - started:.0f} s in all")
