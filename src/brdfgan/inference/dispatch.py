@@ -9,6 +9,7 @@ single-photo write-out, :func:`brdfgan.inference.pipeline.write_prediction`).
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -143,14 +144,17 @@ def _no_flash_beside(flash: Path) -> list[Path]:
         return []
 
 
+def _labelled(on_step: StepProgress | None, label: str) -> Callable[[int, int], None] | None:
+    """A pipeline's ``(step, of steps)`` progress reported under ``label``."""
+    return None if on_step is None else functools.partial(on_step, label)
+
+
 def _predict_single(
     capture: Capture, out_dir: Path, predictor: Predictor, on_step: StepProgress | None
 ) -> PhotoResult:
-    def progress(photo: Path, step: int, steps: int) -> None:
-        assert on_step is not None
-        on_step(f"refining {photo.name}", step, steps)
-
-    result = predict_photo(capture.reference, out_dir, predictor, None if on_step is None else progress)
+    steps = _labelled(on_step, f"refining {capture.reference.name}")
+    progress = None if steps is None else lambda _photo, step, of: steps(step, of)
+    result = predict_photo(capture.reference, out_dir, predictor, progress)
     # A result's warnings name their file, as a capture of several photos must.
     return replace(result, warnings=tuple(f"{capture.reference}: {warning}" for warning in result.warnings))
 
@@ -158,21 +162,15 @@ def _predict_single(
 def _predict_views(
     capture: Capture, out_dir: Path, predictor: Predictor, on_step: StepProgress | None
 ) -> PhotoResult:
-    def progress(step: int, steps: int) -> None:
-        assert on_step is not None
-        on_step(f"fitting {len(capture.files)} views", step, steps)
-
-    return predict_views(capture.files, out_dir, predictor, on_fit_step=None if on_step is None else progress)
+    progress = _labelled(on_step, f"fitting {len(capture.files)} views")
+    return predict_views(capture.files, out_dir, predictor, on_fit_step=progress)
 
 
 def _predict_pair(
     capture: Capture, out_dir: Path, predictor: Predictor, on_step: StepProgress | None
 ) -> PhotoResult:
-    def progress(step: int, steps: int) -> None:
-        assert on_step is not None
-        on_step(f"fitting the pair of {capture.reference.name}", step, steps)
-
-    return predict_pair(capture.files, out_dir, predictor, on_fit_step=None if on_step is None else progress)
+    progress = _labelled(on_step, f"fitting the pair of {capture.reference.name}")
+    return predict_pair(capture.files, out_dir, predictor, on_fit_step=progress)
 
 
 # predict's one dispatch table, by capture kind name (brdfgan.capture.CAPTURE_KINDS).

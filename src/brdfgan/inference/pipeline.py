@@ -414,6 +414,21 @@ def predict_reference(photo: Photo, predictor: Predictor, clock: StageClock) -> 
         photo.lens, photo.width, photo.height, prepared.crop.size, options.field_of_view
     )
     flash_frame = prepared.flash_frame(fov_deg)
+    return network_reference(photo, prepared, fov_deg, fov_source, flash_frame, predictor, clock)
+
+
+def network_reference(
+    photo: Photo,
+    prepared: Preprocessed,
+    fov_deg: float,
+    fov_source: str,
+    flash_frame: Tensor,
+    predictor: Predictor,
+    clock: StageClock,
+) -> ReferencePrediction:
+    """The network's maps of a prepared crop with its flash frame (carried up on the fast path),
+    each stage timed: the second half of :func:`predict_reference`, and what a capture whose
+    network input is not the photo itself (a pair's flash-only image) runs on its own crop."""
     side = prepared.photo.shape[-1]
     with clock("network"):
         outputs = predictor.network(prepared.photo, flash_frame)

@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import torch
 
 from brdfgan.capture import PAIR
 from brdfgan.cli import PARTIAL_FAILURE_EXIT_CODE, main
@@ -28,21 +27,13 @@ from brdfgan.inference.pair import pipeline
 from brdfgan.inference.pair.pipeline import predict_pair
 from brdfgan.inference.pair.relief_fit import PairFitConfig, PairFitResult, fit_pair
 from brdfgan.inference.pipeline import PredictOptions, Predictor
-from brdfgan.models.generator import Generator
-from brdfgan.runs import save_weights
+from tests.inference import test_predict
 from tests.inference.pair import scene
 
 QUICK_FIT = functools.partial(fit_pair, config=PairFitConfig(levels=(16,), steps=(4,)))
 
 
-@pytest.fixture(scope="module")
-def weights(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    torch.manual_seed(0)
-    generator = Generator(width=4, residual_blocks=1)
-    path = tmp_path_factory.mktemp("weights") / "tiny.safetensors"
-    save_weights(path, generator, target="brdfgan.models.generator.Generator", config=generator.config(),
-                 model_id="tiny-test", extra={"resolution": 64})  # fmt: skip
-    return path
+weights = test_predict.weights  # the tiny generator's weights file (module-scoped fixture)
 
 
 @pytest.fixture(scope="module")

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from contextlib import nullcontext
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Protocol
@@ -51,8 +50,8 @@ from brdfgan.inference.pair.relief_fit import PairFitConfig, PairFitResult, fit_
 from brdfgan.inference.pipeline import (
     PhotoResult,
     Predictor,
-    ReferencePrediction,
     StageClock,
+    network_reference,
     write_prediction,
 )
 
@@ -110,7 +109,7 @@ def predict_pair(
             f"{flash_path}: no no-flash photo ({flash_path.stem}{NO_FLASH_SUFFIX}.*) was found for it: "
             "the single-photo prediction"
         )
-        reference = _reference(flash, prepared, fov_deg, fov_source, frame, predictor, clock)
+        reference = network_reference(flash, prepared, fov_deg, fov_source, frame, predictor, clock)
         records: dict[str, Any] = {"refinement": None, "pair": None, "pair_fit": None}
         return write_prediction(
             reference, reference.maps, out_dir, predictor, clock, records=records, warnings=tuple(warnings)
@@ -125,7 +124,7 @@ def predict_pair(
             f"{flash_path}: its no-flash photo {no_flash.path} cannot serve ({outcome}): "
             "the single-photo prediction"
         )
-        reference = _reference(flash, prepared, fov_deg, fov_source, frame, predictor, clock)
+        reference = network_reference(flash, prepared, fov_deg, fov_source, frame, predictor, clock)
         records = {"refinement": None, "pair": _json(record), "pair_fit": None}
         return write_prediction(
             reference, reference.maps, out_dir, predictor, clock, records=records, warnings=tuple(warnings)
@@ -144,7 +143,7 @@ def predict_pair(
             "output_clipped_fraction": float((ldr >= 1.0).any(dim=0).float().mean()),
         },
     )
-    reference = _reference(flash, flash_only, fov_deg, fov_source, frame, predictor, clock)
+    reference = network_reference(flash, flash_only, fov_deg, fov_source, frame, predictor, clock)
     with clock("fit"):
         fitted = (fit or fit_pair)(
             outcome.flash_only.clamp(min=0.0),
@@ -216,25 +215,6 @@ def _pair_images(
     record["valid_fraction"] = images.valid_fraction
     problem = pair_problem(images)
     return images if problem is None else problem
-
-
-def _reference(
-    photo: Photo,
-    prepared: Preprocessed,
-    fov_deg: float,
-    fov_source: str,
-    frame: Tensor,
-    predictor: Predictor,
-    clock: StageClock,
-) -> ReferencePrediction:
-    """The network's maps of a prepared crop (the flash photo's, or the pair's flash-only image),
-    as :func:`~brdfgan.inference.pipeline.predict_reference` runs it."""
-    side = int(prepared.photo.shape[-1])
-    with clock("network"):
-        outputs = predictor.network(prepared.photo, frame)
-    with clock("upsample") if predictor.network_side(side) != side else nullcontext():  # fast path only
-        maps = predictor.upsample(outputs, prepared.photo, frame)
-    return ReferencePrediction(photo, prepared, fov_deg, fov_source, frame, maps)
 
 
 def _json(value: Any) -> Any:
