@@ -62,6 +62,21 @@ def flat_flash_falloff(frame: Tensor, height: int, width: int) -> Tensor:
     return (1.0 + offsets.square().sum(dim=1, keepdim=True)).pow(-1.5)
 
 
+def flash_directions(frame: Tensor, height: int, width: int) -> tuple[Tensor, Tensor]:
+    """Each pixel's unit direction towards the flash at the lens, ``(−o, 1)/√(1 + |o|²)``, and its
+    squared distance ``1 + |o|²`` in camera distances (``o`` its offset from the hotspot,
+    :func:`~brdfgan.core.flash_geometry.flash_offset_channels`): the head-on flash's geometry.
+
+    Shape:
+        - frame: ``(B, 3)``
+        - output: ``(B, 3, height, width)`` and ``(B, 1, height, width)``
+    """
+    offsets = flash_offset_channels(frame, height, width)
+    distance_squared = 1.0 + offsets.square().sum(dim=1, keepdim=True)  # camera distances²
+    towards_flash = torch.cat([-offsets, torch.ones_like(offsets[:, :1])], dim=1) / distance_squared.sqrt()
+    return towards_flash, distance_squared
+
+
 def flash_render(
     basecolor_linear: Tensor, normal: Tensor, roughness: Tensor, metallic: Tensor, frame: Tensor
 ) -> Tensor:
@@ -79,9 +94,7 @@ def flash_render(
     dims = check_shape(basecolor_linear, "B 3 H W", name="basecolor_linear")
     check_shape(normal, "B 3 H W", name="normal", dims=dims)
     check_flash_frame(frame, dims["B"])
-    offsets = flash_offset_channels(frame.to(basecolor_linear.dtype), dims["H"], dims["W"])
-    distance_squared = 1.0 + offsets.square().sum(dim=1, keepdim=True)  # camera distances²
-    towards_flash = torch.cat([-offsets, torch.ones_like(offsets[:, :1])], dim=1) / distance_squared.sqrt()
+    towards_flash, distance_squared = flash_directions(frame.to(basecolor_linear.dtype), dims["H"], dims["W"])
     unit = normalize_normal(normal)
     cosine = (unit * towards_flash).sum(dim=1, keepdim=True).clamp_min(0.0)
     brdf = evaluate_brdf(basecolor_linear, unit, roughness, metallic, towards_flash, towards_flash)

@@ -45,7 +45,8 @@ from torch import Tensor
 
 from brdfgan.core.brdf import evaluate_brdf
 from brdfgan.core.checks import check_shape
-from brdfgan.core.flash_geometry import check_flash_frame, flash_offset_channels, resize_flash_frame
+from brdfgan.core.delit import flash_directions
+from brdfgan.core.flash_geometry import check_flash_frame, resize_flash_frame
 from brdfgan.core.height import height_slope_channels
 from brdfgan.core.render import linear_basecolor_maps
 from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, ROUGHNESS, check_map_shape, linear_to_srgb
@@ -147,9 +148,9 @@ def flash_shading(normal: Tensor, frame: Tensor) -> Tensor:
     """The head-on flash's diffuse shading ``max(n·l, 0) / d²`` (module docstring).
 
     Shape: normal ``(B, 3, H, W)``, frame ``(B, 3)`` → ``(B, 1, H, W)``."""
-    offsets = flash_offset_channels(frame.to(normal.dtype), normal.shape[-2], normal.shape[-1])
-    distance_squared = 1.0 + offsets.square().sum(dim=1, keepdim=True)
-    towards_flash = torch.cat([-offsets, torch.ones_like(offsets[:, :1])], dim=1) / distance_squared.sqrt()
+    towards_flash, distance_squared = flash_directions(
+        frame.to(normal.dtype), normal.shape[-2], normal.shape[-1]
+    )
     return (normal * towards_flash).sum(dim=1, keepdim=True).clamp_min(1e-4) / distance_squared
 
 
@@ -162,8 +163,7 @@ def usable_ratio_mask(
     Shape: ``(3, N, N)``, ``(3, N, N)``, ``(1, N, N)``, ``(8, N, N)``, ``(1, 3)`` → ``(1, N, N)`` float."""
     flat = torch.zeros_like(maps[NORMAL])
     flat[2] = 1.0
-    offsets = flash_offset_channels(frame, maps.shape[-2], maps.shape[-1])[0]
-    towards = torch.cat([-offsets, torch.ones_like(offsets[:1])]) / (1 + offsets.square().sum(0)).sqrt()
+    towards = flash_directions(frame, maps.shape[-2], maps.shape[-1])[0][0]
     basecolor = linear_basecolor_maps(maps[None])[0][BASECOLOR]
     lobes = [
         evaluate_brdf(
