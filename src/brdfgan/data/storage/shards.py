@@ -102,9 +102,10 @@ OPTIONAL_MEMBERS: Mapping[str, tuple[str, ...]] = {
 }
 # The members of a PNG sample (the only format before u16z; kept under its old name).
 SAMPLE_MEMBERS: tuple[str, ...] = FORMAT_MEMBERS["png"]
-_KNOWN_MEMBERS = frozenset(
-    name for table in (FORMAT_MEMBERS, OPTIONAL_MEMBERS) for names in table.values() for name in names
-).union(*(known_shard_members(extension) for extension in SHARD_FORMATS))
+# Every kind's photos (the twin's among them) and the maps and metadata.
+_KNOWN_MEMBERS = frozenset(name for names in FORMAT_MEMBERS.values() for name in names).union(
+    *(known_shard_members(extension) for extension in SHARD_FORMATS)
+)
 MANIFEST_NAME = "manifest.json"
 # Two generations of one spec write the same maps and metadata, but Mitsuba's LLVM variant renders
 # a rare pixel one 16-bit code apart from run to run (the order of its parallel sums), so a shard's
