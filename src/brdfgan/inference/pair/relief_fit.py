@@ -235,31 +235,27 @@ PYRAMID_OCTAVES = 5
 
 def _pyramid_height(start: Tensor, grids: list[Tensor]) -> Tensor:
     size = start.shape[-1]
+    if not grids:
+        return start
     enlarged = [F.interpolate(g, size=(size, size), mode="bilinear", align_corners=False) for g in grids]
     return start + torch.stack(enlarged).sum(0)
 
 
-def _fit_light(level: _Level, height: Tensor, light: Tensor, steps: int, config: PairFitConfig) -> Tensor:
-    """Adam on the room light alone, the height held."""
-    light = light.detach().clone().requires_grad_(True)
-    optimizer = torch.optim.Adam([light], lr=config.learning_rate)
-    for step in range(steps):
-        optimizer.param_groups[0]["lr"] = config.learning_rate * cosine_decay(step, steps)
-        optimizer.zero_grad()
-        level.residual(height, light).backward()
-        optimizer.step()
-    return light.detach()
-
-
 def _fit_level(
-    level: _Level, start: Tensor, light: Tensor, steps: int, config: PairFitConfig
+    level: _Level,
+    start: Tensor,
+    light: Tensor,
+    steps: int,
+    config: PairFitConfig,
+    octaves: int = PYRAMID_OCTAVES,
 ) -> tuple[Tensor, Tensor]:
     """Adam on the room light and a pyramid correction of the height ``start`` (pixel units) at
-    one working size; the height is returned with its mean (a ramp-free sample's) removed."""
+    one working size (``octaves=0``: the light alone, the height held); the height is returned
+    with its mean (a ramp-free sample's) removed."""
     size = start.shape[-1]
     grids = [
         torch.zeros(1, 1, max(size >> octave, 2), max(size >> octave, 2), requires_grad=True)
-        for octave in range(PYRAMID_OCTAVES)
+        for octave in range(octaves)
     ]
     light = light.detach().clone().requires_grad_(True)
     optimizer = torch.optim.Adam([light, *grids], lr=config.learning_rate)
@@ -340,7 +336,7 @@ def fit_pair(
         level = fitted if level_size == sizes[-1] else _Level.of(log_ratio, usable, frame, level_size)
         # Twice the pixels across: the same rise is twice as many (smaller) pixels high.
         height = _enlarge(height, level_size)
-        flat_light = _fit_light(level, torch.zeros_like(height), flat_light, steps, config)
+        _, flat_light = _fit_level(level, torch.zeros_like(height), flat_light, steps, config, octaves=0)
         height, light = _fit_level(level, height, light, steps, config)
         done += steps
         if on_step is not None:
