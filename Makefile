@@ -107,11 +107,14 @@ data: setup
 OOD_OUT ?= outputs/ood
 REFERENCES := src/brdfgan/weights/references
 OOD_MODELS := 'ckpt={shipped: src/brdfgan/weights/default.safetensors, mean_maps: $(REFERENCES)/mean_maps.safetensors, photo_basecolor: $(REFERENCES)/photo_basecolor.safetensors, de_lit: $(REFERENCES)/de_lit.safetensors}'
+# The flash + no-flash rows (the benchmark's photos have their no-flash twins): the shipped model
+# and the de-lit reference on the flash-only photo, and predict --no-flash's pair fit.
+OOD_PAIR_ROWS := 'pair_rows={flash_only: [shipped, de_lit], fit: [shipped]}'
 ood: setup
 	$(PY) generate.py dataset_spec=ood progress=false contact_sheet=8
 	$(PY) generate.py dataset_spec=ood_close progress=false contact_sheet=8
-	$(PY) evaluate.py data=ood hydra.run.dir=$(OOD_OUT)/standard $(OOD_MODELS)
-	$(PY) evaluate.py data=ood_close hydra.run.dir=$(OOD_OUT)/close $(OOD_MODELS)
+	$(PY) evaluate.py data=ood hydra.run.dir=$(OOD_OUT)/standard $(OOD_MODELS) $(OOD_PAIR_ROWS)
+	$(PY) evaluate.py data=ood_close hydra.run.dir=$(OOD_OUT)/close $(OOD_MODELS) $(OOD_PAIR_ROWS)
 	@echo "shipped = $$($(PY) -c 'import json; print(json.load(open("src/brdfgan/weights/default.json"))["model_id"])')"
 	@echo "standard (FOV 40-75 deg, predict's intake): $(OOD_OUT)/standard/metrics.md"
 	@cat $(OOD_OUT)/standard/metrics.md

@@ -39,12 +39,14 @@ from torch import Tensor, nn
 from brdfgan.core.exposure import auto_exposure_scale
 from brdfgan.core.render import warp_maps_to_view
 from brdfgan.core.svbrdf import NORMAL
-from brdfgan.data.loading.datamodule import flash_frames
+from brdfgan.data.loading.datamodule import collate_samples, flash_frames
 from brdfgan.data.loading.rendered import collate_scenes, draw_scene, render_scenes, scene_tensors
 from brdfgan.data.materials.scanned import read_scanned_material, scanned_material_folders
 from brdfgan.data.materials.source import PaintedMaterial
 from brdfgan.data.phone.conditions import sample_as_photographed
 from brdfgan.data.phone.environments import build_environment_pools
+from brdfgan.data.phone.pairs import CLIP_LEVEL as CLIP
+from brdfgan.data.phone.pairs import flash_only_photos
 from brdfgan.data.phone.sensor import SensorEffects
 from brdfgan.data.spec.dataset_spec import (
     DatasetSpec,
@@ -54,7 +56,7 @@ from brdfgan.data.spec.dataset_spec import (
     split_scan_sets,
 )
 from brdfgan.data.spec.determinism import derive_seed, material_seed
-from brdfgan.data.storage.shards import iter_shard, list_shards
+from brdfgan.data.storage.shards import Sample, iter_shard, list_shards
 from brdfgan.inference.model.weights import load_model
 from brdfgan.inference.pair.relief_fit import PairFitConfig, fit_pair
 from brdfgan.io.atomic import write_text_atomic
@@ -64,7 +66,6 @@ from research.relief_tables import HandfulBank, compose_config, log
 ROOT = Path(__file__).resolve().parents[1]
 OOD = Path(os.environ.get("BRDFGAN_OOD_DIR", ROOT.parent / "shared" / "ood" / "ambientcg"))
 DE_LIT = ROOT / "src" / "brdfgan" / "weights" / "references" / "de_lit.safetensors"
-CLIP = 0.98
 ROWS = ("flat", "v4 flash", "v4 flash-only", "de-lit flash-only", "pair fit")
 COLUMNS = (
     ("angle / flat", "normal_angle_deg"),
@@ -148,25 +149,27 @@ def photograph_pair(
     )
 
 
-def shard_pairs(root: Path, split: str = "test") -> Iterator[Pair]:
-    """The Mitsuba pairs of a generated dataset (module docstring), maps aligned as the evaluator does."""
+def shard_pairs(root: Path, scanned: bool, split: str = "test") -> Iterator[Pair]:
+    """The Mitsuba pairs of a generated dataset (module docstring), maps aligned as the evaluator
+    does: its scanned materials' (``meta["family"]`` ``scanned/…``) or its procedural ones'."""
     for shard in list_shards(root, split):
         for stored in iter_shard(shard):
             if stored.no_flash is None:
                 raise SystemExit(f"{shard}: sample {stored.key} has no no-flash twin (dataset_spec.pairs)")
+            if str(stored.meta.get("family", "")).startswith("scanned/") != scanned:
+                continue
             sample = sample_as_photographed(stored)
-            record = sample.meta["pair"]
-            flash_gain, room_gain = (torch.tensor(g).view(3, 1, 1) for g in record["white_balance"])
-            room = float(record["exposure_ratio"]) * stored.no_flash / room_gain
-            flash_only = (sample.photo / flash_gain - room).clamp_min(0.0)
-            exposure = float(auto_exposure_scale(flash_only[None]))
-            valid = ((sample.photo.amax(0) < CLIP) & (stored.no_flash.amax(0) < CLIP)).float()[None]
+            batch = collate_samples([Sample(stored.key, sample.photo, sample.maps, sample.meta,
+                                            check=False, no_flash=stored.no_flash)])  # fmt: skip
+            pair = flash_only_photos(batch["photo"], batch["photo_noflash"], batch["exposure_ratio"],
+                                     batch["white_balance"], CLIP)  # fmt: skip
+            exposure = float(auto_exposure_scale(pair.flash_only))
             yield Pair(
                 flash=sample.photo,
-                flash_only=(flash_only * exposure).clamp(0.0, 1.0),
-                room=room * exposure,
-                valid=valid,
-                frame=flash_frames([sample.meta], sample.photo.shape[-2], sample.photo.shape[-1]),
+                flash_only=(pair.flash_only[0] * exposure).clamp(0.0, 1.0),
+                room=pair.room[0] * exposure,
+                valid=pair.valid[0],
+                frame=batch["flash"],
                 truth=sample.maps,
             )
 
@@ -248,12 +251,13 @@ def main(argv: Sequence[str] | None = None) -> None:
     v4, de_lit = (load_model(path).generator.eval() for path in (None, DE_LIT))
     config = PairFitConfig(flat_prior=args.flat_prior, min_roughness=args.min_roughness)
     if args.shards is not None:
-        scores, count = score(shard_pairs(args.shards), v4, de_lit, config)
-        shard_report = [
-            f"# The pair fit on Mitsuba pairs: {args.shards} (no sensor)\n",
-            table("test split", scores, count),
-        ]
-        write_text_atomic(args.out, "\n".join(shard_report))
+        shard_report = [f"# The pair fit on Mitsuba pairs: {args.shards} (no sensor)\n"]
+        for name, scanned in (("test split, procedural", False), ("test split, scans", True)):
+            scores, count = score(shard_pairs(args.shards, scanned), v4, de_lit, config)
+            if count:
+                shard_report.append(table(name, scores, count))
+            write_text_atomic(args.out, "\n".join(shard_report))
+            log(f"{name}: {count} pairs ({time.time() - started:.0f} s)")
         print("\n".join(shard_report))
         return
     report = [f"# The pair fit on held-out pairs ({'evaluation sensor' if args.sensor else 'no sensor'})\n"]

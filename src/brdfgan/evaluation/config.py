@@ -21,6 +21,14 @@ RefineSettings = make_dataclass(
 
 
 @dataclass
+class PairRowNames:
+    """evaluate.py's ``pair_rows``: :class:`~brdfgan.evaluation.evaluator.PairRows` as lists."""
+
+    flash_only: list[str] = field(default_factory=list)
+    fit: list[str] = field(default_factory=list)
+
+
+@dataclass
 class EvaluateConfig:
     task_name: str = "evaluate"
     ckpt: Any = MISSING  # a path, a list of paths, or a mapping name -> path
@@ -31,6 +39,7 @@ class EvaluateConfig:
     flash_frame: str = "recorded"  # recorded | centred (see conf/evaluate.yaml)
     refine_steps: list[int] = field(default_factory=list)  # each model also after --refine N
     refine: Any = field(default_factory=RefineSettings)  # RefineConfig settings besides steps
+    pair_rows: PairRowNames = field(default_factory=PairRowNames)  # rows on flash + no-flash pairs
     paths: dict[str, Any] = field(default_factory=dict)
     data: dict[str, Any] = field(default_factory=dict)
     logger: dict[str, Any] | None = None

@@ -15,6 +15,7 @@ import io
 import json
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -23,14 +24,18 @@ import torch
 from torch import Tensor, nn
 from torchmetrics import MetricCollection
 
+from brdfgan.capture import FLASH_PHOTO, NO_FLASH_PHOTO
+from brdfgan.core.exposure import auto_exposure_scale
 from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
 from brdfgan.data.loading.datamodule import flash_frames
 from brdfgan.data.phone.conditions import sample_as_photographed
+from brdfgan.data.phone.pairs import flash_only_photos
 from brdfgan.data.storage.shards import Sample, iter_shard, list_shards
 from brdfgan.errors import UserError
 from brdfgan.figures import with_column_header
 from brdfgan.inference.model.tiling import model_placement
+from brdfgan.inference.pair.relief_fit import PairFitConfig, fit_pair
 from brdfgan.io.atomic import atomic_replace, write_text_atomic
 from brdfgan.io.images import write_image
 from brdfgan.metrics import hotspot_centres
@@ -45,6 +50,83 @@ HOTSPOT_COLUMNS = {"basecolor": "basecolor", "normal": "normal", "roughness": "r
 CHECKERBOARD_COLUMNS = {"basecolor": "base", "normal": "normal", "roughness": "rough", "metallic": "metal"}
 
 
+@dataclass(frozen=True)
+class PairRows:
+    """The rows scored on flash + no-flash pairs (issue 59), beside each model's row on the flash
+    photo: ``<name>@flash-only``, the model on the flash-only photo (the room light subtracted,
+    auto-exposed as predict exposes it), for every name in ``flash_only``; ``<name>+pair-fit``,
+    that prediction followed by the pair fit (:func:`~brdfgan.inference.pair.relief_fit.fit_pair`:
+    what ``brdfgan predict --no-flash`` writes, with ``fit_config``), for every name in ``fit``.
+    Names are the evaluated models'."""
+
+    flash_only: tuple[str, ...] = ()
+    fit: tuple[str, ...] = ()
+    fit_config: PairFitConfig = field(default_factory=PairFitConfig)
+
+    def names(self) -> list[str]:
+        return [f"{name}@flash-only" for name in self.flash_only] + [f"{name}+pair-fit" for name in self.fit]
+
+    def check(self, models: Iterable[str]) -> None:
+        """Raises UserError (one line) naming a row whose model is not evaluated."""
+        known = set(models)
+        for key, names in (("pair_rows.flash_only", self.flash_only), ("pair_rows.fit", self.fit)):
+            for name in names:
+                if name not in known:
+                    choices = ", ".join(sorted(known))
+                    raise UserError(f"{key}: {name!r} is not an evaluated model (one of {choices})")
+
+
+def pair_row_maps(
+    models: Mapping[str, nn.Module],
+    batch: Mapping[str, Any],
+    rows: PairRows,
+    flash: Tensor | None,
+    recorded: Tensor,
+) -> dict[str, Tensor]:
+    """The maps of every :class:`PairRows` row for one batch of pairs (the twins and their
+    ``exposure_ratio`` and ``white_balance``, :func:`~brdfgan.data.loading.datamodule
+    .collate_samples`): the models are given the frames ``flash`` (as on the flash photo), the fit
+    the ``recorded`` ones.
+
+    Raises:
+        UserError: the batch holds no no-flash twins (the data was made without ``dataset_spec.pairs``).
+
+    Shape:
+        - flash, recorded: ``(B, 3)``; output: each ``(B, 8, H, W)``
+    """
+    if NO_FLASH_PHOTO.batch_key not in batch:
+        raise UserError(
+            "pair_rows: the test data has no no-flash twins; generate it with dataset_spec.pairs=true"
+        )
+    photo = batch[FLASH_PHOTO.batch_key].to(recorded.device)
+    pair = flash_only_photos(
+        photo, batch[NO_FLASH_PHOTO.batch_key].to(photo), batch["exposure_ratio"], batch["white_balance"]
+    )
+    exposure = auto_exposure_scale(pair.flash_only)[:, None, None, None]
+    network_input = (pair.flash_only * exposure).clamp(0.0, 1.0)
+    out: dict[str, Tensor] = {}
+    from_flash_only = {
+        name: models[name](network_input, flash) for name in dict.fromkeys((*rows.flash_only, *rows.fit))
+    }
+    for name in rows.flash_only:
+        out[f"{name}@flash-only"] = from_flash_only[name]
+    for name in rows.fit:
+        fitted = []
+        for i in range(photo.shape[0]):
+            with torch.enable_grad():  # evaluate_models runs under no_grad; the fit is an Adam loop
+                result = fit_pair(
+                    pair.flash_only[i],
+                    pair.room[i],
+                    pair.valid[i],
+                    from_flash_only[name][i],
+                    recorded[i : i + 1],
+                    rows.fit_config,
+                )
+            fitted.append(result.maps)
+        out[f"{name}+pair-fit"] = torch.stack(fitted)
+    return out
+
+
 @torch.no_grad()
 def evaluate_models(
     models: Mapping[str, nn.Module],
@@ -52,6 +134,7 @@ def evaluate_models(
     make_metrics: Callable[[], MetricCollection],
     device: torch.device | str = "cpu",
     flash_frame: str = "recorded",
+    pair_rows: PairRows = PairRows(),
 ) -> dict[str, dict[str, float]]:
     """Metric values per model name. ``make_metrics()`` builds a fresh metric per model; every
     model sees the same batches in the same order. The flash positions of ``batch["meta"]``
@@ -61,10 +144,13 @@ def evaluate_models(
     :class:`~brdfgan.metrics.ReliefLeak`; without them, photos centred on their hotspot).
     ``flash_frame``: ``"recorded"`` passes the batches' flash frames to the models, ``"centred"``
     the frame of a photo centred on its hotspot with the default field of view (what ``brdfgan
-    predict`` assumes without EXIF)."""
+    predict`` assumes without EXIF). ``pair_rows``: rows of the models on the batches' flash +
+    no-flash pairs (:class:`PairRows`, :func:`pair_row_maps`; the fit is given the recorded frames,
+    as the refinement rows are), scored against the same truth with the flash photo as the photo."""
     if flash_frame not in FLASH_FRAME_SOURCES:
         raise UserError(f"flash_frame={flash_frame!r}: must be {' or '.join(map(repr, FLASH_FRAME_SOURCES))}")
-    metrics = {name: make_metrics().to(device) for name in models}
+    pair_rows.check(models)
+    metrics = {name: make_metrics().to(device) for name in [*models, *pair_rows.names()]}
     for model in models.values():
         model.to(device).eval()
     for batch in batches:
@@ -76,8 +162,13 @@ def evaluate_models(
         recorded = None if recorded is None else recorded.to(device)
         # None: each network's own default, the photo centred on its hotspot with the default FOV.
         flash = recorded if flash_frame == "recorded" else None
-        for name, model in models.items():
-            metrics[name].update(model(photo, flash), truth, hotspot=hotspot, flash=recorded, photo=photo)
+        predictions = {name: model(photo, flash) for name, model in models.items()}
+        if pair_rows.names():
+            if recorded is None:
+                raise ValueError("pair rows need the batches' recorded flash frames (batch['flash'])")
+            predictions |= pair_row_maps(models, batch, pair_rows, flash, recorded)
+        for name, maps in predictions.items():
+            metrics[name].update(maps, truth, hotspot=hotspot, flash=recorded, photo=photo)
     return {name: {k: float(v) for k, v in metric.compute().items()} for name, metric in metrics.items()}
 
 

@@ -16,6 +16,7 @@ from torch import nn
 from brdfgan.config_check import check_config
 from brdfgan.errors import UserError, single_console_logging
 from brdfgan.evaluation.evaluator import (
+    PairRows,
     evaluate_models,
     fixed_samples,
     markdown_table,
@@ -89,7 +90,10 @@ def evaluate(cfg: DictConfig, out_dir: str | Path) -> dict[str, dict[str, float]
     datamodule.splits["test"] = cfg.split  # the test loader streams each sample once, in order
     datamodule.setup("test")
     make_metrics = hydra.utils.instantiate(cfg.metrics)
-    results = evaluate_models(models, datamodule.test_dataloader(), make_metrics, device, cfg.flash_frame)
+    pair_rows = PairRows(tuple(cfg.pair_rows.flash_only), tuple(cfg.pair_rows.fit))
+    results = evaluate_models(
+        models, datamodule.test_dataloader(), make_metrics, device, cfg.flash_frame, pair_rows
+    )
     written = write_results(results, out_dir)
     samples = fixed_samples(
         Path(datamodule.data_dir),

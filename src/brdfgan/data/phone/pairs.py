@@ -41,11 +41,14 @@ from brdfgan.data.storage.shards import ShardError
 from brdfgan.data.storage.spec_checks import DatasetConfigError, in_range
 
 __all__ = [
+    "CLIP_LEVEL",
     "PAIR_BATCH_KEYS",
+    "FlashOnly",
     "PairDraw",
     "PairSampling",
     "draw_exposure_ev",
     "exposure_ratio",
+    "flash_only_photos",
     "misregister",
     "pair_batch",
     "pair_meta",
@@ -61,6 +64,9 @@ PAIR_BATCH_KEYS = ("exposure_ratio", "white_balance")
 # two shots' log gains): a fixed number whatever the settings.
 _UNIFORMS = 4
 UNIT_GAINS = (1.0, 1.0, 1.0)
+# A linear value at or above this in any channel of either photo is clipped (issue 59): the
+# difference of two photos is wrong wherever one of them lost its top.
+CLIP_LEVEL = 0.98
 
 
 def draw_exposure_ev(sampling: CaptureSampling, u: float) -> float:
@@ -246,3 +252,50 @@ def pair_batch(metas: Sequence[Mapping[str, Any]], keys: Sequence[str]) -> dict[
         ),
         "white_balance": torch.tensor([pair["white_balance"] for pair in pairs], dtype=torch.float32),
     }
+
+
+@dataclass(frozen=True)
+class FlashOnly:
+    """Registered pairs undone (:func:`flash_only_photos`), in the flash shot's linear units.
+
+    Attributes:
+        flash_only: ``(B, 3, H, W)`` the flash photo less the room light, clamped at 0.
+        room: ``(B, 3, H, W)`` the room light's share of the flash photo.
+        valid: ``(B, 1, H, W)`` float 0/1: clipped in neither shot.
+    """
+
+    flash_only: Tensor
+    room: Tensor
+    valid: Tensor
+
+
+def flash_only_photos(
+    photo: Tensor, no_flash: Tensor, exposure_ratio: Tensor, white_balance: Tensor, clip: float = CLIP_LEVEL
+) -> FlashOnly:
+    """The flash-only photos of registered pairs, as the module docstring undoes a pair: with ``r``
+    = ``exposure_ratio`` and ``g_f``, ``g_n`` = ``white_balance``, the room light's share is
+    ``r · no_flash / g_n`` and the flash alone ``photo / g_f −`` that share.
+
+    Shape:
+        - photo, no_flash: ``(B, 3, H, W)`` linear; exposure_ratio: ``(B,)``; white_balance:
+          ``(B, 2, 3)`` (flash shot, no-flash shot)
+        - output: :class:`FlashOnly`
+
+    Example:
+        A pixel lit 0.6 by the flash and 0.2 by the room, the twin exposed 2× brighter:
+
+        >>> photo = torch.full((1, 3, 1, 1), 0.8)
+        >>> twin = torch.full((1, 3, 1, 1), 0.4)
+        >>> gains = torch.ones(1, 2, 3)
+        >>> pair = flash_only_photos(photo, twin, torch.tensor([0.5]), gains)
+        >>> round(float(pair.flash_only[0, 0]), 4), round(float(pair.room[0, 0]), 4), float(pair.valid)
+        (0.6, 0.2, 1.0)
+    """
+    dims = check_shape(photo, "B 3 H W", name="photo")
+    check_shape(no_flash, "B 3 H W", name="no_flash", dims=dims)
+    flash_gain = white_balance[:, 0, :, None, None].to(photo)
+    room_gain = white_balance[:, 1, :, None, None].to(photo)
+    room = exposure_ratio.to(photo)[:, None, None, None] * no_flash / room_gain
+    flash_only = (photo / flash_gain - room).clamp_min(0.0)
+    valid = ((photo.amax(1, keepdim=True) < clip) & (no_flash.amax(1, keepdim=True) < clip)).to(photo)
+    return FlashOnly(flash_only=flash_only, room=room, valid=valid)

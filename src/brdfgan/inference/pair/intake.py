@@ -49,6 +49,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from brdfgan.core.exposure import luminance
+from brdfgan.data.phone.pairs import CLIP_LEVEL
 from brdfgan.inference.intake.exposure_settings import ExposureSettings
 from brdfgan.inference.intake.photo import Photo
 from brdfgan.inference.intake.preprocess import Crop, resize_crop
@@ -65,9 +66,6 @@ from brdfgan.inference.views.warp import warp_to_reference
 RatioSource = Literal["exif", "option"]
 BalanceMethod = Literal["colour consistency", "assumed equal"]
 
-# A linear value at or above this in any channel of either photo is clipped (issue 59): the
-# difference of two photos is wrong wherever one of them lost its top.
-CLIP_LEVEL = 0.98
 # The pair cannot serve below these. The flash-only image is a difference: where the flash is
 # under ~1/4 of the room light, the noise and the errors of r and G in the room's share swamp it.
 MIN_FLASH_TO_ROOM = 0.25
