@@ -268,9 +268,18 @@ def _add_predict_output(predict: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--tileable",
         action="store_true",
-        help="make every map wrap seamlessly: the flash mark repaired where it leaked into a map, then "
-        "the maps rolled by about half a side and each seam cut along a minimum-error path through "
-        "their copies, the same cut for all maps; height and occlusion are then periodic too",
+        help="make every map wrap seamlessly: the flash mark repaired where it leaked into a map; a "
+        "material that repeats on a 2-D lattice (tiles, bricks, mosaics) resampled to a whole number of "
+        "its cells, any other the maps rolled by about half a side; then each seam cut along a "
+        "minimum-error path through their copies, the same cut for all maps; height and occlusion are "
+        "then periodic too",
+    )
+    group.add_argument(
+        "--align-pattern",
+        action="store_true",
+        help="with --tileable, for a material that repeats on a 2-D lattice (tiles, bricks, mosaics): "
+        "turn the pattern so that its own rows and columns run along the tile's edges (rectified) "
+        "instead of keeping the photo's orientation; either way such a material is tiled by whole cells",
     )
     group.add_argument(
         "--prefix",
@@ -586,6 +595,8 @@ def _predict_options(args: argparse.Namespace, kind: CaptureKind) -> tuple[Predi
 
     if args.refine is not None and not kind.refines:
         raise UserError(f"--refine cannot be combined with {kind.flag} ({kind.no_refine_reason})")
+    if args.align_pattern and not args.tileable:
+        raise UserError("--align-pattern applies to tileable maps: add --tileable")
     device = _predict_device(args.device)
     options = PredictOptions(
         resolution=args.resolution,
@@ -599,6 +610,7 @@ def _predict_options(args: argparse.Namespace, kind: CaptureKind) -> tuple[Predi
             height_scale=args.height_scale,
         ),
         tileable=args.tileable,
+        align_pattern=args.align_pattern,
         prefix_files=args.prefix,
         tiling=TilingConfig.for_tile(args.tile),
         preview=not args.no_preview,

@@ -34,6 +34,15 @@ from torch import Tensor, nn
 
 from brdfgan.core.flash_geometry import centred_flash_frame, resize_flash_frame
 from brdfgan.core.flash_mark import FlashMark, repair_flash_mark
+from brdfgan.core.lattice import (
+    MAX_STRETCH,
+    PROMINENCE_THRESHOLD,
+    CellTiling,
+    Lattice,
+    choose_cells,
+    find_lattice,
+    tile_whole_cells,
+)
 from brdfgan.core.seamless import (
     MAP_NAMES,
     MIN_SIDE,
@@ -86,6 +95,8 @@ class PredictOptions:
     animate: Literal["gif", "mp4"] | None = None
     refine: RefineConfig | None = None  # None: the network's maps as they are
     tileable: bool = False  # cut the maps into a seamless tile (make_tileable)
+    # --align-pattern: with --tileable, a periodic material's lattice turned onto the tile's axes.
+    align_pattern: bool = False
     prefix_files: bool = False  # texture files named <material>_<map>.<ext> for engines' importers
     field_of_view: FieldOfView = field(default_factory=FieldOfView)  # --fov / --focal-length-35mm
     # The largest side an anchored network runs at for the default (crop-sized) output; larger
@@ -257,18 +268,42 @@ class TileableRecord:
     """What ``--tileable`` did to a photo's maps (``material.json``'s ``tileable``): the flash mark
     found and repaired, the four copies the tile is cut from (:class:`~brdfgan.core.seamless.SeamlessTile`'s
     ``shifts``), each map's wrap ratio before (the network's maps) and, with the copied fractions,
-    after (measured against the repaired maps, which the tile is cut from)."""
+    after (measured against the repaired maps, which the tile is cut from).
+
+    A periodic material (``lattice``, :func:`~brdfgan.core.lattice.find_lattice`) is instead tiled
+    by whole lattice cells (``cells``, :class:`~brdfgan.core.lattice.CellTiling`): ``shifts`` are
+    then the whole periods ``(H or 0, W or 0)`` by which the resampled maps' copies differ, and the
+    copied fractions are measured against the resampled maps. ``lattice`` is ``None`` unless one
+    was found (kept with ``cells`` ``None`` where no whole number of its cells fits: the cut's path).
+    ``note``: one line where the lattice was ambiguous or could not be used, saying which path was
+    taken."""
 
     flash_mark: FlashMark
     shifts: tuple[tuple[int, int], ...]
     wrap_ratio_before: dict[str, tuple[float, float]]
     after: TilingMeasures
+    lattice: Lattice | None = None
+    cells: CellTiling | None = None
+    note: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         measures = self.after.to_json()
+        lattice = None
+        if self.lattice is not None:
+            lattice = {
+                **self.lattice.to_json(),
+                "cells": None if self.cells is None else self.cells.to_json(),
+            }
         return {
-            "method": "flash mark repaired, then rolled and cut along minimum-error paths",
+            "method": (
+                "flash mark repaired, then resampled to whole lattice cells and each wrap cut along a "
+                "minimum-error path between copies one period apart"
+                if self.cells is not None
+                else "flash mark repaired, then rolled and cut along minimum-error paths"
+            ),
             "flash_mark": self.flash_mark.to_json(),
+            "lattice": lattice,
+            "note": self.note,
             "shifts": [list(shift) for shift in self.shifts],
             "wrap_ratio_before": {name: list(pair) for name, pair in self.wrap_ratio_before.items()},
             "wrap_ratio_after": measures["wrap_ratio"],
@@ -278,6 +313,9 @@ class TileableRecord:
     @classmethod
     def from_json(cls, record: dict[str, Any]) -> TileableRecord:
         before = record["wrap_ratio_before"]
+        lattice = record.get("lattice")
+        cells = None if lattice is None else lattice.get("cells")
+        note = record.get("note")
         return cls(
             flash_mark=FlashMark.from_json(record["flash_mark"]),
             shifts=tuple((int(dy), int(dx)) for dy, dx in record["shifts"]),
@@ -285,13 +323,23 @@ class TileableRecord:
             after=TilingMeasures.from_json(
                 {"wrap_ratio": record["wrap_ratio_after"], "copied_fraction": record["copied_fraction"]}
             ),
+            lattice=None if lattice is None else Lattice.from_json(lattice),
+            cells=None if cells is None else CellTiling.from_json(cells),
+            note=None if note is None else str(note),
         )
 
 
-def make_tileable(maps: Tensor, hotspot: tuple[float, float]) -> tuple[Tensor, TileableRecord]:
+def make_tileable(
+    maps: Tensor, hotspot: tuple[float, float], *, align_pattern: bool = False
+) -> tuple[Tensor, TileableRecord]:
     """``--tileable``: the flash mark repaired where it leaked into the maps (:mod:`brdfgan.core.flash_mark`,
-    ``hotspot`` ``(x, y)`` in the maps' pixels), so that no tile repeats it; then the maps rolled
-    and cut into a tile (:func:`~brdfgan.core.seamless.make_seamless`), with the record of both.
+    ``hotspot`` ``(x, y)`` in the maps' pixels), so that no tile repeats it; then, for a material
+    that repeats on a 2-D lattice (:func:`~brdfgan.core.lattice.find_lattice`), the maps resampled
+    to a whole number of its cells and the wraps' residual seams cut
+    (:func:`~brdfgan.core.lattice.tile_whole_cells`; ``align_pattern``: turned so that the lattice's
+    own direction nearest an axis becomes it, ``--align-pattern``); for any other material, or a
+    lattice whose cells do not fit, rolled and cut into a tile
+    (:func:`~brdfgan.core.seamless.make_seamless`, unchanged), with the record of all.
 
     Shape: ``(8, H, W)`` → ``(8, H, W)``.
     """
@@ -299,10 +347,41 @@ def make_tileable(maps: Tensor, hotspot: tuple[float, float]) -> tuple[Tensor, T
     if min(height, width) < MIN_SIDE:
         raise PredictError(f"--tileable needs maps of at least {MIN_SIDE}×{MIN_SIDE}, got {height}×{width}")
     repaired, mark = repair_flash_mark(maps, hotspot)
-    tile = make_seamless(repaired)
     before = {name: wrap_ratios(image) for name, image in zip(MAP_NAMES, file_units(maps), strict=True)}
+    lattice = find_lattice(repaired)
+    cells = None
+    if lattice.periodic and lattice.vectors is not None:
+        cells = choose_cells(lattice.vectors, height, width, align=align_pattern)
+    note = _lattice_note(lattice, cells, align_pattern)
+    if cells is not None:
+        whole = tile_whole_cells(repaired, cells)
+        shifts = ((height, width), (height, 0), (0, width), (0, 0))
+        return whole.maps, TileableRecord(mark, shifts, before, whole.measures, lattice, whole.tiling, note)
+    tile = make_seamless(repaired)
     after = tiling_measures(tile.maps, repaired, tile.shifts)
-    return tile.maps, TileableRecord(mark, tile.shifts, before, after)
+    return tile.maps, TileableRecord(
+        mark, tile.shifts, before, after, lattice if lattice.periodic else None, None, note
+    )
+
+
+def _lattice_note(lattice: Lattice, cells: CellTiling | None, align_pattern: bool) -> str | None:
+    """The one line ``material.json`` (and the run's warnings) get where the lattice decision is worth a
+    look: an ambiguous score, a lattice whose cells do not fit, ``--align-pattern`` with nothing
+    to align. ``None`` otherwise."""
+    score = f"score {lattice.score:.3f}, threshold {PROMINENCE_THRESHOLD}"
+    if lattice.periodic and cells is None:
+        return (
+            f"a lattice was found ({score}) but no whole number of its cells fits the maps with room "
+            f"for the seam and a stretch of at most {MAX_STRETCH}: tiled by the minimum-error cut"
+        )
+    if lattice.ambiguous:
+        path = "by whole lattice cells" if cells is not None else "by the minimum-error cut"
+        return f"the pattern is ambiguously periodic ({score}): tiled {path}"
+    if align_pattern and cells is None:
+        return (
+            "--align-pattern: no 2-D lattice in the maps, so nothing to align: tiled by the minimum-error cut"
+        )
+    return None
 
 
 RefineProgress = Callable[[Path, int, int], None]  # (photo, step, of steps)
@@ -457,7 +536,10 @@ def write_prediction(
     tiling: TileableRecord | None = None
     if options.tileable:
         with clock("tileable"):
-            maps, tiling = make_tileable(maps, (float(flash_frame[0, 0]), float(flash_frame[0, 1])))
+            hotspot = (float(flash_frame[0, 0]), float(flash_frame[0, 1]))
+            maps, tiling = make_tileable(maps, hotspot, align_pattern=options.align_pattern)
+        if tiling.note is not None:
+            warnings = (*warnings, tiling.note)
     metadata = {
         "name": out_dir.name,
         "model": predictor.model.to_json(),

@@ -1,0 +1,884 @@
+"""Pattern-true tiling (``brdfgan predict --tileable``): whether a map set repeats on a 2-D lattice,
+its two lattice vectors, and a tile made of whole lattice cells.
+
+Tiles, bricks, pavers and mosaics repeat a cell. A minimum-error cut (:mod:`brdfgan.core.seamless`)
+joins copies wherever they agree and so can join half a tile to half a tile; tiling by whole
+periods keeps every cell whole (Rodriguez-Pardo, Suja & Garces 2019, "Automatic extraction and
+synthesis of regular repeatable patterns"). The steps:
+
+1. **Features** (:func:`pattern_features`): the base colour's luminance and the normal's two
+   slopes, the pattern an artist sees and its relief, each with a quadratic trend (shading) removed.
+2. **Autocorrelation** (:func:`autocorrelation`): per feature group (colour, relief) the linear
+   autocorrelation through a zero-padded FFT of the mean-free features under a Tukey window,
+   divided by the window's own (an unbiased estimate at every lag) and by its value at lag 0; the
+   groups averaged. ``ρ(l) = 1`` where the maps shifted by ``l`` equal themselves.
+3. **Lattice** (:func:`find_lattice`): a lattice vector is a local maximum of ρ that stands above
+   the ring around it (:func:`peak_prominence`). That is what separates a 2-D lattice from a 1-D
+   pattern: stripes, planks and wood grain have *ridges* in ρ (ρ stays high along the stripes), so
+   every point of a ridge has a ring as high as itself. The shortest prominent peak is ``a``, the
+   shortest prominent one at an angle to it ``b``; the pair is Lagrange–Gauss reduced
+   (:func:`reduce_basis`) and refined by least squares over the sub-pixel positions (parabolic
+   interpolation) of the peaks at the small integer combinations ``i·a + j·b``
+   (:func:`refine_lattice`), which averages the broadened peaks of a photo in mild perspective.
+   The lattice is accepted when its *score*, the least prominence among the peaks at ``a``, ``b``
+   and the combinations ``a ± b``, ``2a``, ``2b`` that the maps are large enough to show (at least
+   one of them), reaches :data:`PROMINENCE_THRESHOLD`: a spurious pair of noise maxima has no peak
+   at its sum.
+4. **Whole cells** (:func:`choose_cells`): integer combinations ``u = m₁a + n₁b`` (about
+   horizontal) and ``v = m₂a + n₂b`` (about vertical) spanning a parallelogram that fits in the
+   maps, the largest with the least stretch and turn; with ``align`` the frame is turned so that the
+   lattice's own direction nearest an axis becomes that axis (the pattern is rectified).
+5. **Resample** (:func:`sample_cells`): the affine map taking ``u`` to ``(W, 0)`` and ``v`` to
+   ``(0, H)`` samples the maps (bilinear, ``grid_sample``; normals renormalised), a margin of whole
+   pixels beyond each edge included. The result repeats by whole periods: its wrap joins a cell to
+   the same cell one period on.
+6. **Residual seam** (:func:`cut_wrap`): where the photo is not perfectly periodic (stains, grain,
+   shading, perspective) the wrap still shows a step. Across it the tile may take either the pixel
+   or the pixel one period ``u`` (``v``) on, sampled from the photo in the margin: the two agree
+   in the pattern, so a minimum-error path between them (the seam cut's own
+   :func:`~brdfgan.core.seamless.min_error_path` and :func:`~brdfgan.core.seamless.seam_cost`)
+   moves the seam where the rest agrees too, and the lattice stays whole. Today's cut, which
+   rolls the maps by about half a side, would shift the pattern by a fraction of a cell instead.
+7. **Roll** (:func:`tile_whole_cells`): the tile now repeats without a seam, so rolling it is a
+   shift of the whole tiling and keeps every cell. As today's cut does, the quietest step in the
+   middle half of each axis (:func:`~brdfgan.core.seamless.quiet_cut`) becomes the tile's wrap, and
+   the residual seams move inside.
+
+**1-D patterns are not periodic here.** Stripes, planks and wood grain repeat along one direction
+only: ρ has a ridge, no isolated peak, and :func:`find_lattice` reports no lattice. Such maps keep
+the minimum-error cut, whose rolls already prefer shifts where the copies agree (a whole number of
+stripes across them), and whose cut runs along the stripes.
+
+Lattice vectors are ``(dx, dy)`` in pixels of the maps, ``x`` to the right, ``y`` down (rows).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from brdfgan.core.checks import check_shape
+from brdfgan.core.exposure import luminance
+from brdfgan.core.seamless import (
+    COPY_TOLERANCE,
+    FEATHER,
+    MAP_GROUPS,
+    MAP_NAMES,
+    TilingMeasures,
+    file_units,
+    map_scales,
+    min_error_path,
+    quiet_cut,
+    seam_cost,
+    wrap_ratios,
+)
+from brdfgan.core.svbrdf import check_single_maps, join_maps, normalize_normal, split_maps
+
+Vector = tuple[float, float]
+
+# Feature channels (pattern_features) and their groups: colour (luminance) and relief (slopes).
+FEATURE_GROUPS = (1, 2)
+# A feature group whose detrended energy per pixel is below this square (a constant map, a flat
+# normal map) carries no pattern: it is left out instead of normalising its noise up to weight 1.
+FEATURE_FLOOR = 1e-3
+# Normals tilted beyond this z are clamped before their slope is taken (|slope| ≤ ~20).
+MIN_NORMAL_Z = 0.05
+# Detection runs on the features shrunk to at most this side (area averaging): the FFT grows with
+# the padded area, and a period of a few pixels at 2048² is still ten pixels here.
+DETECT_SIDE = 1024
+# The Tukey window's tapered fraction (half at each end): enough to keep the image's border out of
+# the estimate without starving the large lags a lattice of two periods per side needs.
+WINDOW_TAPER = 0.2
+# Lags whose overlap (the fraction of pixels that have a partner at that shift) is below this are
+# too noisy for a lattice vector; combinations are checked down to CHECK_OVERLAP.
+MIN_OVERLAP = 0.25
+CHECK_OVERLAP = 0.1
+# Periods shorter than this (pixels at detection size) are texture, not a pattern.
+MIN_PERIOD = 4.0
+# A lattice peak's height in ρ at least this; candidates are the strongest MAX_CANDIDATES maxima.
+MIN_PEAK = 0.15
+MAX_CANDIDATES = 400
+# The ring on which a peak's prominence is measured: this fraction of the shorter lattice vector
+# (away from the neighbouring lattice points, outside a peak's core), at least MIN_RING pixels.
+RING_FRACTION = 0.3
+MIN_RING = 2.0
+# The score (the weakest lattice peak's prominence: its height minus the ring's highest point) a
+# lattice needs; calibrated in tests/core/test_lattice.py.
+PROMINENCE_THRESHOLD = 0.1
+# Candidates are picked from half the threshold, so that a weak lattice is scored, not missed.
+SELECT_FRACTION = 0.5
+# Among the candidates that stand out, the shortest within this fraction of the best prominence.
+RELATIVE_PROMINENCE = 0.5
+# A score within this factor of the threshold is ambiguous: a note says which path was taken.
+AMBIGUITY_FACTOR = 1.5
+# The two vectors at least this far from parallel (degrees).
+MIN_ANGLE_DEG = 20.0
+# A lattice point is searched within this fraction of the shorter vector around its prediction;
+# the refinement fits peaks that reach COMBINATION_LEVEL × the weaker of the two vectors' peaks.
+SEARCH_FRACTION = 0.15
+COMBINATION_LEVEL = 0.5
+# Refinement fits the peaks at i·a + j·b with |i|, |j| ≤ REFINE_ORDER (the 2–3 nearest per vector).
+REFINE_ORDER = 2
+# Whole cells: the tile's edges turn at most MAX_TURN_DEG from the frame's axes; the choice pays
+# STRETCH_WEIGHT per unit of log-anisotropy and TURN_WEIGHT per radian of turn against the log of
+# the area kept (1 % stretch is worth ~3 % area: shapes matter more than resolution).
+MAX_TURN_DEG = 15.0
+STRETCH_WEIGHT = 3.0
+TURN_WEIGHT = 1.0
+# Combinations tried per vector at most; of the candidates for each edge, the least turned of each
+# length (bins of LENGTH_STEP in the log: 1 %) is paired with those of the other.
+MAX_COUNT = 512
+LENGTH_STEP = 0.01
+# A tile stretching shapes more than this (log-anisotropy, ~16 %) is not used: the maps keep the cut.
+MAX_STRETCH = 0.15
+# The residual seam's band: up to MAX_MARGIN of the side beyond each edge (as much as the photo
+# has), at least MIN_MARGIN of it and MIN_BAND output pixels; a cell that leaves less room is not
+# used (the path needs room to find where the copies agree).
+MAX_MARGIN = 1.0 / 16.0
+MIN_MARGIN = 1.0 / 32.0
+MIN_BAND = 4
+
+
+@dataclass(frozen=True)
+class Lattice:
+    """What :func:`find_lattice` found: the reduced lattice vectors ``(dx, dy)`` in pixels
+    (``a`` the shorter; ``None`` where no candidate pair was found), the score (the weakest lattice
+    peak's prominence in the autocorrelation; 0 without vectors, or where the maps show too few
+    periods to check), whether the maps count as periodic, the method, and a note on the decision."""
+
+    vectors: tuple[Vector, Vector] | None
+    score: float
+    periodic: bool
+    method: str = "autocorrelation"
+    notes: str = ""
+
+    @property
+    def ambiguous(self) -> bool:
+        """Whether the score is within :data:`AMBIGUITY_FACTOR` of the threshold either way."""
+        return (
+            self.vectors is not None
+            and PROMINENCE_THRESHOLD / AMBIGUITY_FACTOR
+            <= self.score
+            <= PROMINENCE_THRESHOLD * AMBIGUITY_FACTOR
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "vectors": None if self.vectors is None else [list(vector) for vector in self.vectors],
+            "score": self.score,
+            "threshold": PROMINENCE_THRESHOLD,
+            "periodic": self.periodic,
+            "method": self.method,
+            "notes": self.notes,
+        }
+
+    @classmethod
+    def from_json(cls, record: dict[str, Any]) -> Lattice:
+        vectors = record["vectors"]
+        return cls(
+            vectors=None if vectors is None else (_vector(vectors[0]), _vector(vectors[1])),
+            score=float(record["score"]),
+            periodic=bool(record["periodic"]),
+            method=str(record["method"]),
+            notes=str(record["notes"]),
+        )
+
+
+def _vector(values: Sequence[float]) -> Vector:
+    return (float(values[0]), float(values[1]))
+
+
+def pattern_features(maps: Tensor) -> Tensor:
+    """The channels a pattern shows in: the base colour's luminance (of its sRGB values, as a
+    texture shows them) and the normal's slopes ``(nx / nz, ny / nz)`` (the relief's gradient).
+
+    Shape: ``(8, H, W)`` → ``(3, H, W)`` (groups :data:`FEATURE_GROUPS`).
+    """
+    check_single_maps(maps)
+    parts = split_maps(maps)
+    slopes = parts.normal[:2] / parts.normal[2:].clamp_min(MIN_NORMAL_Z)
+    return torch.cat([luminance(parts.basecolor), slopes])
+
+
+def _detrend(features: Tensor) -> Tensor:
+    """Each channel minus its least-squares quadratic in ``(x, y)``: the shading and vignetting a
+    photo's maps keep would otherwise dominate ρ at every lag. Shape: ``(C, H, W)`` → same."""
+    channels, height, width = features.shape
+    y = torch.linspace(-1.0, 1.0, height, dtype=features.dtype, device=features.device)
+    x = torch.linspace(-1.0, 1.0, width, dtype=features.dtype, device=features.device)
+    yy, xx = torch.meshgrid(y, x, indexing="ij")
+    basis = torch.stack([torch.ones_like(xx), xx, yy, xx * xx, xx * yy, yy * yy]).view(6, -1)
+    values = features.reshape(channels, -1)
+    coefficients = torch.linalg.lstsq(basis.T, values.T).solution  # (6, C)
+    return (values - (basis.T @ coefficients).T).view(channels, height, width)
+
+
+def _tukey(length: int, like: Tensor) -> Tensor:
+    """A Tukey window: 1 in the middle, cosine tapers over :data:`WINDOW_TAPER`/2 at each end."""
+    position = (torch.arange(length, dtype=like.dtype, device=like.device) + 0.5) / length
+    edge = torch.minimum(position, 1.0 - position) / (0.5 * WINDOW_TAPER)
+    return torch.where(edge < 1.0, 0.5 - 0.5 * torch.cos(math.pi * edge), torch.ones_like(edge))
+
+
+def autocorrelation(features: Tensor, groups: Sequence[int] = FEATURE_GROUPS) -> Tensor:
+    """The normalised autocorrelation ρ of the features (module docstring, step 2): per channel
+    group, the windowed linear autocorrelation of the detrended channels summed, over the window's
+    own, over its value at lag 0; the mean over the groups that are not constant
+    (:data:`FEATURE_FLOOR`). Lag ``(lx, ly)`` is at index ``[H + ly, W + lx]``; ρ is symmetric.
+
+    Shape: ``(C, H, W)`` → ``(2H, 2W)``, lags ``-H..H-1`` × ``-W..W-1``, ``ρ[H, W] = 1``
+    (0 everywhere when every group is constant).
+
+    Example:
+        A pattern repeating every 8 columns matches itself 8 columns on:
+
+        >>> columns = torch.arange(32.0).remainder(8.0).lt(2.0).double().expand(1, 32, 32)
+        >>> rho = autocorrelation(columns, groups=(1,))
+        >>> round(float(rho[32, 32]), 3), float(rho[32, 40]) > 0.9, float(rho[32, 36]) < 0
+        (1.0, True, True)
+    """
+    check_shape(features, "C H W", name="features")
+    channels, height, width = features.shape
+    if sum(groups) != channels or min(groups) < 1:
+        raise ValueError(f"feature groups {tuple(groups)} do not split {channels} channels")
+    work = _detrend(features.double())
+    window = _tukey(height, work).view(height, 1) * _tukey(width, work).view(1, width)
+    size = (2 * height, 2 * width)
+    weighted_mean = (work * window).sum(dim=(-2, -1), keepdim=True) / window.sum()
+    spectrum = torch.fft.rfft2((work - weighted_mean) * window, s=size)
+    per_channel = torch.fft.irfft2(spectrum.real.square() + spectrum.imag.square(), s=size)
+    overlap = torch.fft.irfft2(torch.fft.rfft2(window, s=size).abs().square(), s=size)
+    # The window's autocorrelation vanishes at lags beyond the image; those are cut off later.
+    unbiased = per_channel / overlap.clamp_min(1e-9 * float(overlap[0, 0]))
+    rho = torch.zeros(size, dtype=work.dtype, device=work.device)
+    used = 0
+    for part in unbiased.split(list(groups)):
+        summed = part.sum(dim=0)
+        if float(summed[0, 0]) > FEATURE_FLOOR**2:
+            rho += summed / summed[0, 0]
+            used += 1
+    return torch.fft.fftshift(rho / max(used, 1))
+
+
+def _lag_overlap(lags: Tensor, height: int, width: int) -> Tensor:
+    """The fraction of pixels that have a partner at each lag ``(lx, ly)``. Shape: ``(N, 2)`` → ``(N,)``."""
+    fraction = (1.0 - lags[:, 0].abs() / width).clamp_min(0) * (1.0 - lags[:, 1].abs() / height).clamp_min(0)
+    return fraction
+
+
+def sample_rho(rho: Tensor, lags: Tensor) -> Tensor:
+    """ρ at sub-pixel lags ``(lx, ly)``, bilinear. Shape: ``(2H, 2W)``, ``(*, 2)`` → ``(*)``."""
+    check_shape(rho, "H2 W2", name="rho")
+    height, width = rho.shape[0] // 2, rho.shape[1] // 2
+    flat = lags.reshape(-1, 2).to(rho.dtype)
+    # align_corners=False: index i's centre is at normalised (2i + 1) / n − 1.
+    grid = torch.stack(
+        [
+            (2.0 * (flat[:, 0] + width) + 1.0) / (2 * width) - 1.0,
+            (2.0 * (flat[:, 1] + height) + 1.0) / (2 * height) - 1.0,
+        ],
+        dim=-1,
+    )
+    values = F.grid_sample(
+        rho[None, None], grid.view(1, 1, -1, 2), align_corners=False, padding_mode="border"
+    )
+    return values.view(lags.shape[:-1])
+
+
+def peak_prominence(rho: Tensor, lags: Tensor, radius: Tensor | float) -> Tensor:
+    """How far ρ at each lag stands above the ring of ``radius`` pixels around it: ρ(l) minus the
+    ring's highest point (32 or more points on it). A lattice point is positive; a point on a ridge
+    (stripes) ~0; a point on a slope negative.
+
+    Shape: ``(2H, 2W)``, ``(N, 2)``, scalar or ``(N,)`` → ``(N,)``.
+    """
+    radii = torch.as_tensor(radius, dtype=rho.dtype, device=rho.device).expand(lags.shape[0])
+    largest = float(radii.max()) if radii.numel() else 0.0
+    count = min(128, max(32, math.ceil(2 * math.pi * largest)))  # ~1 px apart, bounded
+    angles = torch.arange(count, dtype=rho.dtype, device=rho.device) * (2 * math.pi / count)
+    ring = torch.stack([torch.cos(angles), torch.sin(angles)], dim=-1)  # (K, 2)
+    points = lags.to(rho.dtype).unsqueeze(1) + radii.view(-1, 1, 1) * ring  # (N, K, 2)
+    return sample_rho(rho, lags) - sample_rho(rho, points).amax(dim=-1)
+
+
+def reduce_basis(a: Vector, b: Vector) -> tuple[Vector, Vector]:
+    """The Lagrange–Gauss reduced basis of the lattice spanned by ``a`` and ``b``: the shortest
+    vector first, the second the shortest not parallel to it (``|a·b| ≤ |a|²/2``), ``a`` pointing
+    down or right (``dy > 0``, or ``dy = 0`` and ``dx > 0``), ``b`` turning clockwise on screen
+    from ``a`` (``a × b > 0`` with ``y`` down).
+
+    Shape: two ``(dx, dy)`` → two ``(dx, dy)``.
+
+    Example:
+        >>> reduce_basis((10.0, 0.0), (31.0, 10.0))
+        ((10.0, 0.0), (1.0, 10.0))
+    """
+    ax, ay = a
+    bx, by = b
+    if abs(ax * by - ay * bx) < 1e-12:
+        raise ValueError(f"lattice vectors {a} and {b} are parallel")
+    for _ in range(64):  # converges in O(log) steps; the bound guards against NaN input
+        if ax * ax + ay * ay > bx * bx + by * by:
+            ax, ay, bx, by = bx, by, ax, ay
+        mu = round((ax * bx + ay * by) / (ax * ax + ay * ay))
+        if mu == 0:
+            break
+        bx, by = bx - mu * ax, by - mu * ay
+    if ay < 0 or (ay == 0 and ax < 0):
+        ax, ay = -ax, -ay
+    if ax * by - ay * bx < 0:
+        bx, by = -bx, -by
+    return (ax, ay), (bx, by)
+
+
+def _peak_near(rho: Tensor, lag: Tensor, radius: float) -> tuple[Tensor, float, bool]:
+    """The highest point of ρ within ``radius`` of ``lag``, refined to sub-pixel by a parabola
+    through it and its neighbours along each axis; with its height and whether it is a local
+    maximum inside the disk (not on its rim, where ρ is still rising).
+
+    Shape: ``(2H, 2W)``, ``(2,)`` → ``(2,)`` lag, height, flag.
+    """
+    height, width = rho.shape[0] // 2, rho.shape[1] // 2
+    reach = max(1, math.ceil(radius))
+    cx, cy = round(float(lag[0])) + width, round(float(lag[1])) + height
+    x0, x1 = max(cx - reach, 1), min(cx + reach + 1, 2 * width - 1)
+    y0, y1 = max(cy - reach, 1), min(cy + reach + 1, 2 * height - 1)
+    if x0 >= x1 or y0 >= y1:
+        return lag.to(rho.dtype), -math.inf, False
+    ys = torch.arange(y0, y1, device=rho.device).view(-1, 1)
+    xs = torch.arange(x0, x1, device=rho.device).view(1, -1)
+    inside = (xs - (float(lag[0]) + width)) ** 2 + (ys - (float(lag[1]) + height)) ** 2 <= reach * reach
+    patch = torch.where(inside, rho[y0:y1, x0:x1], torch.tensor(-math.inf, dtype=rho.dtype))
+    index = int(torch.argmax(patch))
+    iy, ix = y0 + index // (x1 - x0), x0 + index % (x1 - x0)
+    centre = float(rho[iy, ix])
+    local = centre >= float(rho[iy - 1 : iy + 2, ix - 1 : ix + 2].max())
+    offsets = []
+    for before, after in ((rho[iy, ix - 1], rho[iy, ix + 1]), (rho[iy - 1, ix], rho[iy + 1, ix])):
+        curvature = float(before) - 2.0 * centre + float(after)
+        offsets.append(
+            0.0 if curvature >= 0 else max(-0.5, min(0.5, 0.5 * float(before - after) / curvature))
+        )
+    position = torch.tensor([ix - width + offsets[0], iy - height + offsets[1]], dtype=rho.dtype)
+    return position, centre, local
+
+
+def refine_lattice(rho: Tensor, a: Vector, b: Vector, image_size: tuple[int, int]) -> tuple[Vector, Vector]:
+    """``a`` and ``b`` fitted by weighted least squares to the sub-pixel peaks of ρ near the lattice
+    points ``i·a + j·b`` (``|i|, |j| ≤`` :data:`REFINE_ORDER`, overlap at least
+    :data:`CHECK_OVERLAP`, high enough to be a peak; weights their heights), twice: a peak at
+    ``2a`` halves the error of one at ``a``, and in mild perspective averages the drift.
+
+    Shape: ``(2H, 2W)``, two ``(dx, dy)``, ``(H, W)`` → two ``(dx, dy)``.
+    """
+    height, width = image_size
+    basis = torch.tensor([a, b], dtype=rho.dtype)  # rows a, b
+    orders = [
+        (i, j)
+        for i in range(-REFINE_ORDER, REFINE_ORDER + 1)
+        for j in range(-REFINE_ORDER, REFINE_ORDER + 1)
+        if (i, j) > (0, 0) or (i == 0 and j > 0)
+    ]
+    coefficients = torch.tensor(orders, dtype=rho.dtype)
+    for _ in range(2):
+        shortest = float(basis.norm(dim=1).min())
+        predicted = coefficients @ basis
+        level = COMBINATION_LEVEL * float(sample_rho(rho, basis).min())
+        rows, targets, weights = [], [], []
+        for k, lag in enumerate(predicted):
+            if float(_lag_overlap(lag.view(1, 2), height, width)) < CHECK_OVERLAP:
+                continue
+            position, value, local = _peak_near(rho, lag, SEARCH_FRACTION * shortest)
+            if local and value >= level:
+                rows.append(coefficients[k])
+                targets.append(position)
+                weights.append(value)
+        if len(rows) < 2:
+            break
+        design, target = torch.stack(rows), torch.stack(targets)
+        if torch.linalg.matrix_rank(design) < 2:
+            break
+        root = torch.tensor(weights, dtype=rho.dtype).sqrt().view(-1, 1)
+        basis = torch.linalg.lstsq(root * design, root * target).solution
+    return _vector(basis[0].tolist()), _vector(basis[1].tolist())
+
+
+def _candidates(rho: Tensor, height: int, width: int) -> Tensor:
+    """The local maxima of ρ (3×3) in one half-plane of lags, at least :data:`MIN_PEAK` high,
+    :data:`MIN_PERIOD` long, with :data:`MIN_OVERLAP`: the strongest :data:`MAX_CANDIDATES`,
+    shortest first. Shape: ``(2H, 2W)`` → ``(N, 2)`` lags ``(lx, ly)``."""
+    pooled = F.max_pool2d(rho[None, None], 3, stride=1, padding=1)[0, 0]
+    ys, xs = torch.nonzero((rho >= pooled) & (rho >= MIN_PEAK), as_tuple=True)
+    lags = torch.stack([xs - width, ys - height], dim=-1).to(rho.dtype)
+    upper = (lags[:, 1] > 0) | ((lags[:, 1] == 0) & (lags[:, 0] > 0))
+    keep = upper & (lags.norm(dim=-1) >= MIN_PERIOD) & (_lag_overlap(lags, height, width) >= MIN_OVERLAP)
+    lags, values = lags[keep], rho[ys[keep], xs[keep]]
+    lags = lags[torch.argsort(values, descending=True)[:MAX_CANDIDATES]]
+    return lags[torch.argsort(lags.norm(dim=-1), stable=True)]
+
+
+def _shortest_standing_out(prominence: Tensor) -> int | None:
+    """The first (shortest) candidate whose prominence is at least half the threshold and at least
+    :data:`RELATIVE_PROMINENCE` × the best: a ridge's bumps (stripes, grout lines) reach a few
+    hundredths, a lattice point several tenths. Shape: ``(N,)`` → an index or ``None``."""
+    if prominence.numel() == 0:
+        return None
+    level = max(SELECT_FRACTION * PROMINENCE_THRESHOLD, RELATIVE_PROMINENCE * float(prominence.max()))
+    chosen = torch.nonzero(prominence >= level)
+    return int(chosen[0]) if chosen.numel() else None
+
+
+def _pick_pair(rho: Tensor, lags: Tensor) -> tuple[Vector, Vector] | None:
+    """The shortest candidate that stands out (:func:`_shortest_standing_out`) and the shortest one
+    at least :data:`MIN_ANGLE_DEG` from it that does, rings sized by the first. Shape: ``(N, 2)``."""
+    if lags.shape[0] == 0:
+        return None
+    first = _shortest_standing_out(
+        peak_prominence(rho, lags, (RING_FRACTION * lags.norm(dim=-1)).clamp_min(MIN_RING))
+    )
+    if first is None:
+        return None
+    a = lags[first]
+    sine = (a[0] * lags[:, 1] - a[1] * lags[:, 0]).abs() / (a.norm() * lags.norm(dim=-1))
+    others = lags[sine >= math.sin(math.radians(MIN_ANGLE_DEG))]
+    ring = max(MIN_RING, RING_FRACTION * float(a.norm()))
+    second = _shortest_standing_out(peak_prominence(rho, others, ring))
+    if second is None:
+        return None
+    return _vector(a.tolist()), _vector(others[second].tolist())
+
+
+def _score_lattice(rho: Tensor, a: Vector, b: Vector, image_size: tuple[int, int]) -> tuple[float, str]:
+    """The lattice's score: the least prominence (:func:`peak_prominence`, rings sized by the
+    shorter vector) among the peaks of ρ nearest ``a``, ``b`` and the combinations ``a ± b``,
+    ``2a``, ``2b`` that the maps can show (:data:`CHECK_OVERLAP`), with the weakest one's name;
+    ``-inf`` and why where no combination can be checked (less than two periods in the maps).
+    A pair of noise maxima has no peak at its sum: its score is 0 or negative there."""
+    height, width = image_size
+    basis = torch.tensor([a, b], dtype=rho.dtype)
+    shortest = float(basis.norm(dim=1).min())
+    ring = max(MIN_RING, RING_FRACTION * shortest)
+    points = {"a": basis[0], "b": basis[1]}
+    combinations = {
+        "a+b": basis[0] + basis[1],
+        "a-b": basis[0] - basis[1],
+        "2a": 2 * basis[0],
+        "2b": 2 * basis[1],
+    }
+    for name, lag in combinations.items():
+        if float(_lag_overlap(lag.view(1, 2), height, width)) >= CHECK_OVERLAP:
+            points[name] = lag
+    if len(points) == 2:
+        return -math.inf, "the maps show less than two periods: no combination of the vectors to check"
+    # Each point's own peak: the highest ρ near it, which must be a local maximum (on the search
+    # disk's rim ρ is still rising towards something else: no peak here, prominence 0 at most).
+    found = [_peak_near(rho, lag, SEARCH_FRACTION * shortest) for lag in points.values()]
+    prominence = peak_prominence(rho, torch.stack([position for position, _, _ in found]), ring)
+    local = torch.tensor([is_local for _, _, is_local in found])
+    prominence = torch.where(local, prominence, prominence.clamp_max(0.0))
+    weakest = int(torch.argmin(prominence))
+    return float(prominence[weakest]), list(points)[weakest]
+
+
+def find_lattice(maps: Tensor) -> Lattice:
+    """Whether the map set repeats on a 2-D lattice, and its reduced lattice vectors in the maps'
+    pixels (module docstring, steps 1–3). Stripes and other 1-D patterns are not periodic.
+
+    Shape: ``(8, H, W)`` → :class:`Lattice`.
+    """
+    check_single_maps(maps)
+    height, width = maps.shape[-2:]
+    features = pattern_features(maps.detach().double())
+    scale = max(height, width) / DETECT_SIDE
+    if scale > 1.0:
+        size = (max(1, round(height / scale)), max(1, round(width / scale)))
+        features = F.interpolate(features[None], size=size, mode="area")[0]
+    small_h, small_w = features.shape[-2:]
+    factor = torch.tensor([width / small_w, height / small_h], dtype=torch.float64)
+    rho = autocorrelation(features)
+    pair = _pick_pair(rho, _candidates(rho, small_h, small_w))
+    if pair is None:
+        return Lattice(None, 0.0, False, notes="no isolated autocorrelation peak (no 2-D lattice)")
+    a, b = reduce_basis(*pair)
+    a, b = refine_lattice(rho, a, b, (small_h, small_w))
+    a, b = reduce_basis(a, b)
+    score, weakest = _score_lattice(rho, a, b, (small_h, small_w))
+    periodic = score >= PROMINENCE_THRESHOLD
+    if not math.isfinite(score):
+        notes, score = weakest, 0.0
+    elif periodic:
+        notes = f"2-D lattice (weakest peak: {weakest})"
+    else:
+        notes = f"lattice peaks too weak (at {weakest}: score {score:.3f} < {PROMINENCE_THRESHOLD})"
+    scaled = tuple(
+        _vector((torch.tensor(vector, dtype=torch.float64) * factor).tolist()) for vector in (a, b)
+    )
+    return Lattice((scaled[0], scaled[1]), score, periodic, notes=notes)
+
+
+def _distortion(u: Tensor, v: Tensor, height: int, width: int) -> tuple[Tensor, Tensor]:
+    """The stretch (log of the singular values' ratio: 0 for a rotation with a uniform scale) and
+    the turn (radians, clockwise on screen; the rotation of the polar decomposition) of the affine
+    map taking ``u`` to ``(W, 0)`` and ``v`` to ``(0, H)``; ``u × v > 0``. In closed form, so that
+    all pairs of candidates are scored at once.
+
+    Shape: ``(*, 2)``, ``(*, 2)`` (broadcast) → ``(*)``, ``(*)``.
+    """
+    cross = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    # A = diag(W, H) · [u v]⁻¹ = [[p, q], [r, s]].
+    p, q = width * v[..., 1] / cross, -width * v[..., 0] / cross
+    r, s = -height * u[..., 1] / cross, height * u[..., 0] / cross
+    frobenius = p * p + q * q + r * r + s * s
+    determinant = p * s - q * r
+    spread = (frobenius * frobenius - 4.0 * determinant * determinant).clamp_min(0.0).sqrt()
+    larger = (0.5 * (frobenius + spread)).sqrt()
+    smaller = (0.5 * (frobenius - spread)).clamp_min(1e-300).sqrt()
+    return torch.log(larger / smaller), torch.atan2(r - q, p + s)
+
+
+@dataclass(frozen=True)
+class CellTiling:
+    """Whole lattice cells as a tile (module docstring, steps 4–5): ``u = m₁a + n₁b`` and
+    ``v = m₂a + n₂b`` (``counts = ((m₁, n₁), (m₂, n₂))``, pixels ``(dx, dy)`` of the maps) become
+    the tile's edges ``(W, 0)`` and ``(0, H)`` (``size = (H, W)``, the maps' size): output point
+    ``(x, y)`` (pixel edges) is source point ``origin + (x / W)·u + (y / H)·v`` before the tile is
+    rolled by ``roll = (ry, rx)`` pixels (:func:`tile_whole_cells`; the tile's pixel ``(i, j)`` is
+    then the unrolled one's ``((i + ry) mod H, (j + rx) mod W)``). ``margin = (mx, my)`` output
+    pixels are sampled beyond each edge for the residual seam; ``aligned``: the frame was turned to
+    the lattice (``--align-pattern``)."""
+
+    counts: tuple[tuple[int, int], tuple[int, int]]
+    u: Vector
+    v: Vector
+    origin: Vector
+    size: tuple[int, int]
+    margin: tuple[int, int]
+    aligned: bool = False
+    roll: tuple[int, int] = (0, 0)
+
+    @property
+    def cells(self) -> int:
+        """How many lattice cells the tile holds: ``|m₁n₂ − n₁m₂|``."""
+        (m1, n1), (m2, n2) = self.counts
+        return abs(m1 * n2 - n1 * m2)
+
+    def affine(self) -> Tensor:
+        """The linear part of the map from source offsets to output offsets: ``A·u = (W, 0)``,
+        ``A·v = (0, H)``. Shape: ``(2, 2)`` float64."""
+        height, width = self.size
+        edges = torch.tensor([[self.u[0], self.v[0]], [self.u[1], self.v[1]]], dtype=torch.float64)
+        scale = torch.diag(torch.tensor([float(width), float(height)], dtype=torch.float64))
+        return scale @ torch.linalg.inv(edges)
+
+    def _distortion(self) -> tuple[float, float]:
+        stretch, turn = _distortion(
+            torch.tensor(self.u, dtype=torch.float64), torch.tensor(self.v, dtype=torch.float64), *self.size
+        )
+        return float(stretch), float(turn)
+
+    @property
+    def stretch(self) -> float:
+        """How much the resampling distorts shapes: the log of the ratio of the affine map's
+        singular values (0 for a rotation with a uniform scale; 0.05 ≈ 5 % longer one way)."""
+        return self._distortion()[0]
+
+    @property
+    def turn_deg(self) -> float:
+        """How far the resampling turns the pattern, degrees clockwise on screen."""
+        return math.degrees(self._distortion()[1])
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "counts": {"u": list(self.counts[0]), "v": list(self.counts[1])},
+            "cells": self.cells,
+            "u": list(self.u),
+            "v": list(self.v),
+            "origin": list(self.origin),
+            "size": list(self.size),
+            "margin": list(self.margin),
+            "aligned": self.aligned,
+            "roll": list(self.roll),
+            "stretch": self.stretch,
+            "turn_deg": self.turn_deg,
+        }
+
+    @classmethod
+    def from_json(cls, record: dict[str, Any]) -> CellTiling:
+        counts = record["counts"]
+        return cls(
+            counts=((int(counts["u"][0]), int(counts["u"][1])), (int(counts["v"][0]), int(counts["v"][1]))),
+            u=_vector(record["u"]),
+            v=_vector(record["v"]),
+            origin=_vector(record["origin"]),
+            size=(int(record["size"][0]), int(record["size"][1])),
+            margin=(int(record["margin"][0]), int(record["margin"][1])),
+            aligned=bool(record["aligned"]),
+            roll=(int(record["roll"][0]), int(record["roll"][1])),
+        )
+
+
+def _frame_angle(a: Vector, b: Vector) -> float:
+    """The turn (radians, in (−π/4, π/4]) that brings the lattice direction nearest an image axis
+    onto that axis: of ``a`` and ``b`` the one whose angle modulo 90° is smallest."""
+    turns = []
+    for dx, dy in (a, b):
+        angle = math.atan2(dy, dx)
+        turns.append(angle - (math.pi / 2) * round(angle / (math.pi / 2)))
+    return min(turns, key=abs)
+
+
+def _axis_candidates(
+    vectors: Tensor, counts: Tensor, axis: Tensor, extent: tuple[float, float]
+) -> tuple[Tensor, Tensor]:
+    """The lattice vectors within :data:`MAX_TURN_DEG` of ``axis`` that fit ``extent`` (the maps'
+    ``(W − 1, H − 1)`` less the smallest margin) on their own: of each length (bins of
+    :data:`LENGTH_STEP` in the log) the one turned least, so that every size of tile is tried.
+    Shape: ``(N, 2)``, ``(N, 2)``, ``(2,)`` → ``(K, 2)``, ``(K, 2)``."""
+    along = vectors @ axis
+    across = vectors[:, 0] * axis[1] - vectors[:, 1] * axis[0]
+    turn = torch.atan2(across.abs(), along)
+    keep = (
+        (along > 0)
+        & (turn <= math.radians(MAX_TURN_DEG))
+        & (vectors[:, 0].abs() <= extent[0])
+        & (vectors[:, 1].abs() <= extent[1])
+    )
+    vectors, counts, along, turn = vectors[keep], counts[keep], along[keep], turn[keep]
+    bins = torch.floor(torch.log(vectors.norm(dim=-1)) / LENGTH_STEP)
+    order = torch.argsort(turn)
+    order = order[torch.argsort(bins[order], stable=True)]  # by bin, the least turned first
+    _, sizes = torch.unique_consecutive(bins[order], return_counts=True)
+    firsts = order[torch.cumsum(sizes, 0) - sizes]
+    return vectors[firsts], counts[firsts]
+
+
+def choose_cells(
+    vectors: tuple[Vector, Vector], height: int, width: int, *, align: bool = False
+) -> CellTiling | None:
+    """The whole-cell tile of an ``H × W`` map set with lattice ``vectors`` (module docstring,
+    step 4): among the integer combinations ``u`` within :data:`MAX_TURN_DEG` of the frame's x axis
+    and ``v`` of its y axis (the image's axes; with ``align`` turned onto the lattice's direction
+    nearest an axis), the pair whose parallelogram, centred, fits in the maps with a margin
+    (:data:`MIN_MARGIN` to :data:`MAX_MARGIN` of the side, :data:`MIN_BAND` pixels) and a stretch
+    of at most :data:`MAX_STRETCH`, maximising ``log(area / HW) − STRETCH_WEIGHT · stretch −
+    TURN_WEIGHT · |turn − frame|``. ``None`` where no cell fits.
+
+    Shape: two ``(dx, dy)``, sizes → :class:`CellTiling` or ``None``.
+
+    Example:
+        A square lattice of 30 pixels in a 100² map: three cells each way (90 pixels, with room
+        for the seam's margin), neither stretched nor turned:
+
+        >>> tiling = choose_cells(((30.0, 0.0), (0.0, 30.0)), 100, 100)
+        >>> tiling.counts, tiling.cells, round(tiling.stretch, 6), tiling.margin
+        (((3, 0), (0, 3)), 9, 0.0, (5, 5))
+    """
+    a = torch.tensor(vectors[0], dtype=torch.float64)
+    b = torch.tensor(vectors[1], dtype=torch.float64)
+    area = float(abs(a[0] * b[1] - a[1] * b[0]))
+    if not area > 0:
+        raise ValueError(f"lattice vectors {vectors} are parallel")
+    longest = float(torch.maximum(a.norm(), b.norm()))
+    # Coefficients of a reduced basis stay below length × longest / area for vectors that long.
+    reach = min(MAX_COUNT, math.ceil(math.hypot(width, height) * longest / area) + 1)
+    steps = torch.arange(-reach, reach + 1, dtype=torch.float64)
+    mm, nn = torch.meshgrid(steps, steps, indexing="ij")
+    counts = torch.stack([mm.flatten(), nn.flatten()], dim=-1)
+    combos = counts @ torch.stack([a, b])
+    frame = _frame_angle(vectors[0], vectors[1]) if align else 0.0
+    x_axis = torch.tensor([math.cos(frame), math.sin(frame)], dtype=torch.float64)
+    y_axis = torch.tensor([-math.sin(frame), math.cos(frame)], dtype=torch.float64)
+    room = 1.0 + 2.0 * MIN_MARGIN
+    extent = ((width - 1.0) / room, (height - 1.0) / room)
+    us, u_counts = _axis_candidates(combos, counts, x_axis, extent)
+    vs, v_counts = _axis_candidates(combos, counts, y_axis, extent)
+    if us.shape[0] == 0 or vs.shape[0] == 0:
+        return None
+    u, v = us.unsqueeze(1), vs.unsqueeze(0)  # (U, 1, 2), (1, V, 2): every pair at once
+    margin = _margins(u, v, height, width)
+    cross = (u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]).clamp_min(1e-12)
+    stretch, turn = _distortion(u, v, height, width)
+    score = (
+        torch.log(cross / (height * width)) - STRETCH_WEIGHT * stretch - TURN_WEIGHT * (turn + frame).abs()
+    )
+    usable = (margin >= MIN_MARGIN) & (stretch <= MAX_STRETCH)
+    usable &= (torch.floor(margin * min(height, width)) >= MIN_BAND) & (cross > 1e-9)
+    if not bool(usable.any()):
+        return None
+    best = int(torch.argmax(torch.where(usable, score, torch.tensor(-math.inf, dtype=score.dtype))))
+    i, j = divmod(best, vs.shape[0])
+    chosen_u, chosen_v, fraction = us[i], vs[j], float(margin[i, j])
+    origin = (
+        0.5 * (width - float(chosen_u[0] + chosen_v[0])),
+        0.5 * (height - float(chosen_u[1] + chosen_v[1])),
+    )
+    return CellTiling(
+        counts=(_count(u_counts[i]), _count(v_counts[j])),
+        u=_vector(chosen_u.tolist()),
+        v=_vector(chosen_v.tolist()),
+        origin=origin,
+        size=(height, width),
+        margin=(math.floor(fraction * width), math.floor(fraction * height)),
+        aligned=align,
+    )
+
+
+def _count(pair: Tensor) -> tuple[int, int]:
+    return (round(float(pair[0])), round(float(pair[1])))
+
+
+def _margins(u: Tensor, v: Tensor, height: int, width: int) -> Tensor:
+    """The largest margin (a fraction of each edge, at most :data:`MAX_MARGIN`) with which the
+    parallelogram of ``u`` and ``v``, centred, keeps every sample between the maps' outer pixel
+    centres (bilinear needs two); negative where it does not fit at all.
+
+    Shape: ``(*, 2)``, ``(*, 2)`` (broadcast) → ``(*)``.
+    """
+    zero = torch.zeros_like(u[..., 0] + v[..., 0])
+    xs = torch.stack([zero, u[..., 0] + zero, v[..., 0] + zero, u[..., 0] + v[..., 0]])
+    ys = torch.stack([zero, u[..., 1] + zero, v[..., 1] + zero, u[..., 1] + v[..., 1]])
+    extent_x = (xs.amax(dim=0) - xs.amin(dim=0)).clamp_min(1e-9)
+    extent_y = (ys.amax(dim=0) - ys.amin(dim=0)).clamp_min(1e-9)
+    # Samples reach from −margin to 1 + margin along each edge.
+    room = torch.minimum((width - 1.0) / extent_x, (height - 1.0) / extent_y)
+    return (0.5 * (room - 1.0)).clamp_max(MAX_MARGIN)
+
+
+def sample_cells(maps: Tensor, tiling: CellTiling) -> Tensor:
+    """The maps resampled so that the tiling's cells fill the output (module docstring, step 5):
+    bilinear (``grid_sample``), normals renormalised, with ``margin`` pixels beyond each edge, the
+    photo's continuation one period on.
+
+    Shape: ``(8, H, W)`` → ``(8, H + 2·my, W + 2·mx)``; output ``[my + i, mx + j]`` is tile pixel
+    ``(i, j)``.
+    """
+    check_single_maps(maps)
+    source_h, source_w = maps.shape[-2:]
+    height, width = tiling.size
+    mx, my = tiling.margin
+    work = maps.detach().double()
+    sx = (torch.arange(-mx, width + mx, dtype=torch.float64, device=maps.device) + 0.5) / width
+    sy = (torch.arange(-my, height + my, dtype=torch.float64, device=maps.device) + 0.5) / height
+    px = tiling.origin[0] + sx.view(1, -1) * tiling.u[0] + sy.view(-1, 1) * tiling.v[0]
+    py = tiling.origin[1] + sx.view(1, -1) * tiling.u[1] + sy.view(-1, 1) * tiling.v[1]
+    # align_corners=False: normalised −1 and 1 are the outer edges of the border pixels.
+    grid = torch.stack([2.0 * px / source_w - 1.0, 2.0 * py / source_h - 1.0], dim=-1)
+    sampled = F.grid_sample(
+        work[None], grid[None], mode="bilinear", padding_mode="border", align_corners=False
+    )
+    parts = split_maps(sampled[0])
+    return join_maps(parts.basecolor, normalize_normal(parts.normal), parts.roughness, parts.metallic)
+
+
+def _cut_wrap_columns(image: Tensor, margin: int, scales: Tensor, row_offset: int, period: int) -> Tensor:
+    """One residual seam (module docstring, step 6): ``image`` holds ``margin`` columns beyond each
+    edge of a tile ``L`` wide that repeats by ``L``; across the wrap, each row switches once from
+    the tile's end to the pixels one period before its start along a minimum-error path through the
+    ``2·margin`` columns around it, blended over :data:`FEATHER` pixels. The path is found on the
+    ``period`` rows from ``row_offset`` and closes around them; other rows repeat it.
+
+    Shape: ``(C, R, L + 2·margin)`` → ``(C, R, L)``.
+    """
+    rows, total = image.shape[-2:]
+    length = total - 2 * margin
+    start = image[..., : 2 * margin]  # positions −margin .. margin − 1 from the tile's first column
+    end = image[..., length : length + 2 * margin]  # the same positions one period on
+    cost = seam_cost(start, end, scales, MAP_GROUPS)[row_offset : row_offset + period]
+    keep = math.ceil(FEATHER)  # the blend stays inside the band, which joins the tile unblended
+    path = min_error_path(cost[:, keep : 2 * margin - keep], cyclic=True) + keep
+    positions = path[(torch.arange(rows, device=image.device) - row_offset) % period].to(image.dtype)
+    centres = torch.arange(2 * margin, dtype=image.dtype, device=image.device) + 0.5
+    weight = ((centres.view(1, -1) - positions.view(-1, 1)) / FEATHER + 0.5).clamp(0.0, 1.0)
+    band = end + weight * (start - end)  # the end before the path, the start after it
+    tile = image[..., margin : margin + length].clone()
+    tile[..., length - margin :] = band[..., :margin]
+    tile[..., :margin] = band[..., margin:]
+    return tile
+
+
+def cut_wrap(extended: Tensor, margin: tuple[int, int]) -> Tensor:
+    """The tile of a resampled map set (:func:`sample_cells`) with both wraps cut (module docstring,
+    step 6): the columns, then the rows of that result; normals renormalised after the blend.
+
+    Shape: ``(8, H + 2·my, W + 2·mx)`` → ``(8, H, W)``.
+    """
+    check_single_maps(extended)
+    mx, my = margin
+    height = extended.shape[-2] - 2 * my
+    scales = map_scales(extended, MAP_GROUPS)
+    columns = _cut_wrap_columns(extended, mx, scales, my, height)
+    tile = _cut_wrap_columns(columns.transpose(-2, -1), my, scales, 0, columns.shape[-1]).transpose(-2, -1)
+    parts = split_maps(tile)
+    return join_maps(parts.basecolor, normalize_normal(parts.normal), parts.roughness, parts.metallic)
+
+
+def period_copied_fraction(
+    tiled: Tensor, extended: Tensor, margin: tuple[int, int], tolerance: float = COPY_TOLERANCE
+) -> float:
+    """:func:`~brdfgan.core.seamless.copied_fraction` for a whole-cell tile: the fraction of its
+    pixels within ``tolerance`` (every channel) of the resampled maps at the same place or one
+    period (``W``, ``H``) before or after, where the margin has it.
+
+    Shape: ``(C, H, W)``, ``(C, H + 2·my, W + 2·mx)`` → a number in [0, 1].
+    """
+    channels, height, width = tiled.shape
+    mx, my = margin
+    check_shape(
+        extended, "C H W", name="extended", dims={"C": channels, "H": height + 2 * my, "W": width + 2 * mx}
+    )
+    copied = torch.zeros(height, width, dtype=torch.bool, device=tiled.device)
+    for dy in (-height, 0, height):
+        for dx in (-width, 0, width):
+            # Tile rows i with my + i + dy inside the extended rows, likewise columns.
+            i0, i1 = max(0, -dy - my), min(height, height + my - dy)
+            j0, j1 = max(0, -dx - mx), min(width, width + mx - dx)
+            if i0 >= i1 or j0 >= j1:
+                continue
+            copy = extended[:, my + i0 + dy : my + i1 + dy, mx + j0 + dx : mx + j1 + dx]
+            close = (tiled[:, i0:i1, j0:j1] - copy).abs().amax(dim=0) <= tolerance
+            copied[i0:i1, j0:j1] |= close
+    return float(copied.double().mean())
+
+
+@dataclass(frozen=True)
+class CellTile:
+    """A whole-cell tile: the tile's maps, the tiling with its ``roll``, the resampled maps it was
+    cut from (with the margin), and how it wraps and how much of it is copied (against those)."""
+
+    maps: Tensor
+    tiling: CellTiling
+    resampled: Tensor
+    measures: TilingMeasures
+
+
+def tile_whole_cells(maps: Tensor, tiling: CellTiling) -> CellTile:
+    """The maps resampled to whole lattice cells, their wraps cut and the tile rolled to a quiet
+    wrap (module docstring, steps 5–7), in the maps' dtype, with
+    :class:`~brdfgan.core.seamless.TilingMeasures` (wrap ratios of the tile; copied fractions
+    against the resampled maps, :func:`period_copied_fraction`, which a roll does not change).
+
+    Shape: ``(8, H, W)`` → :class:`CellTile` with ``maps`` ``(8, H, W)``.
+    """
+    check_single_maps(maps)
+    if tuple(maps.shape[-2:]) != tiling.size:
+        raise ValueError(f"the tiling is for maps of {tiling.size}, got {tuple(maps.shape[-2:])}")
+    resampled = sample_cells(maps, tiling)
+    tile = cut_wrap(resampled, tiling.margin)
+    roll_x = quiet_cut(tile, -1, MAP_GROUPS)
+    roll_y = quiet_cut(torch.roll(tile, -roll_x, dims=-1), -2, MAP_GROUPS)
+    rolled = torch.roll(tile, (-roll_y, -roll_x), dims=(-2, -1))
+    wrap: dict[str, tuple[float, float]] = {}
+    copied: dict[str, float] = {}
+    for name, after, cut, source in zip(
+        MAP_NAMES, file_units(rolled), file_units(tile), file_units(resampled), strict=True
+    ):
+        wrap[name] = wrap_ratios(after)
+        copied[name] = period_copied_fraction(cut, source, tiling.margin)
+    rolled_tiling = replace(tiling, roll=(roll_y, roll_x))
+    return CellTile(rolled.to(maps.dtype), rolled_tiling, resampled, TilingMeasures(wrap, copied))

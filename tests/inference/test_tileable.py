@@ -1,0 +1,131 @@
+"""``--tileable``'s choice of path (``inference/pipeline.py``'s ``make_tileable``): a periodic
+material is tiled by whole lattice cells, anything else exactly as before; ``material.json``
+records the lattice, its cells and the method, round-trips, and a note says which path an
+ambiguous or unusable lattice took; ``--align-pattern`` turns the lattice onto the axes."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import torch
+from torch import Tensor
+
+import brdfgan.inference.pipeline as pipeline
+from brdfgan.cli import main
+from brdfgan.core.flash_mark import repair_flash_mark
+from brdfgan.core.lattice import Lattice, find_lattice
+from brdfgan.core.seamless import make_seamless
+from brdfgan.core.svbrdf import validate_maps
+from brdfgan.errors import USER_ERROR_EXIT_CODE
+from brdfgan.inference.pipeline import TileableRecord, make_tileable
+from tests.core.test_lattice import SIZE, lattice_maps, noise_maps, polar
+
+HOTSPOT = (SIZE / 2, SIZE / 2)
+
+
+def tiles() -> Tensor:
+    return lattice_maps(polar(24.0, 30.0), polar(30.0, 120.0), seed=11)
+
+
+def round_trip(record: TileableRecord) -> dict[str, object]:
+    document = json.loads(json.dumps(record.to_json()))
+    assert TileableRecord.from_json(document) == record
+    return document
+
+
+def todays_tile(maps: Tensor) -> Tensor:
+    """What ``--tileable`` made of any material before lattices: the repaired maps, cut."""
+    return make_seamless(repair_flash_mark(maps, HOTSPOT)[0]).maps
+
+
+def test_a_periodic_material_is_tiled_by_whole_cells_and_recorded() -> None:
+    maps = tiles()
+    tiled, record = make_tileable(maps, HOTSPOT)
+    validate_maps(tiled)
+    assert record.lattice is not None and record.lattice.periodic and record.cells is not None
+    assert record.note is None
+    document = round_trip(record)
+    lattice = document["lattice"]
+    assert isinstance(lattice, dict) and lattice["method"] == "autocorrelation"
+    assert lattice["cells"]["cells"] == record.cells.cells >= 10
+    assert set(lattice["cells"]["counts"]) == {"u", "v"}
+    assert "whole lattice cells" in str(document["method"])
+    assert min(record.after.copied_fraction.values()) >= 0.85
+    assert max(max(pair) for pair in record.after.wrap_ratio.values()) <= 1.2
+    assert not torch.equal(tiled, todays_tile(maps))
+
+
+def test_a_non_periodic_material_keeps_todays_cut_bit_for_bit() -> None:
+    maps = noise_maps(1)
+    tiled, record = make_tileable(maps, HOTSPOT)
+    assert torch.equal(tiled, todays_tile(maps))
+    assert record.lattice is None and record.cells is None and record.note is None
+    assert record.shifts == make_seamless(repair_flash_mark(maps, HOTSPOT)[0]).shifts
+    document = round_trip(record)
+    assert document["lattice"] is None and document["note"] is None
+    assert document["method"] == "flash mark repaired, then rolled and cut along minimum-error paths"
+
+
+def test_an_ambiguous_texture_gets_a_note_saying_which_path_was_taken() -> None:
+    # Coarse noise whose autocorrelation has a chance lattice scoring just under the threshold.
+    maps = noise_maps(243, sigma=10.0)
+    found = find_lattice(maps)
+    assert found.ambiguous and not found.periodic, found
+    tiled, record = make_tileable(maps, HOTSPOT)
+    assert torch.equal(tiled, todays_tile(maps))
+    assert (
+        record.note is not None
+        and "ambiguously periodic" in record.note
+        and "minimum-error cut" in record.note
+    )
+    assert "\n" not in record.note
+    round_trip(record)
+
+
+def test_an_ambiguous_lattice_is_still_tiled_by_cells_with_a_note(monkeypatch: pytest.MonkeyPatch) -> None:
+    maps = tiles()
+    weak = replace(find_lattice(maps), score=0.12)
+    monkeypatch.setattr(pipeline, "find_lattice", lambda _: weak)
+    _, record = make_tileable(maps, HOTSPOT)
+    assert record.cells is not None and record.lattice == weak
+    assert record.note is not None and "tiled by whole lattice cells" in record.note
+
+
+def test_a_lattice_whose_cells_do_not_fit_keeps_the_cut(monkeypatch: pytest.MonkeyPatch) -> None:
+    maps = tiles()
+    coarse = Lattice(
+        ((180.0, 0.0), (0.0, 185.0)), 0.3, True, notes="2-D lattice"
+    )  # one cell: 96 % of the side
+    monkeypatch.setattr(pipeline, "find_lattice", lambda _: coarse)
+    tiled, record = make_tileable(maps, HOTSPOT)
+    assert torch.equal(tiled, todays_tile(maps))
+    assert record.lattice == coarse and record.cells is None
+    assert record.note is not None and "no whole number of its cells fits" in record.note
+    assert round_trip(record)["lattice"] is not None
+
+
+def test_align_pattern_turns_a_lattice_onto_the_axes_and_says_when_there_is_none() -> None:
+    _, record = make_tileable(tiles(), HOTSPOT, align_pattern=True)
+    assert record.cells is not None and record.cells.aligned
+    assert abs(record.cells.turn_deg) == pytest.approx(30.0, abs=1.0)
+    maps = noise_maps(2)
+    tiled, plain = make_tileable(maps, HOTSPOT, align_pattern=True)
+    assert torch.equal(tiled, todays_tile(maps))
+    assert plain.note is not None and plain.note.startswith("--align-pattern: no 2-D lattice")
+
+
+def test_align_pattern_without_tileable_is_a_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import cv2
+    import numpy as np
+
+    photo = tmp_path / "p.png"
+    cv2.imwrite(str(photo), np.full((64, 64, 3), 128, np.uint8))
+    code = main(["predict", str(photo), "--out", str(tmp_path / "o"), "--align-pattern"])
+    assert code == USER_ERROR_EXIT_CODE
+    assert "--align-pattern applies to tileable maps: add --tileable" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
