@@ -129,3 +129,11 @@ def test_align_pattern_without_tileable_is_a_usage_error(
     assert code == USER_ERROR_EXIT_CODE
     assert "--align-pattern applies to tileable maps: add --tileable" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_float32_maps_are_tiled_in_float32() -> None:
+    # The pipeline's maps are float32; the whole-cell path resamples and cuts in their precision.
+    maps = tiles().float()
+    tiled, record = make_tileable(maps, HOTSPOT)
+    assert tiled.dtype == torch.float32 and record.cells is not None
+    validate_maps(tiled)

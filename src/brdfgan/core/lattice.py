@@ -755,20 +755,23 @@ def sample_cells(maps: Tensor, tiling: CellTiling) -> Tensor:
     bilinear (``grid_sample``), normals renormalised, with ``margin`` pixels beyond each edge, the
     photo's continuation one period on.
 
-    Shape: ``(8, H, W)`` → ``(8, H + 2·my, W + 2·mx)``; output ``[my + i, mx + j]`` is tile pixel
-    ``(i, j)``.
+    Shape: ``(8, H, W)`` → ``(8, H + 2·my, W + 2·mx)`` in the maps' dtype; output
+    ``[my + i, mx + j]`` is tile pixel ``(i, j)``.
     """
     check_single_maps(maps)
     source_h, source_w = maps.shape[-2:]
     height, width = tiling.size
     mx, my = tiling.margin
-    work = maps.detach().double()
+    # In the maps' own precision: at 2048² every full-size pass is memory-bound, and float32
+    # holds a bilinear sample and the seam's costs to far below an 8-bit level.
+    work = maps.detach()
     sx = (torch.arange(-mx, width + mx, dtype=torch.float64, device=maps.device) + 0.5) / width
     sy = (torch.arange(-my, height + my, dtype=torch.float64, device=maps.device) + 0.5) / height
     px = tiling.origin[0] + sx.view(1, -1) * tiling.u[0] + sy.view(-1, 1) * tiling.v[0]
     py = tiling.origin[1] + sx.view(1, -1) * tiling.u[1] + sy.view(-1, 1) * tiling.v[1]
     # align_corners=False: normalised −1 and 1 are the outer edges of the border pixels.
     grid = torch.stack([2.0 * px / source_w - 1.0, 2.0 * py / source_h - 1.0], dim=-1)
+    grid = grid.to(work.dtype)  # positions computed in float64, sampled at the maps' precision
     sampled = F.grid_sample(
         work[None], grid[None], mode="bilinear", padding_mode="border", align_corners=False
     )
