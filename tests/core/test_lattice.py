@@ -146,6 +146,56 @@ def test_mild_perspective_still_finds_the_lattice() -> None:
     assert_same_lattice(find_lattice(maps), truth, 0.03)
 
 
+def brick_maps(width: float, height: float, degrees: float, *, size: int = SIZE, seed: int = 0) -> Tensor:
+    """Running-bond bricks ``width × height`` (every other course shifted by half a brick), turned
+    ``degrees``: the horizontal mortar runs through (a ridge in the autocorrelation), only the
+    head joints make the lattice's peaks."""
+    generator = torch.Generator().manual_seed(seed)
+    axis = torch.arange(size, dtype=torch.float64) + 0.5
+    yy, xx = torch.meshgrid(axis, axis, indexing="ij")
+    cosine, sine = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    x, y = cosine * xx + sine * yy, -sine * xx + cosine * yy
+    course = torch.floor(y / height)
+    shifted = x + 0.5 * width * (course % 2)
+    to_joint = torch.minimum(
+        (shifted - width * torch.round(shifted / width)).abs(), (y - height * torch.round(y / height)).abs()
+    )
+    mortar = torch.exp(-((to_joint / 1.5) ** 2))
+    speckle = gaussian_blur(
+        torch.rand(1, 1, size, size, generator=generator, dtype=torch.float64), 1.0, "reflect"
+    )
+    luminance = (0.6 - 0.35 * mortar + 0.1 * (speckle[0, 0] - 0.5) + 0.05 * torch.sin(1.7 * course)).clamp(
+        0, 1
+    )
+    gy, gx = torch.gradient(-mortar)
+    normal = normalize_normal(torch.stack([-0.5 * gx, 0.5 * gy, torch.ones_like(gx)]))
+    basecolor = luminance * torch.tensor([0.8, 0.45, 0.35], dtype=torch.float64).view(3, 1, 1)
+    roughness = (0.6 + 0.2 * mortar)[None]
+    return join_maps(basecolor, normal, roughness, torch.zeros_like(roughness))
+
+
+def test_running_bond_bricks_are_a_lattice_of_half_offset_courses() -> None:
+    # Bricks 40 × 15 turned 20°: the lattice is (40, 0) and (20, 15) in the wall, turned; the
+    # through-running bed joints are a ridge that the head joints' peaks stand out from.
+    turn = math.radians(20.0)
+
+    def wall(x: float, y: float) -> Vector:
+        return (math.cos(turn) * x - math.sin(turn) * y, math.sin(turn) * x + math.cos(turn) * y)
+
+    maps = brick_maps(40.0, 15.0, 20.0)
+    lattice = find_lattice(maps)
+    assert_same_lattice(lattice, (wall(40.0, 0.0), wall(20.0, 15.0)), 0.01)
+    assert lattice.vectors is not None
+    # Tiled by whole cells, the sheet of 2 × 2 tiles is one wall: its lattice is the tile's.
+    tiling = choose_cells(lattice.vectors, SIZE, SIZE)
+    assert tiling is not None
+    sheet = tile_whole_cells(maps, tiling).maps.repeat(1, 2, 2)
+    a, b = (
+        (tiling.affine() @ torch.tensor(vector, dtype=torch.float64)).tolist() for vector in lattice.vectors
+    )
+    assert_same_lattice(find_lattice(sheet), ((a[0], a[1]), (b[0], b[1])), 0.02)
+
+
 @pytest.mark.parametrize(
     "maps",
     [noise_maps(3), noise_maps(4, sigma=8.0), stripe_maps(5, wavy=False), stripe_maps(6, wavy=True)],
