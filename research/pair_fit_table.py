@@ -32,13 +32,15 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import hydra
+import numpy as np
 import torch
 from torch import Tensor, nn
 
 from brdfgan.core.exposure import auto_exposure_scale
 from brdfgan.core.render import warp_maps_to_view
-from brdfgan.core.svbrdf import NORMAL
+from brdfgan.core.svbrdf import NORMAL, encode_normal, linear_to_srgb
 from brdfgan.data.loading.datamodule import collate_samples, flash_frames
 from brdfgan.data.loading.rendered import collate_scenes, draw_scene, render_scenes, scene_tensors
 from brdfgan.data.materials.scanned import read_scanned_material, scanned_material_folders
@@ -57,9 +59,12 @@ from brdfgan.data.spec.dataset_spec import (
 )
 from brdfgan.data.spec.determinism import derive_seed, material_seed
 from brdfgan.data.storage.shards import Sample, iter_shard, list_shards
+from brdfgan.figures import caption, with_column_header
 from brdfgan.inference.model.weights import load_model
 from brdfgan.inference.pair.relief_fit import PairFitConfig, fit_pair
 from brdfgan.io.atomic import write_text_atomic
+from brdfgan.io.images import write_image
+from brdfgan.losses.parameter import angular_distance
 from brdfgan.metrics import SVBRDFMetrics
 from research.relief_tables import HandfulBank, compose_config, log
 
@@ -205,6 +210,59 @@ def predictions(
     )
 
 
+FIGURE_COLUMNS = ("flash photo", "no-flash photo", "normal: truth", "v4, flash photo", "pair fit")
+
+
+def figure_row(pair: Pair, v4: nn.Module, config: PairFitConfig, label: str, panel: int) -> np.ndarray:
+    """One row of the before/after figure: the two photos (the no-flash one scaled to its own
+    range), the true normals, v4's from the flash photo and the pair fit's, each normal panel
+    captioned with its mean angle to the truth. Shape ``(panel, 5·panel, 3)`` uint8."""
+    with torch.no_grad():
+        single = v4(pair.flash[None], pair.frame)[0]
+        from_flash_only = v4(pair.flash_only[None], pair.frame)[0]
+    fitted = fit_pair(pair.flash_only, pair.room, pair.valid, from_flash_only, pair.frame, config).maps
+    room = pair.room / pair.room.amax().clamp_min(1e-6)
+    tiles = [linear_to_srgb(pair.flash.clamp(0, 1)), linear_to_srgb(room.clamp(0, 1))]
+    tiles += [encode_normal(maps[NORMAL]) for maps in (pair.truth, single, fitted)]
+    images = [
+        cv2.resize(t.permute(1, 2, 0).numpy(), (panel, panel), interpolation=cv2.INTER_AREA) for t in tiles
+    ]
+    row = np.ascontiguousarray((np.concatenate(images, axis=1) * 255.0 + 0.5).astype(np.uint8))
+    caption(row, label, (3, 12))
+    flat = torch.zeros_like(pair.truth[NORMAL])
+    flat[2] = 1.0
+    for column, maps in ((2, None), (3, single), (4, fitted)):
+        normal = flat if maps is None else maps[NORMAL]
+        angle = float(angular_distance(normal, pair.truth[NORMAL], dim=0).mean()) * 180.0
+        text = f"flat {angle:.1f} deg" if maps is None else f"{angle:.1f} deg"
+        caption(row, text, (column * panel + 3, panel - 6))
+    return row
+
+
+def write_figure(path: Path, rows: list[np.ndarray]) -> None:
+    canvas = np.concatenate(rows, axis=0).astype(np.float32) / 255.0
+    write_image(path, with_column_header(canvas, FIGURE_COLUMNS))
+
+
+def figure_pairs(root: Path, count: int) -> Iterator[tuple[str, Pair]]:
+    """The figure's pairs, chosen by a rule fixed before looking: the first crop of each of the
+    first ``count`` scanned sets in key order."""
+    seen: set[str] = set()
+    for pair, family in zip(shard_pairs(root, scanned=True), shard_families(root, scanned=True), strict=True):
+        if family not in seen and len(seen) < count:
+            seen.add(family)
+            yield family.removeprefix("scanned/"), pair
+
+
+def shard_families(root: Path, scanned: bool, split: str = "test") -> Iterator[str]:
+    """The ``meta["family"]`` of :func:`shard_pairs`'s pairs, in its order."""
+    for shard in list_shards(root, split):
+        for stored in iter_shard(shard):
+            family = str(stored.meta.get("family", ""))
+            if family.startswith("scanned/") == scanned:
+                yield family
+
+
 def table(name: str, scores: dict[str, dict[str, float]], photos: int) -> str:
     flat = scores["flat"]
     lines = [f"**{name}** ({photos} pairs)\n", "| row | " + " | ".join(c for c, _ in COLUMNS) + " |"]
@@ -224,6 +282,24 @@ def table(name: str, scores: dict[str, dict[str, float]], photos: int) -> str:
     return "\n".join(lines) + "\n"
 
 
+def score_shards(args: argparse.Namespace, v4: nn.Module, de_lit: nn.Module, config: PairFitConfig,
+                 started: float) -> None:  # fmt: skip
+    """``--shards``: the table of a generated dataset's Mitsuba pairs, or with ``--figure`` its figure."""
+    if args.figure is not None:
+        pairs = figure_pairs(args.shards, args.figure_rows)
+        write_figure(args.figure, [figure_row(pair, v4, config, label, 192) for label, pair in pairs])
+        print(f"wrote {args.figure}")
+        return
+    shard_report = [f"# The pair fit on Mitsuba pairs: {args.shards} (no sensor)\n"]
+    for name, scanned in (("test split, procedural", False), ("test split, scans", True)):
+        scores, count = score(shard_pairs(args.shards, scanned), v4, de_lit, config)
+        if count:
+            shard_report.append(table(name, scores, count))
+        write_text_atomic(args.out, "\n".join(shard_report))
+        log(f"{name}: {count} pairs ({time.time() - started:.0f} s)")
+    print("\n".join(shard_report))
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -241,6 +317,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument(
         "--shards", type=Path, default=None, help="a generated dataset with pairs (its test split)"
     )
+    parser.add_argument(
+        "--figure", type=Path, default=None, help="with --shards: the before/after figure of its scans' pairs"
+    )
+    parser.add_argument("--figure-rows", type=int, default=3)
     args = parser.parse_args(argv)
     started = time.time()
     cfg = compose_config()
@@ -251,14 +331,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     v4, de_lit = (load_model(path).generator.eval() for path in (None, DE_LIT))
     config = PairFitConfig(flat_prior=args.flat_prior, min_roughness=args.min_roughness)
     if args.shards is not None:
-        shard_report = [f"# The pair fit on Mitsuba pairs: {args.shards} (no sensor)\n"]
-        for name, scanned in (("test split, procedural", False), ("test split, scans", True)):
-            scores, count = score(shard_pairs(args.shards, scanned), v4, de_lit, config)
-            if count:
-                shard_report.append(table(name, scores, count))
-            write_text_atomic(args.out, "\n".join(shard_report))
-            log(f"{name}: {count} pairs ({time.time() - started:.0f} s)")
-        print("\n".join(shard_report))
+        score_shards(args, v4, de_lit, config, started)
         return
     report = [f"# The pair fit on held-out pairs ({'evaluation sensor' if args.sensor else 'no sensor'})\n"]
     chosen = args.sets.split(",")
