@@ -43,12 +43,15 @@ table says so and what it costs); ``today``: :func:`brdfgan.core.seamless.make_s
   cell, one that shifts the pattern by more than a pixel breaks every cell it crosses (from about
   half a cell beyond), and different stains or grain on either side of a well-placed seam do not
   count. Only for materials with a true 2-D lattice;
-- ``period err`` (:func:`period_error`): :func:`~brdfgan.core.lattice.find_lattice` on the tile
-  repeated 2 × 2 against the true vectors as the tile shows them (``A·a``, ``A·b``: ``A`` the
-  tiling's affine map, the identity for the cut; at the crop's centre): the larger relative length
-  error of the two reduced vectors and the larger angle between true and found ones; "—" where the
-  sheet shows no lattice;
-- ``found err``: the same for ``find_lattice`` on the untiled crop (the detection alone);
+- ``period err`` (:func:`lattice_period_error`): :func:`~brdfgan.core.lattice.find_lattice` on the
+  tile repeated 2 × 2, each found vector against the nearest vector of the true lattice as the tile
+  shows it (``A·a``, ``A·b``: ``A`` the tiling's affine map, the identity for the cut; the lattice
+  at the crop's centre): the larger relative length error and the larger angle. The sheet repeats
+  every tile exactly, and ``find_lattice`` there sometimes reports a coarser lattice (whole
+  combinations of the true vectors: ``×2``, ``×3`` in the table, "coarser" in the summary), which
+  still repeats with the material's period; "not found" where it reports none;
+- ``found err`` (:func:`period_error`): ``find_lattice`` on the untiled crop against the true vectors
+  (reduced bases, strict), where it found a lattice: the detection alone; ``score`` its score;
 - ``stretch``: the whole-cell tiling's stretch (log of its singular values' ratio, in %);
 - ``wrap``: the worst of every map's wrap ratio (:func:`~brdfgan.core.seamless.wrap_ratios`,
   columns and rows; ≤ 1.2 is today's goal);
@@ -79,7 +82,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from brdfgan.core.lattice import find_lattice, pattern_features, reduce_basis
+from brdfgan.core.lattice import PROMINENCE_THRESHOLD, find_lattice, pattern_features, reduce_basis
 from brdfgan.core.seamless import file_units
 from brdfgan.core.svbrdf import check_single_maps, join_maps, normalize_normal, split_maps
 from brdfgan.data.spec.determinism import derive_seed
@@ -239,6 +242,43 @@ def period_error(found: Basis | None, truth: Basis) -> tuple[float, float]:
         angle = math.degrees(math.acos(max(-1.0, min(1.0, cosine))))
         worst_length, worst_angle = max(worst_length, length), max(worst_angle, angle)
     return round(worst_length, 12), round(worst_angle, 9)
+
+
+def lattice_period_error(found: Basis | None, truth: Basis) -> tuple[float, float, int]:
+    """Whether a found lattice's vectors are periods of the true lattice: for each found vector,
+    the nearest non-zero true lattice vector, the relative length error and the angle (degrees)
+    between them, the larger of each over the two; and the index of the found lattice in the true
+    one (1: the same lattice; 2, 3, ...: a coarser one, whose vectors are whole combinations of
+    the true ones, as :func:`~brdfgan.core.lattice.find_lattice` can pick on a sheet where every
+    tile repeats exactly); ``(inf, inf, 0)`` without one.
+
+    Shape: two ``(dx, dy)`` each → two numbers and a count.
+
+    Example:
+        A found lattice twice as long one way is a coarser lattice of the same periods:
+
+        >>> lattice_period_error(((20.0, 0.0), (0.0, 10.1)), ((10.0, 0.0), (0.0, 10.0)))
+        (0.01, 0.0, 2)
+    """
+    if found is None:
+        return math.inf, math.inf, 0
+    basis = torch.tensor(truth, dtype=torch.float64)  # rows a, b
+    inverse = torch.linalg.inv(basis)
+    steps = torch.tensor([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)], dtype=torch.float64)
+    worst_length, worst_angle, rows = 0.0, 0.0, []
+    for vector in found:
+        f = torch.tensor(vector, dtype=torch.float64)
+        candidates = torch.round(f @ inverse) + steps  # the rounded coefficients and their neighbours
+        candidates = candidates[candidates.abs().sum(dim=-1) > 0]
+        points = candidates @ basis
+        nearest = int((points - f).norm(dim=-1).argmin())
+        t = points[nearest]
+        rows.append(candidates[nearest])
+        worst_length = max(worst_length, abs(float(f.norm()) / float(t.norm()) - 1.0))
+        cosine = float(f @ t) / (float(f.norm()) * float(t.norm()))
+        worst_angle = max(worst_angle, math.degrees(math.acos(max(-1.0, min(1.0, cosine)))))
+    index = round(abs(float(torch.det(torch.stack(rows)))))
+    return round(worst_length, 12), round(worst_angle, 9), index
 
 
 def feature_image(maps: Tensor) -> Tensor:
@@ -533,6 +573,20 @@ def check_cells(
 SCANS = Path(os.environ.get("BRDFGAN_SCANS_DIR", Path(__file__).resolve().parents[2] / "shared" / "scans"))
 MATERIAL_SIDE = 512
 CROP = 256
+# Layout parameters that count cells across the material: scaled with the side it is painted at,
+# so that a larger crop (--crop 512, painted at 1024) shows more cells of the same size.
+COUNT_PARAMETERS = frozenset(
+    {
+        "tile_count",
+        "tesserae",
+        "count",
+        "lozenge_count",
+        "brick_rows",
+        "bricks_per_row",
+        "plank_rows",
+        "planks_per_row",
+    }
+)
 ANGLES = (0.0, 15.0, 30.0, 45.0)
 # ±2 % scale from the centre to the left and right edges, ±1.5 % to the top and bottom: about
 # 2° of camera tilt with a phone's field of view, "mild perspective".
@@ -543,12 +597,14 @@ PERIODIC_GROUPS = GROUPS[:2]
 
 @dataclass(frozen=True)
 class Material:
-    """A material of the table: its name, group (:data:`GROUPS`) and how to paint its maps at a
-    side (``(8, S, S)``, periodic on its square)."""
+    """A material of the table: its name, group (:data:`GROUPS`), how to paint its maps at a side
+    (``(8, S, S)``, periodic on its square) and whether it is a procedural family's (those paint
+    the same cells at any side: their count parameters scale, :data:`COUNT_PARAMETERS`)."""
 
     name: str
     group: str
     paint: Callable[[int], Tensor]
+    procedural: bool = False
 
 
 def family_material(
@@ -562,10 +618,12 @@ def family_material(
 
     def paint(side: int) -> Tensor:
         generator = torch.Generator().manual_seed(derive_seed("tiling table", name))
-        params = {**chosen.sample_parameters(generator), **overrides}
+        scale = side / MATERIAL_SIDE
+        fixed = {key: value * scale if key in COUNT_PARAMETERS else value for key, value in overrides.items()}
+        params = {**chosen.sample_parameters(generator), **fixed}
         return chosen.make_maps(params, side, generator).double()
 
-    return Material(name, group, paint)
+    return Material(name, group, paint, procedural=True)
 
 
 def scan_material(name: str, group: str) -> Material:
@@ -657,6 +715,7 @@ class Row:
     score: float = math.nan
     found_error: tuple[float, float] = (math.nan, math.nan)
     period_error: tuple[float, float] = (math.nan, math.nan)
+    period_index: int = 0
     stretch: float = math.nan
     cells: float = math.nan
     worst_jump: float = math.nan
@@ -686,8 +745,14 @@ def measure_tile(
     row.cells = check.share()
     row.worst_jump = float(check.jumps.max()) if check.jumps.numel() else math.nan
     row.extra["unexplained"] = float(check.unexplained.max()) if check.unexplained.numel() else math.nan
-    found = find_lattice(tile.detach().repeat(1, 2, 2))
-    row.period_error = period_error(found.vectors if found.periodic else None, tile_lattice)
+    try:
+        found = find_lattice(tile.detach().repeat(1, 2, 2))
+    except RuntimeError as error:  # core.lattice's refinement can fail (the note's failing cases)
+        row.period_error = (math.inf, math.inf)
+        row.extra["sheet_error"] = f"find_lattice on the 2x2 sheet: {type(error).__name__}"
+        return
+    length, angle, index = lattice_period_error(found.vectors if found.periodic else None, tile_lattice)
+    row.period_error, row.period_index = (length, angle), index
 
 
 def run_case(material: Material, maps: Tensor, truth: Basis | None, frame: Frame) -> list[Row]:
@@ -708,6 +773,7 @@ def run_case(material: Material, maps: Tensor, truth: Basis | None, frame: Frame
 
     rows = []
     new = Row(**base, path="new")
+    _detect(new, crop, crop_truth)
     start = time.process_time()
     try:
         with repair_held_off() as records:
@@ -729,21 +795,50 @@ def run_case(material: Material, maps: Tensor, truth: Basis | None, frame: Frame
     rows.append(today)
 
     if new.repair and not new.error:
-        shipped = Row(**base, path="shipped")
-        try:
-            tiled, record = make_tileable(crop, (frame.size / 2, frame.size / 2))
-            _fill_new(shipped, record, crop, tiled, crop_truth, truth, crop_to_material, identity)
-            offset = record.flash_mark.patch_offset
-            if offset is not None and crop_truth is not None:
-                shipped.extra["patch_off_lattice_px"] = float(
-                    lattice_residual(torch.tensor([[float(offset[1]), float(offset[0])]]), crop_truth)[0]
-                )
-            shipped.extra["repaired"] = list(record.flash_mark.repaired)
-            shipped.extra["levelled"] = list(getattr(record.flash_mark, "levelled", ()))
-        except Exception as error:
-            shipped.error = f"{type(error).__name__}: {str(error).splitlines()[0][:120]}"
-        rows.append(shipped)
+        rows.append(_shipped_row(base, new, crop, crop_truth, truth, crop_to_material, identity))
     return rows
+
+
+def _detect(row: Row, crop: Tensor, crop_truth: Basis | None) -> None:
+    """The detection on its own into ``row`` (make_tileable records a lattice only where it uses
+    one): its score and accuracy whichever path the maps take."""
+    try:
+        detected = find_lattice(crop)
+    except RuntimeError as error:  # the note's failing cases of core.lattice
+        row.extra["detection"] = f"find_lattice: {type(error).__name__}"
+        return
+    row.score = detected.score
+    row.extra["detection"] = detected.notes
+    if crop_truth is not None and detected.vectors is not None:
+        row.found_error = period_error(detected.vectors, crop_truth)
+
+
+def _shipped_row(
+    base: dict[str, Any],
+    new: Row,
+    crop: Tensor,
+    crop_truth: Basis | None,
+    truth: Basis | None,
+    crop_to_material: PointMap,
+    identity: Tensor,
+) -> Row:
+    """The new tiling with the flash-mark repair as it stands (where it fires on the true maps):
+    what it repaired or levelled, how far its patch's shift is from a lattice vector, the cells."""
+    from brdfgan.inference.pipeline import make_tileable
+
+    shipped = Row(**base, path="shipped", score=new.score, found_error=new.found_error)
+    try:
+        tiled, record = make_tileable(crop, (crop.shape[-1] / 2, crop.shape[-2] / 2))
+        _fill_new(shipped, record, crop, tiled, crop_truth, truth, crop_to_material, identity)
+        offset = record.flash_mark.patch_offset  # (dy, dx)
+        if offset is not None and crop_truth is not None:
+            shift = torch.tensor([[float(offset[1]), float(offset[0])]])
+            shipped.extra["patch_off_lattice_px"] = float(lattice_residual(shift, crop_truth)[0])
+        shipped.extra["repaired"] = list(record.flash_mark.repaired)
+        shipped.extra["levelled"] = list(getattr(record.flash_mark, "levelled", ()))
+    except Exception as error:  # a crash is a row of the table
+        shipped.error = f"{type(error).__name__}: {str(error).splitlines()[0][:120]}"
+    return shipped
 
 
 def lattice_residual(offsets: Tensor, lattice: Basis) -> Tensor:
@@ -768,11 +863,6 @@ def _fill_new(
     row.whole_cells = record.cells is not None
     row.note = record.note or ""
     row.wrap, row.copied = _worst_wrap(record.after), _least_copied(record.after)
-    lattice = record.lattice
-    if lattice is not None:
-        row.score = lattice.score
-        if crop_truth is not None and lattice.vectors is not None:
-            row.found_error = period_error(lattice.vectors, crop_truth)
     if record.cells is None:
         measure_tile(row, tiled, crop.double(), identity, crop_to_material, crop_truth, truth)
         return
@@ -804,7 +894,12 @@ def summarise(rows: list[Row]) -> dict[str, Any]:
     wraps = _finite([row.wrap for row in rows])
     copied = _finite([row.copied for row in rows])
     jumps = _finite([row.worst_jump for row in rows])
-    detected = [row.found_error[0] for row in rows if math.isfinite(row.found_error[0])]
+    # The detection's accuracy where it found a lattice (a rejected one's vectors mean nothing).
+    detected = [
+        row.found_error[0]
+        for row in rows
+        if math.isfinite(row.found_error[0]) and row.score >= PROMINENCE_THRESHOLD
+    ]
     return {
         "cases": len(rows),
         "whole_cell_path": sum(row.whole_cells for row in rows),
@@ -819,6 +914,7 @@ def summarise(rows: list[Row]) -> dict[str, Any]:
         "period_goal_met": sum(value <= PERIOD_GOAL for value in found),
         "period_cases": len(periods),
         "angle_max": max(angles) if angles else math.nan,
+        "coarser": sum(row.period_index > 1 for row in rows),
         "found_median": statistics.median(detected) if detected else math.nan,
         "found_max": max(detected) if detected else math.nan,
         "wrap_max": max(wraps) if wraps else math.nan,
@@ -837,7 +933,7 @@ def _group_cells(summary: dict[str, Any], periodic: bool, path: str) -> list[str
         f"{s['cells_goal_met']}/{s['cells_cases']}",
         _fmt(s["jump_median"], 1),
         f"{_fmt(s['period_median'], 2, 100, ' %')} ({_fmt(s['period_max'], 1, 100, ' %')}), "
-        f"{s['period_goal_met']}/{s['period_cases']}",
+        f"{s['period_goal_met']}/{s['period_cases']}, coarser {s['coarser']}",
         _fmt(s["angle_max"], 2),
         f"{_fmt(s['found_median'], 2, 100, ' %')} ({_fmt(s['found_max'], 1, 100, ' %')})"
         if path == "new"
@@ -855,7 +951,7 @@ def _group_cells(summary: dict[str, Any], periodic: bool, path: str) -> list[str
 
 SUMMARY_HEADER = (
     "| group | frames | path | cases | whole-cell path | cells whole: mean (min) | cases ≥ 95 % "
-    "| worst jump px (median) | period err: median (max), cases ≤ 1 % | angle err max ° "
+    "| worst jump px (median) | period err: median (max), cases ≤ 1 %, coarser | angle err max ° "
     "| found err: median (max) | wrap max (median) | copied min (median) | errors |"
 )
 CASE_HEADER = (
@@ -878,12 +974,17 @@ def _case_line(row: Row) -> str:
     if row.path == "new":
         score = f" ({row.score:.2f})" if math.isfinite(row.score) else ""
         lattice = ("yes" if row.whole_cells else "no") + score
-    if math.isinf(row.period_error[0]):
+    if row.extra.get("sheet_error"):
+        period = "crash"
+    elif math.isinf(row.period_error[0]):
         period = "not found"
     else:
         period = f"{_fmt(row.period_error[0], 2, 100, ' %')} ({_fmt(row.period_error[1], 2)})"
+        if row.period_index > 1:
+            period += f" ×{row.period_index}"
     found = _fmt(row.found_error[0], 2, 100, " %") if row.path == "new" else "—"
-    note = row.error or ("repair would fire" if row.repair else "")
+    notes = [row.error, row.extra.get("sheet_error", ""), "repair would fire" if row.repair else ""]
+    note = "; ".join(part for part in notes if part)
     cells = [
         row.material,
         f"{row.angle:.0f}",
@@ -958,6 +1059,19 @@ def main() -> None:
     parser.add_argument("--only", nargs="*", default=None, help="material names to run (default: all)")
     parser.add_argument("--angles", type=float, nargs="*", default=list(ANGLES))
     parser.add_argument(
+        "--perspective",
+        type=float,
+        nargs=2,
+        default=list(PERSPECTIVE),
+        help="scale change from the centre to the x and y edges in the perspective frames",
+    )
+    parser.add_argument(
+        "--crop",
+        type=int,
+        default=CROP,
+        help="crop side; above 256 the families are painted larger with the same cells, scans left out",
+    )
+    parser.add_argument(
         "--report", type=Path, default=None, help="report a run's JSON again, measuring nothing"
     )
     args = parser.parse_args()
@@ -965,16 +1079,27 @@ def main() -> None:
         print(report(_rows_from_json(args.report), f"(reported again from {args.report})", 0.0))
         return
     started = time.process_time()
+    json_path = args.json or args.out.with_suffix(".json")
     rows: list[Row] = []
-    chosen = [m for m in materials() if args.only is None or m.name in args.only]
+    side = MATERIAL_SIDE * args.crop // CROP
+    chosen = [
+        m
+        for m in materials()
+        if (args.only is None or m.name in args.only) and (args.crop == CROP or m.procedural)
+    ]
     frames = [
-        Frame(CROP, angle, perspective) for perspective in ((0.0, 0.0), PERSPECTIVE) for angle in args.angles
+        Frame(args.crop, angle, perspective)
+        for perspective in ((0.0, 0.0), tuple(args.perspective))
+        for angle in args.angles
     ]
     for material in chosen:
-        maps = material.paint(MATERIAL_SIDE)
+        maps = material.paint(side)
         truth, how = true_lattice(maps) if material.group in PERIODIC_GROUPS else (None, "")
         for frame in frames:
             rows.extend(run_case(material, maps, truth, frame))
+        # Every material's rows as soon as they are measured: a long run keeps what it has.
+        json_path.parent.mkdir(parents=True, exist_ok=True)
+        json_path.write_text(json.dumps([asdict(row) for row in rows], indent=1))
         print(
             f"{material.name}: truth {how} {truth} ({time.process_time() - started:.0f} CPU s)",
             file=sys.stderr,
