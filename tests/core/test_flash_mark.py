@@ -1,6 +1,7 @@
 """The flash mark (``core/flash_mark.py``): a synthetic hotspot is detected in the maps it leaked
-into and repaired there, clean maps stay untouched (also near the image's edge), and what was done
-round-trips through ``material.json``."""
+into and repaired there, clean maps stay untouched (also near the image's edge), a smooth grey disc
+is levelled given the highlight's radius (not on a metal surface, not on a plain texture), and what
+was done round-trips through ``material.json``."""
 
 from __future__ import annotations
 
@@ -14,10 +15,12 @@ from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.flash_geometry import hotspot_distance
 from brdfgan.core.flash_mark import (
     LEAK_THRESHOLD,
+    LEVEL_THRESHOLD,
     REPAIR_INNER,
     REPAIR_OUTER,
     FlashMark,
     leak_scores,
+    level_scores,
     mark_radius,
     repair_flash_mark,
 )
@@ -105,3 +108,84 @@ def test_maps_too_small_to_tile_are_a_user_error() -> None:
 
     with pytest.raises(UserError, match="--tileable needs maps of at least 16×16, got 12×12"):
         make_tileable(random_maps(12, 12), (6.0, 6.0))
+
+
+def with_grey_disc(maps: Tensor, centre: tuple[float, float], radius: float) -> Tensor:
+    """``maps`` with the smooth disc a clipped hotspot leaves (the wood-plank sample's): base colour
+    pulled towards grey and metallic raised, fading out to ``radius``, the texture still under it."""
+    strength = (1.0 - hotspot_distance(torch.tensor([centre]), SIZE, SIZE)[0] / radius).clamp(0.0, 1.0)
+    marked = maps.clone()
+    marked[0:3] = maps[0:3] + 0.6 * strength * (0.8 - maps[0:3])
+    marked[7] = maps[7] * (1.0 - strength) + 0.7 * strength
+    return marked
+
+
+def dielectric_surface(seed: int = 0) -> Tensor:
+    """:func:`surface` with a wood-like contrast (base colour 0.45 ± a third of its noise) and
+    almost no metal."""
+    maps = surface(seed)
+    maps[0:3] = 0.45 + (maps[0:3] - 0.5) / 3.0
+    maps[7] = 0.02 * maps[7]
+    return maps
+
+
+def test_a_smooth_grey_disc_is_levelled_given_the_highlight_radius() -> None:
+    centre, radius = (60.0, 66.0), 30.0
+    clean = dielectric_surface(seed=4)
+    marked = with_grey_disc(clean, centre, radius)
+    # Today's detail scores miss it (the texture is still there), as on the wood-plank sample.
+    assert max(leak_scores(marked, centre).values()) < LEAK_THRESHOLD
+    unchanged, record = repair_flash_mark(marked, centre)
+    assert torch.equal(unchanged, marked) and record.levelled == ()
+    scores = level_scores(marked, centre, 1.2 * radius)
+    assert scores["basecolor"] > 2 * LEVEL_THRESHOLD and scores["metallic"] > 2 * LEVEL_THRESHOLD, scores
+    assert scores["roughness"] < LEVEL_THRESHOLD, scores
+    repaired, record = repair_flash_mark(marked, centre, radius=1.2 * radius)
+    validate_maps(repaired)
+    assert set(record.levelled) == {"basecolor", "metallic"}, record.level_scores
+    inside = hotspot_distance(torch.tensor([centre]), SIZE, SIZE)[0] <= radius
+    before = (marked[0:3, inside] - clean[0:3, inside]).abs().mean()
+    after = (repaired[0:3, inside] - clean[0:3, inside]).abs().mean()
+    assert after < 0.25 * before, (float(after), float(before))
+    assert float(repaired[7, inside].mean()) < 0.05
+    # The texture under the disc stays: its fine detail matches the clean map's.
+    detail = lambda m: (m - gaussian_blur(m[None], 2.0, "reflect")[0])[0:3, inside].flatten()  # noqa: E731
+    assert torch.corrcoef(torch.stack([detail(repaired), detail(clean)]))[0, 1] > 0.8
+    # Normals, and everything beyond the radius, are untouched.
+    beyond = ~(hotspot_distance(torch.tensor([centre]), SIZE, SIZE)[0] < 1.2 * radius)
+    assert torch.equal(repaired[3:6], marked[3:6]) and torch.equal(repaired[:, beyond], marked[:, beyond])
+
+
+def test_a_metal_surface_keeps_its_highlight() -> None:
+    centre, radius = (64.0, 64.0), 30.0
+    metal = surface(seed=6)
+    metal[7] = 1.0
+    marked = with_grey_disc(metal, centre, radius)
+    repaired, record = repair_flash_mark(marked, centre, radius=1.2 * radius)
+    assert record.levelled == () and torch.equal(repaired, marked)
+
+
+def test_a_stationary_texture_is_not_levelled() -> None:
+    for seed in range(3):
+        clean = dielectric_surface(seed=seed)
+        _, record = repair_flash_mark(clean, (64.0, 64.0), radius=36.0)
+        assert record.levelled == () and max(record.level_scores.values()) < LEVEL_THRESHOLD, (
+            record.level_scores
+        )
+
+
+def test_a_record_from_before_the_level_check_reads_back() -> None:
+    old = {
+        "centre": [1.0, 2.0],
+        "radius": 25.6,
+        "threshold": 2.0,
+        "leak_scores": {"basecolor": 0.35},
+        "repaired": [],
+        "patch_offset": None,
+    }
+    mark = FlashMark.from_json(old)
+    assert mark.levelled == () and mark.level_radius == 0.0
+    _, record = repair_flash_mark(
+        with_grey_disc(dielectric_surface(), (64.0, 64.0), 30.0), (64.0, 64.0), radius=36.0
+    )
+    assert FlashMark.from_json(json.loads(json.dumps(record.to_json()))) == record

@@ -12,6 +12,20 @@ around it), well above 1 where it did. Both energies get :data:`ENERGY_FLOOR` (o
 squared) added, so that a nearly constant map (metallic 0) does not score with its noise. A map
 with a score above :data:`LEAK_THRESHOLD` has leaked.
 
+**Level** (:func:`level_scores`). A clipped hotspot more often leaves a *smooth* disc: the base
+colour greyed and lightened, the metallic raised, the roughness lowered, with the texture still
+visible through it (the wood-plank sample: detail scores 0.35-1.21, a disc every viewer sees). Per
+map, the median of each of :data:`LEVEL_BINS` equal-area rings inside the highlight's radius minus
+the median of the reference ring outside it (:data:`LEVEL_REFERENCE` radii) is the disc's *bias
+profile*; its largest step over the reference's spread (1.4826 × its median absolute deviation,
+plus one 8-bit level) is the map's level score. Ring medians ignore the texture, so a stationary
+texture scores ~1-2 and a visible disc well above :data:`LEVEL_THRESHOLD`, which was chosen on
+over-exposed renders of held-out materials (research/notes/2026-12-flash-leak.md). A map whose
+score is above it gets the bias profile subtracted (interpolated over the radius, 0 at its edge):
+the disc's level goes, the texture in it stays. Normals are left to the detail repair, and the
+level repair stands down where the surroundings read as metal (:data:`METAL_SURFACE`): there the
+highlight is the metal's own look, and a disc of bright base colour belongs to it.
+
 **Repair** (:func:`repair_flash_mark`). The leaked maps get the disk (to :data:`REPAIR_INNER`
 radii, fading out by :data:`REPAIR_OUTER`) replaced by a patch of their own texture from nearby:
 the displacement among :data:`PATCH_DIRECTIONS` directions at :data:`PATCH_DISTANCES` radii whose
@@ -24,8 +38,9 @@ One displacement serves every leaked map, which stay aligned.
 
 from __future__ import annotations
 
+import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import torch
@@ -34,7 +49,7 @@ from torch import Tensor
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.flash_geometry import hotspot_distance
 from brdfgan.core.seamless import MAP_GROUPS, MAP_NAMES, copy_error, local_contrast, map_scales
-from brdfgan.core.svbrdf import check_single_maps, normalize_normal
+from brdfgan.core.svbrdf import CHANNELS, METALLIC, check_single_maps, normalize_normal
 
 # The disk whose detail is compared with its surroundings, as a fraction of the shorter side: the
 # marks of the shipped model span up to ~0.11 of the side (wood planks at 256²).
@@ -52,6 +67,16 @@ MATCH_OUTER = 2.0
 # Where patches are looked for, in radii: far enough that the patch (REPAIR_OUTER radii around its
 # centre) misses the mark (REPAIR_INNER radii), ≥ 2.5, and near enough to be the same surface.
 PATCH_DIRECTIONS = 16
+# The level check (module docstring): equal-area rings inside the radius, the reference ring in
+# radii (widened to LEVEL_REFERENCE_WIDE when the image cuts it to fewer than LEVEL_MIN_PIXELS),
+# the threshold on the score, and the metallic (smoothstep edges) at which surroundings read as metal.
+LEVEL_BINS = 12
+LEVEL_REFERENCE = (1.0, 1.5)
+LEVEL_REFERENCE_WIDE = 2.0
+LEVEL_MIN_PIXELS = 16
+LEVEL_THRESHOLD = 3.0
+METAL_SURFACE = (0.3, 0.6)
+LEVELLED_MAPS = ("basecolor", "roughness", "metallic")
 PATCH_DISTANCES = (2.6, 3.2, 3.8, 4.4)
 BUSY_WEIGHT = 1.0
 
@@ -61,22 +86,33 @@ class FlashMark:
     """What :func:`repair_flash_mark` found and did: the hotspot ``centre`` ``(x, y)`` and disk
     ``radius`` in pixels, each map's leak score (:data:`MAP_NAMES`), the maps repaired and the
     displacement ``(dy, dx)`` of the patch copied into them (``None``: nothing repaired, or no
-    patch fitted inside the image)."""
+    patch fitted inside the image); the level check's radius, each levelled map's score
+    (:data:`LEVELLED_MAPS`), the maps levelled, and the two thresholds used. A record written
+    before the level check existed reads back with none levelled."""
 
     centre: tuple[float, float]
     radius: float
     scores: dict[str, float]
     repaired: tuple[str, ...]
     patch_offset: tuple[int, int] | None
+    level_radius: float = 0.0
+    level_scores: dict[str, float] = field(default_factory=dict)
+    levelled: tuple[str, ...] = ()
+    threshold: float = LEAK_THRESHOLD
+    level_threshold: float = LEVEL_THRESHOLD
 
     def to_json(self) -> dict[str, Any]:
         return {
             "centre": list(self.centre),
             "radius": self.radius,
-            "threshold": LEAK_THRESHOLD,
+            "threshold": self.threshold,
             "leak_scores": dict(self.scores),
             "repaired": list(self.repaired),
             "patch_offset": list(self.patch_offset) if self.patch_offset is not None else None,
+            "level_radius": self.level_radius,
+            "level_threshold": self.level_threshold,
+            "level_scores": dict(self.level_scores),
+            "levelled": list(self.levelled),
         }
 
     @classmethod
@@ -88,6 +124,11 @@ class FlashMark:
             scores={str(name): float(score) for name, score in record["leak_scores"].items()},
             repaired=tuple(str(name) for name in record["repaired"]),
             patch_offset=(int(offset[0]), int(offset[1])) if offset is not None else None,
+            level_radius=float(record.get("level_radius", 0.0)),
+            level_scores={str(name): float(v) for name, v in record.get("level_scores", {}).items()},
+            levelled=tuple(str(name) for name in record.get("levelled", ())),
+            threshold=float(record.get("threshold", LEAK_THRESHOLD)),
+            level_threshold=float(record.get("level_threshold", LEVEL_THRESHOLD)),
         )
 
 
@@ -248,11 +289,97 @@ def fill_disk(
     return result
 
 
+@dataclass(frozen=True)
+class LevelBias:
+    """The disc's bias profile (module docstring) in the window around the hotspot: ``field``, the
+    bias of every channel at every window pixel (0 beyond the radius); ``scores`` per map of
+    :data:`LEVELLED_MAPS`; ``metal``, how much the reference ring reads as metal (0-1)."""
+
+    window: _Window
+    field: Tensor  # (8, h, w)
+    scores: dict[str, float]
+    metal: float
+
+
+def level_bias(maps: Tensor, centre: tuple[float, float], radius: float) -> LevelBias | None:
+    """The bias profile of the disc of ``radius`` pixels around ``centre`` (module docstring);
+    ``None`` when the image holds too little of the disc or of its reference ring.
+
+    Shape: maps ``(8, H, W)``; output field ``(8, h, w)`` over :class:`_Window`.
+    """
+    check_single_maps(maps)
+    window = _Window.around(maps, centre, LEVEL_REFERENCE_WIDE * radius + 1.0)
+    distance = window.distance
+    reference = (distance > LEVEL_REFERENCE[0] * radius) & (distance <= LEVEL_REFERENCE[1] * radius)
+    if int(reference.sum()) < LEVEL_MIN_PIXELS:
+        reference = (distance > radius) & (distance <= LEVEL_REFERENCE_WIDE * radius)
+    edges = [radius * math.sqrt(k / LEVEL_BINS) for k in range(LEVEL_BINS + 1)]
+    rings = [(distance >= lo) & (distance < hi) for lo, hi in itertools.pairwise(edges)]
+    if int(reference.sum()) < LEVEL_MIN_PIXELS or any(int(ring.sum()) < LEVEL_MIN_PIXELS for ring in rings):
+        return None
+    work = window.read(maps.detach()).double()
+    level = work[:, reference].median(dim=-1).values  # (8,)
+    spread = 1.4826 * (work[:, reference] - level[:, None]).abs().median(dim=-1).values + 1.0 / 255.0
+    steps = torch.stack([work[:, ring].median(dim=-1).values - level for ring in rings], dim=-1)  # (8, K)
+    # Piecewise linear over each ring's middle radius (by area), flat inside the first, 0 at the edge.
+    middles = [radius * math.sqrt((k + 0.5) / LEVEL_BINS) for k in range(LEVEL_BINS)]
+    knots = torch.tensor([0.0, *middles, radius], dtype=torch.float64, device=maps.device)
+    values = torch.cat([steps[:, :1], steps, torch.zeros_like(steps[:, :1])], dim=-1)  # (8, K + 2)
+    at = distance.clamp(max=radius).to(torch.float64)
+    upper = torch.searchsorted(knots, at.flatten().contiguous(), right=True).clamp(1, len(knots) - 1)
+    lower = upper - 1
+    share = ((at.flatten() - knots[lower]) / (knots[upper] - knots[lower])).clamp(0.0, 1.0)
+    bias = values[:, lower] + share * (values[:, upper] - values[:, lower])
+    bias = torch.where((distance < radius).flatten(), bias, torch.zeros_like(bias)).view_as(work)
+    relative = (steps.abs() / spread[:, None]).amax(dim=-1)  # (8,)
+    scores = {name: float(relative[CHANNELS[name]].max()) for name in LEVELLED_MAPS}
+    metal = float(_smoothstep(*METAL_SURFACE, level[METALLIC].max()))
+    return LevelBias(window, bias.to(maps.dtype), scores, metal)
+
+
+def level_scores(maps: Tensor, centre: tuple[float, float], radius: float) -> dict[str, float]:
+    """Per map of :data:`LEVELLED_MAPS`, the level score of the disc of ``radius`` pixels around
+    ``centre`` (module docstring); 0.0 for each when the image holds too little of it.
+
+    Shape: maps ``(8, H, W)``.
+    """
+    bias = level_bias(maps, centre, radius)
+    return bias.scores if bias is not None else dict.fromkeys(LEVELLED_MAPS, 0.0)
+
+
+def level_disc(maps: Tensor, bias: LevelBias, names: tuple[str, ...]) -> Tensor:
+    """The maps ``names`` with the bias profile subtracted (module docstring), the others
+    unchanged; values kept in [0, 1].
+
+    Shape: ``(8, H, W)`` → ``(8, H, W)``.
+    """
+    window = bias.window
+    rows = slice(window.top, window.top + window.height)
+    columns = slice(window.left, window.left + window.width)
+    result = maps.clone()
+    for name in names:
+        part = CHANNELS[name]
+        levelled = (result[part, rows, columns] - bias.field[part]).clamp(0.0, 1.0)
+        result[part, rows, columns] = torch.where(
+            bias.field[part] != 0, levelled, result[part, rows, columns]
+        )
+    return result
+
+
 def repair_flash_mark(
-    maps: Tensor, centre: tuple[float, float], threshold: float = LEAK_THRESHOLD
+    maps: Tensor,
+    centre: tuple[float, float],
+    threshold: float = LEAK_THRESHOLD,
+    *,
+    radius: float | None = None,
+    level_threshold: float = LEVEL_THRESHOLD,
 ) -> tuple[Tensor, FlashMark]:
-    """The maps with the flash mark removed from those that leaked it (score above ``threshold``),
-    and what was found and done.
+    """The maps with the flash mark removed (module docstring), and what was found and done: first,
+    given the highlight's ``radius`` in pixels (:func:`~brdfgan.core.clipped_fill.highlight_radius`
+    of the photo), the disc's level taken out of the maps whose level score is above
+    ``level_threshold`` unless the surroundings read as metal (``None`` or 0: no level check, as
+    without a photo); then the patch copied into the maps whose detail score is above
+    ``threshold``.
 
     Shape: ``(8, H, W)`` → ``(8, H, W)``; centre ``(x, y)`` in pixels.
     """
@@ -260,15 +387,28 @@ def repair_flash_mark(
     if not all(math.isfinite(v) for v in centre):
         raise ValueError(f"the hotspot centre must be two finite numbers, got {centre}")
     height, width = maps.shape[-2:]
-    scores = leak_scores(maps, centre)
+    radius = 0.0 if radius is None else float(radius)
+    if not (math.isfinite(radius) and radius >= 0):
+        raise ValueError(f"the level radius must be a finite number >= 0, got {radius}")
+    bias = level_bias(maps, centre, radius) if radius > 0 else None
+    levelled: tuple[str, ...] = ()
+    if bias is not None and bias.metal < 0.5:
+        levelled = tuple(name for name in LEVELLED_MAPS if bias.scores[name] > level_threshold)
+    levelled_maps = level_disc(maps, bias, levelled) if bias is not None and levelled else maps
+    scores = leak_scores(levelled_maps, centre)
     leaked = tuple(name for name in MAP_NAMES if scores[name] > threshold)
-    offset = find_patch(maps, centre) if leaked else None
-    repaired = fill_disk(maps, centre, offset, leaked) if offset is not None else maps
+    offset = find_patch(levelled_maps, centre) if leaked else None
+    repaired = fill_disk(levelled_maps, centre, offset, leaked) if offset is not None else levelled_maps
     record = FlashMark(
         centre=(float(centre[0]), float(centre[1])),
         radius=mark_radius(height, width),
         scores=scores,
         repaired=leaked if offset is not None else (),
         patch_offset=offset,
+        level_radius=radius,
+        level_scores=bias.scores if bias is not None else dict.fromkeys(LEVELLED_MAPS, 0.0),
+        levelled=levelled,
+        threshold=threshold,
+        level_threshold=level_threshold,
     )
     return repaired, record

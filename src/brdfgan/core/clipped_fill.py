@@ -1,0 +1,424 @@
+"""The flash's own marks in the maps: clipped pixels brought back to their surroundings, the
+hotspot's disc levelled, and metal taken off thin dark features (issue 60, item 2).
+
+A clipped pixel of a flash photo (any channel at :data:`CLIP_LEVEL` or more) says only that the
+surface sent back at least that much light: it is no evidence of base colour, roughness or
+metallic. On a dielectric the network reads the clipped flash as a grey or white base colour and
+often as metal (the wood-plank sample's grey disc and bright metallic disc, the white streaks the
+glints leave on glossy black tiles). :func:`fill_clipped` changes base colour, roughness and
+metallic there only as far as the surroundings contradict them:
+
+- **into the surroundings' range** (:func:`surroundings_range`): each clipped pixel's values are
+  clamped into the mean ± :data:`RANGE_SPREAD` standard deviations of the unclipped pixels around
+  it. Replacing them outright by a fill from the rim (push-pull) was tried and measured worse: the
+  rim of a clipped region is often what stopped the clipping (a dark groove, the binder between an
+  asphalt's stones), and the clipped pixels are a texture's brightest and glossiest part, a bare
+  metal patch in rust among them; the clamp keeps a reading the neighbourhood allows and removes
+  one it does not (a white glint on black tile, metal in wood);
+- **from the same cell elsewhere** (:func:`lattice_fill`), for a periodic material whose two
+  lattice vectors are known: the median of the unclipped twins one or two periods away, which
+  keeps the pattern (a grout line crossing the hole stays a grout line); pixels with no unclipped
+  twin fall back to the clamp.
+
+Normals are kept: a clipped hotspot leaves them flat rather than wrong, and the flash-mark repair
+patches a dimple.
+
+**The disc** around the hotspot reaches as far as the highlight (:func:`highlight_radius`, from
+the photo), well beyond the clipped pixels; :func:`~brdfgan.core.flash_mark.repair_flash_mark`
+levels it given that radius.
+
+**Thin dark features are not metal** (:func:`suppress_false_metal`): the network reads the dark
+gaps between planks and the grout between tiles as metal lines. On a texel darker than the
+closing of the photo's luminance (else the base colour's) over a :data:`THIN_WINDOW_FRACTION` ×
+side window by :data:`THIN_DARKNESS` (a gap or groove narrower than the window), the metallic is
+lowered to the opening of the metallic over the same window — the metal of the surroundings once
+features narrower than the window are removed — so a gap in a metal surface stays metal and a gap
+in wood becomes wood.
+
+:func:`remove_flash` chains the three: what ``brdfgan predict`` runs on every prediction. The
+constants were chosen on over-exposed renders of held-out materials
+(research/notes/2026-12-flash-leak.md, ``python -m research.flash_leak_table``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from brdfgan.core.checks import check_shape
+from brdfgan.core.delit import delit_photo
+from brdfgan.core.exposure import luminance
+from brdfgan.core.filtering import gaussian_blur
+from brdfgan.core.flash_geometry import check_flash_frame, hotspot_distance
+from brdfgan.core.flash_mark import FlashMark, repair_flash_mark
+from brdfgan.core.svbrdf import BASECOLOR, METALLIC, ROUGHNESS, check_single_maps, srgb_to_linear
+
+# A pixel with a channel at or above this is clipped (the refinement's and the pair fit's level).
+CLIP_LEVEL = 0.98
+# The clipped mask is dilated by this fraction of the shorter side (2 px at 256²): a clipped
+# pixel's neighbours are blurred with it by the lens, the demosaic and the resize.
+CLIP_DILATION_FRACTION = 1.0 / 128.0
+# The surroundings' range (surroundings_range): its Gaussian (fraction of the shorter side), the
+# share of known pixels a neighbourhood needs to be trusted, the working size, and the range's
+# half-width in standard deviations.
+RANGE_SIGMA_FRACTION = 1.0 / 32.0
+RANGE_MIN_KNOWN = 0.25
+RANGE_WORKING_SIDE = 256
+RANGE_SPREAD = 1.0
+# The lattice fill looks this many periods away along each lattice vector.
+LATTICE_REACH = 2
+# Thin dark features: the window (fraction of the shorter side; 9 px at 256²) and how much darker
+# than the window's closing a texel must be (smoothstep from the first to the second value).
+THIN_WINDOW_FRACTION = 9.0 / 256.0
+THIN_DARKNESS = (0.15, 0.35)
+# The highlight's extent (:func:`highlight_radius`): where the ring median of the de-lit photo
+# falls to (1 + HIGHLIGHT_EXCESS) × the far field's; never beyond HIGHLIGHT_MAX_FRACTION × side.
+HIGHLIGHT_EXCESS = 0.25
+HIGHLIGHT_MAX_FRACTION = 0.3
+HIGHLIGHT_FAR = (0.3, 0.5)  # the far field, in fractions of the shorter side
+HIGHLIGHT_STEP = 2.0  # ring width, pixels
+
+
+def _smoothstep(edge0: float, edge1: float, x: Tensor) -> Tensor:
+    t = ((x - edge0) / (edge1 - edge0)).clamp(0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _dilate(mask: Tensor, radius: int) -> Tensor:
+    """``mask`` grown by a square of ``radius`` pixels. Shape: ``(H, W)`` bool → same."""
+    if radius <= 0:
+        return mask
+    grown = F.max_pool2d(mask.float()[None, None], 2 * radius + 1, stride=1, padding=radius)
+    return grown[0, 0] > 0
+
+
+def clipped_mask(photo: Tensor, level: float = CLIP_LEVEL) -> Tensor:
+    """The photo's clipped pixels (any channel at ``level`` or more), dilated by
+    :data:`CLIP_DILATION_FRACTION` × the shorter side.
+
+    Shape: photo ``(3, H, W)`` linear LDR → ``(H, W)`` bool.
+    """
+    dims = check_shape(photo, "3 H W", name="photo")
+    radius = max(1, round(CLIP_DILATION_FRACTION * min(dims["H"], dims["W"])))
+    return _dilate((photo >= level).any(dim=0), radius)
+
+
+def push_pull_fill(image: Tensor, known: Tensor) -> Tensor:
+    """``image`` filled where ``known`` is 0 from where it is 1 (weights between blend): a
+    normalised-convolution pyramid. Pull: 2 × 2 sums of the weighted values and the weights (capped
+    at 1) down to one pixel; push: each level is its own weighted value plus the coarser level's
+    bilinear enlargement times the missing weight. Pixels with weight 1 keep their value exactly;
+    a hole gets a smooth blend of its rim, further rims weighing less.
+
+    Shape: image ``(C, H, W)``; known ``(H, W)`` in [0, 1] → ``(C, H, W)``. All zero weights give
+    zeros.
+
+    Example:
+        >>> image = torch.tensor([[[1.0, 0.0, 3.0]]])
+        >>> push_pull_fill(image, torch.tensor([[1.0, 0.0, 1.0]])).tolist()
+        [[[1.0, 2.0, 3.0]]]
+    """
+    dims = check_shape(image, "C H W", name="image")
+    check_shape(known, "H W", name="known", dims=dims)
+    weight = known.to(image.dtype).clamp(0.0, 1.0)[None, None]
+    value = image[None] * weight
+    levels: list[tuple[Tensor, Tensor]] = []
+    while max(weight.shape[-2:]) > 1:
+        levels.append((value, weight))
+        pad = (0, weight.shape[-1] % 2, 0, weight.shape[-2] % 2)
+        value_sum = F.avg_pool2d(F.pad(value, pad), 2) * 4.0
+        weight_sum = F.avg_pool2d(F.pad(weight, pad), 2) * 4.0
+        # Normalised, then weighted by the capped weight: a coarse pixel over several known ones
+        # counts as one known pixel.
+        capped = weight_sum.clamp_max(1.0)
+        value = value_sum / weight_sum.clamp_min(1e-12) * capped
+        weight = capped
+    filled = value / weight.clamp_min(1e-12)
+    for value, weight in reversed(levels):
+        enlarged = F.interpolate(filled, size=weight.shape[-2:], mode="bilinear", align_corners=False)
+        filled = value + (1.0 - weight) * enlarged
+    return filled[0]
+
+
+def surroundings_range(image: Tensor, known: Tensor, spread: float) -> tuple[Tensor, Tensor]:
+    """Per pixel, the range ``mean ± spread · sd`` of the known pixels around it: their mean and
+    standard deviation under a Gaussian of :data:`RANGE_SIGMA_FRACTION` × the shorter side
+    (normalised convolution), carried into holes wider than that by :func:`push_pull_fill` from the
+    pixels whose neighbourhood is at least :data:`RANGE_MIN_KNOWN` known. Computed on a copy
+    area-averaged to at most :data:`RANGE_WORKING_SIDE` (the moments are smooth), then enlarged.
+
+    Shape: image ``(C, H, W)``; known ``(H, W)`` in [0, 1] → low and high ``(C, H, W)``.
+    """
+    dims = check_shape(image, "C H W", name="image")
+    check_shape(known, "H W", name="known", dims=dims)
+    height, width = dims["H"], dims["W"]
+    factor = max(1, math.ceil(min(height, width) / RANGE_WORKING_SIDE))
+    size = (max(1, height // factor), max(1, width // factor))
+    weight = known.to(image.dtype)[None, None]
+    stack = torch.cat([weight, image[None] * weight, image[None].square() * weight], dim=1)
+    small = F.interpolate(stack, size=size, mode="area")
+    sigma = max(1.0, RANGE_SIGMA_FRACTION * min(size))
+    blurred = gaussian_blur(small, sigma, "reflect")[0]
+    share, channels = blurred[:1], image.shape[0]
+    mean = blurred[1 : 1 + channels] / share.clamp_min(1e-6)
+    square = blurred[1 + channels :] / share.clamp_min(1e-6)
+    trusted = (share[0] / RANGE_MIN_KNOWN).clamp(0.0, 1.0)
+    moments = push_pull_fill(torch.cat([mean, square]), trusted)
+    moments = F.interpolate(moments[None], size=(height, width), mode="bilinear", align_corners=False)[0]
+    mean, square = moments[:channels], moments[channels:]
+    deviation = (square - mean.square()).clamp_min(0.0).sqrt()
+    return mean - spread * deviation, mean + spread * deviation
+
+
+def lattice_fill(
+    image: Tensor, hole: Tensor, vectors: tuple[tuple[float, float], tuple[float, float]]
+) -> tuple[Tensor, Tensor]:
+    """The hole's pixels taken from the same place in other cells of a periodic texture: per hole
+    pixel the median of its twins ``p + i·a + j·b`` (``|i|, |j| ≤`` :data:`LATTICE_REACH`, not both
+    0; bilinear samples) that lie inside the image and away from the hole; and where a pixel found
+    at least one twin.
+
+    Shape: image ``(C, H, W)``; hole ``(H, W)`` bool; vectors ``((dx, dy), (dx, dy))`` in pixels →
+    ``(C, H, W)`` (the image outside the hole, and where no twin was found) and ``(H, W)`` bool.
+    """
+    dims = check_shape(image, "C H W", name="image")
+    check_shape(hole, "H W", name="hole", dims=dims)
+    (ax, ay), (bx, by) = vectors
+    if not all(math.isfinite(v) for v in (ax, ay, bx, by)) or abs(ax * by - ay * bx) < 1.0:
+        raise ValueError(
+            f"the lattice vectors must be finite and span a cell of at least 1 px², got {vectors}"
+        )
+    rows, columns = torch.nonzero(hole, as_tuple=True)
+    result, found = image.clone(), torch.zeros_like(hole)
+    if rows.numel() == 0:
+        return result, found
+    steps = [
+        (i, j)
+        for i in range(-LATTICE_REACH, LATTICE_REACH + 1)
+        for j in range(-LATTICE_REACH, LATTICE_REACH + 1)
+    ]
+    offsets = torch.tensor(
+        [(i * ax + j * bx, i * ay + j * by) for i, j in steps if (i, j) != (0, 0)], dtype=torch.float64
+    )
+    height, width = dims["H"], dims["W"]
+    x = columns.double()[:, None] + offsets[None, :, 0]  # (N, K)
+    y = rows.double()[:, None] + offsets[None, :, 1]
+    # grid_sample's normalised coordinates, pixel centres at (2i + 1)/size − 1.
+    grid = torch.stack([(2 * x + 1) / width - 1, (2 * y + 1) / height - 1], dim=-1)[None].to(image.dtype)
+    sources = torch.cat([image, hole[None].to(image.dtype)])[None]
+    sampled = F.grid_sample(sources, grid, mode="bilinear", padding_mode="zeros", align_corners=False)[0]
+    inside = (x >= 0) & (x <= width - 1) & (y >= 0) & (y <= height - 1)
+    usable = inside & (sampled[-1] <= 0)  # no clipped pixel in the bilinear footprint
+    values = torch.where(usable[None], sampled[:-1], torch.full_like(sampled[:-1], float("nan")))
+    median = values.nanmedian(dim=-1).values  # (C, N)
+    any_twin = usable.any(dim=-1)
+    result[:, rows[any_twin], columns[any_twin]] = median[:, any_twin]
+    found[rows[any_twin], columns[any_twin]] = True
+    return result, found
+
+
+@dataclass(frozen=True)
+class ClippedFill:
+    """What :func:`fill_clipped` did: the ``maps``; the share of pixels clipped (the mask given), of
+    pixels changed, and of pixels taken from a lattice twin; the ``method`` (``"surroundings"``,
+    ``"lattice"``, or ``"none"`` when nothing was clipped)."""
+
+    maps: Tensor
+    clipped_fraction: float
+    changed_fraction: float
+    lattice_fraction: float
+    method: str
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "clip_level": CLIP_LEVEL,
+            "range_spread": RANGE_SPREAD,
+            "clipped_fraction": self.clipped_fraction,
+            "changed_fraction": self.changed_fraction,
+            "lattice_fraction": self.lattice_fraction,
+            "method": self.method,
+        }
+
+
+FILLED_MAPS = (BASECOLOR, ROUGHNESS, METALLIC)
+
+
+def fill_clipped(
+    maps: Tensor,
+    clipped: Tensor,
+    *,
+    lattice: tuple[tuple[float, float], tuple[float, float]] | None = None,
+    spread: float = RANGE_SPREAD,
+) -> ClippedFill:
+    """The maps with base colour, roughness and metallic of the clipped pixels brought back to what
+    their surroundings say (module docstring): from a lattice twin where ``lattice`` (two vectors
+    ``(dx, dy)`` in the maps' pixels) is given and one is found, else clamped into the range of the
+    unclipped pixels around them (:func:`surroundings_range`, ``spread`` standard deviations).
+    Normals and every unclipped pixel are unchanged, bit for bit; with no clipped pixel (or no
+    unclipped one) the maps themselves are returned.
+
+    Shape: maps ``(8, H, W)``; clipped ``(H, W)`` bool (:func:`clipped_mask` of the photo the maps
+    were predicted from, at the maps' size) → :class:`ClippedFill` with maps ``(8, H, W)``.
+    """
+    check_single_maps(maps)
+    check_shape(clipped, "H W", name="clipped", dims={"H": maps.shape[-2], "W": maps.shape[-1]})
+    pixels = clipped.numel()
+    if not bool(clipped.any()) or bool(clipped.all()):
+        return ClippedFill(maps, float(clipped.float().mean()), 0.0, 0.0, "none")
+    channels = torch.cat([maps[part] for part in FILLED_MAPS])  # (5, H, W)
+    low, high = surroundings_range(channels, (~clipped).to(maps.dtype), spread)
+    filled = torch.minimum(torch.maximum(channels, low), high)
+    found = torch.zeros_like(clipped)
+    if lattice is not None:
+        twins, found = lattice_fill(channels, clipped, lattice)
+        filled = torch.where(found[None], twins, filled)
+    filled = torch.where(clipped[None], filled.clamp(0.0, 1.0), channels)
+    result = maps.clone()
+    start = 0
+    for part in FILLED_MAPS:
+        count = part.stop - part.start
+        result[part] = filled[start : start + count]
+        start += count
+    return ClippedFill(
+        maps=result,
+        clipped_fraction=float(clipped.sum()) / pixels,
+        changed_fraction=float((filled != channels).any(dim=0).sum()) / pixels,
+        lattice_fraction=float((found & clipped).sum()) / pixels,
+        method="lattice" if lattice is not None else "surroundings",
+    )
+
+
+def highlight_radius(photo: Tensor, frame: Tensor) -> float:
+    """How far the flash's highlight reaches from the hotspot, in pixels: the first ring (of
+    :data:`HIGHLIGHT_STEP` px) whose median de-lit luminance (the photo over the flat-surface
+    falloff, :func:`~brdfgan.core.delit.delit_photo`) is at most (1 + :data:`HIGHLIGHT_EXCESS`) ×
+    the median of the far field (:data:`HIGHLIGHT_FAR` × side from the hotspot, else the whole
+    photo); at most :data:`HIGHLIGHT_MAX_FRACTION` × the shorter side. Ring medians ignore texture:
+    a matte surface's reach is 0, a glossy one's its specular lobe.
+
+    Shape: photo ``(3, H, W)`` linear LDR; frame ``(1, 3)`` its flash frame.
+    """
+    dims = check_shape(photo, "3 H W", name="photo")
+    check_flash_frame(frame, 1)
+    side = min(dims["H"], dims["W"])
+    delit = delit_photo(photo[None].double(), frame.double(), clip=False)
+    level = luminance(delit)[0, 0]
+    distance = hotspot_distance(frame[:, :2].double(), dims["H"], dims["W"])[0]
+    far = (distance > HIGHLIGHT_FAR[0] * side) & (distance <= HIGHLIGHT_FAR[1] * side)
+    baseline = level[far].median() if int(far.sum()) >= 16 else level.median()
+    reach = HIGHLIGHT_MAX_FRACTION * side
+    bins = torch.div(distance, HIGHLIGHT_STEP, rounding_mode="floor").long()
+    for index in range(math.ceil(reach / HIGHLIGHT_STEP)):
+        ring = bins == index
+        if bool(ring.any()) and level[ring].median() <= (1.0 + HIGHLIGHT_EXCESS) * baseline:
+            return index * HIGHLIGHT_STEP
+    return reach
+
+
+def thin_dark_weight(maps: Tensor, photo: Tensor | None = None) -> Tensor:
+    """How much each texel is a thin dark feature (module docstring): a smoothstep over
+    :data:`THIN_DARKNESS` of ``1 − luminance / closing``, the closing over a square of
+    :data:`THIN_WINDOW_FRACTION` × the shorter side, of the photo's luminance when given (a gap is
+    dark in the photo even where the network painted it grey-blue: the wood-plank sample), else of
+    the linear base colour's. The ratio to a local closing ignores the flash's smooth falloff.
+
+    Shape: maps ``(8, H, W)``; photo ``(3, H, W)`` linear, optional → ``(H, W)`` in [0, 1].
+    """
+    check_single_maps(maps)
+    if photo is not None:
+        check_shape(photo, "3 H W", name="photo", dims={"H": maps.shape[-2], "W": maps.shape[-1]})
+    window = _odd_window(maps)
+    guide = srgb_to_linear(maps[BASECOLOR]) if photo is None else photo.to(maps.dtype)
+    lum = luminance(guide[None])  # (1, 1, H, W)
+    closed = _erode(_dilate_values(lum, window), window)
+    darkness = _smoothstep(*THIN_DARKNESS, 1.0 - lum / closed.clamp_min(1e-6))
+    # Grown by a quarter window: the network's metal line is a little wider than the gap it read.
+    return _dilate_values(darkness, window // 4 * 2 + 1)[0, 0]
+
+
+def _odd_window(maps: Tensor) -> int:
+    return 2 * max(1, round(THIN_WINDOW_FRACTION * min(maps.shape[-2:]) / 2.0)) + 1
+
+
+def _dilate_values(image: Tensor, window: int) -> Tensor:
+    """Grey dilation (the max over a ``window`` square), mirrored at the edges. Shape: ``(1, 1, H, W)``."""
+    pad = window // 2
+    return F.max_pool2d(F.pad(image, (pad, pad, pad, pad), mode="replicate"), window, stride=1)
+
+
+def _erode(image: Tensor, window: int) -> Tensor:
+    return -_dilate_values(-image, window)
+
+
+def suppress_false_metal(maps: Tensor, photo: Tensor | None = None) -> tuple[Tensor, Tensor]:
+    """The maps with the metallic of thin dark features lowered to their surroundings' (module
+    docstring): ``m − w · max(0, m − opening(m))`` with ``w`` :func:`thin_dark_weight` (of the
+    ``photo`` when given); and ``w``. Only the metallic changes, and only downwards.
+
+    Shape: maps ``(8, H, W)``; photo ``(3, H, W)`` linear, optional → ``(8, H, W)``, ``(H, W)``.
+    """
+    check_single_maps(maps)
+    window = _odd_window(maps)
+    weight = thin_dark_weight(maps, photo)
+    metallic = maps[METALLIC][None]  # (1, 1, H, W)
+    opened = _dilate_values(_erode(metallic, window), window)
+    lowered = metallic - weight * (metallic - opened).clamp_min(0.0)
+    result = maps.clone()
+    result[METALLIC] = lowered[0]
+    return result, weight
+
+
+@dataclass(frozen=True)
+class FlashRemoval:
+    """What :func:`remove_flash` did: the clipped fill, the highlight's radius, the flash mark
+    found and repaired, and the share of texels whose metallic the thin-dark rule lowered by more
+    than one 8-bit level."""
+
+    fill: ClippedFill
+    highlight_radius: float
+    mark: FlashMark
+    false_metal_fraction: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "clipped_fill": self.fill.to_json(),
+            "highlight_radius": self.highlight_radius,
+            "flash_mark": self.mark.to_json(),
+            "false_metal_lowered_fraction": self.false_metal_fraction,
+        }
+
+
+def remove_flash(
+    maps: Tensor,
+    photo: Tensor,
+    frame: Tensor,
+    *,
+    clipped: Tensor | None = None,
+    lattice: tuple[tuple[float, float], tuple[float, float]] | None = None,
+) -> tuple[Tensor, FlashRemoval]:
+    """The flash taken out of maps predicted from ``photo`` (module docstring): the clipped pixels
+    filled (:func:`fill_clipped`, ``clipped`` defaulting to :func:`clipped_mask` of the photo), the
+    hotspot's disc levelled and a leaked blotch patched within the highlight's radius
+    (:func:`~brdfgan.core.flash_mark.repair_flash_mark`), and thin dark features' metal lowered
+    (:func:`suppress_false_metal`). A photo with nothing clipped, no highlight and no thin dark
+    feature under metal returns the maps unchanged, bit for bit.
+
+    Shape: maps ``(8, H, W)``; photo ``(3, H, W)`` linear LDR at the maps' size (the network's
+    input, preprocessed); frame ``(1, 3)`` its flash frame; clipped ``(H, W)`` bool, optional →
+    ``(8, H, W)`` and :class:`FlashRemoval`.
+    """
+    check_single_maps(maps)
+    check_shape(photo, "3 H W", name="photo", dims={"H": maps.shape[-2], "W": maps.shape[-1]})
+    check_flash_frame(frame, 1)
+    fill = fill_clipped(maps, clipped_mask(photo) if clipped is None else clipped, lattice=lattice)
+    radius = highlight_radius(photo, frame)
+    hotspot = (float(frame[0, 0]), float(frame[0, 1]))
+    repaired, mark = repair_flash_mark(fill.maps, hotspot, radius=radius)
+    result, _ = suppress_false_metal(repaired, photo)
+    lowered = float(((repaired[METALLIC] - result[METALLIC]) > 1.0 / 255.0).float().mean())
+    return result, FlashRemoval(fill, radius, mark, lowered)

@@ -1,0 +1,250 @@
+"""The flash's own marks (``core/clipped_fill.py``): a clipped disc is taken out of base colour and
+metallic, unclipped maps and pixels stay as they were bit for bit, a periodic material is filled
+from its own cells, metal in thin dark grout goes while real metal stays, and the highlight's reach
+is measured on the photo."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+import torch
+from torch import Tensor
+
+from brdfgan.core.clipped_fill import (
+    CLIP_LEVEL,
+    clipped_mask,
+    fill_clipped,
+    highlight_radius,
+    lattice_fill,
+    push_pull_fill,
+    remove_flash,
+    suppress_false_metal,
+)
+from brdfgan.core.delit import flash_render, flat_flash_falloff
+from brdfgan.core.exposure import auto_exposure_scale
+from brdfgan.core.filtering import gaussian_blur
+from brdfgan.core.flash_geometry import centred_flash_frame, hotspot_distance
+from brdfgan.core.svbrdf import flat_maps, join_maps, srgb_to_linear, validate_maps
+
+SIZE = 128
+CENTRE = (64.0, 64.0)
+
+
+def wood(seed: int = 0) -> Tensor:
+    """A brown dielectric with a fine grain (blurred noise): base colour ~(0.55, 0.35, 0.2) sRGB."""
+    generator = torch.Generator().manual_seed(seed)
+    noise = torch.rand(1, 1, SIZE, SIZE, generator=generator, dtype=torch.float64) - 0.5
+    grain = gaussian_blur(noise, 1.0, "reflect")[0]
+    basecolor = torch.tensor([0.55, 0.35, 0.2], dtype=torch.float64).view(3, 1, 1) + 0.3 * grain
+    maps = flat_maps(SIZE, SIZE, roughness=0.5, metallic=0.0).double()
+    maps[0:3] = basecolor.clamp(0.0, 1.0)
+    maps[6] = (0.5 + 0.3 * grain[0]).clamp(0.0, 1.0)
+    return maps
+
+
+def disc(radius: float, centre: tuple[float, float] = CENTRE) -> Tensor:
+    return hotspot_distance(torch.tensor([centre]), SIZE, SIZE)[0] <= radius
+
+
+def with_flash_disc(truth: Tensor, inside: Tensor) -> Tensor:
+    """What the network makes of a clipped hotspot: grey-white base colour, metal, smooth."""
+    marked = truth.clone()
+    marked[0:3] = torch.where(inside, torch.full_like(marked[0:3], 0.85), marked[0:3])
+    marked[6] = torch.where(inside, torch.full_like(marked[6], 0.08), marked[6])
+    marked[7] = torch.where(inside, torch.full_like(marked[7], 0.8), marked[7])
+    return marked
+
+
+def test_push_pull_fills_a_hole_from_its_rim_and_keeps_known_pixels() -> None:
+    image = torch.linspace(0.0, 1.0, SIZE, dtype=torch.float64).view(1, 1, SIZE).expand(2, SIZE, SIZE).clone()
+    known = ~disc(20.0)
+    image[:, ~known] = 5.0  # garbage in the hole
+    filled = push_pull_fill(image, known.double())
+    assert torch.equal(filled[:, known], image[:, known])
+    # A ramp's hole is filled with values of the ramp's range near the ramp itself.
+    ramp = torch.linspace(0.0, 1.0, SIZE, dtype=torch.float64).view(1, SIZE).expand(SIZE, SIZE)
+    assert (filled[0, ~known] - ramp[~known]).abs().max() < 0.1
+    assert torch.allclose(
+        push_pull_fill(torch.full((1, 9, 7), 0.3), torch.rand(9, 7) > 0.5), torch.full((1, 9, 7), 0.3)
+    )
+
+
+def test_a_clipped_disc_is_removed_from_base_colour_metallic_and_roughness() -> None:
+    truth = wood()
+    inside = disc(12.0)
+    marked = with_flash_disc(truth, inside)
+    result = fill_clipped(marked, inside)
+    validate_maps(result.maps)
+    # Base colour in the disc is back near the truth around it, metal is gone, roughness is wood's.
+    error = (result.maps[0:3, inside] - truth[0:3, inside]).abs().mean()
+    before = (marked[0:3, inside] - truth[0:3, inside]).abs().mean()
+    assert error < 0.1 * before and error < 0.05, (float(error), float(before))
+    assert float(result.maps[7, inside].max()) < 0.05
+    assert abs(float(result.maps[6, inside].mean()) - float(truth[6, inside].mean())) < 0.1
+    # Normals and every pixel outside the clipped mask are untouched, bit for bit.
+    assert torch.equal(result.maps[3:6], marked[3:6])
+    assert torch.equal(result.maps[:, ~inside], marked[:, ~inside])
+    assert result.method == "surroundings" and math.isclose(
+        result.clipped_fraction, float(inside.float().mean())
+    )
+    assert json.loads(json.dumps(result.to_json()))["changed_fraction"] > 0
+
+
+def test_unclipped_maps_are_unchanged_bit_for_bit() -> None:
+    maps = wood(seed=2)
+    result = fill_clipped(maps, torch.zeros(SIZE, SIZE, dtype=torch.bool))
+    assert result.maps is maps and result.method == "none"
+    # The whole chain on a matte, unclipped photo of a surface with no metal: nothing changes.
+    frame = centred_flash_frame(1, SIZE, SIZE, dtype=torch.float64)
+    photo = 0.4 * flat_flash_falloff(frame, SIZE, SIZE)[0].expand(3, SIZE, SIZE)
+    assert not bool(clipped_mask(photo).any()) and highlight_radius(photo, frame) == 0.0
+    removed, record = remove_flash(maps, photo, frame)
+    assert torch.equal(removed, maps)
+    assert record.mark.levelled == () and record.mark.repaired == () and record.false_metal_fraction == 0.0
+
+
+def test_a_clipped_metal_patch_keeps_its_metal() -> None:
+    # Bare metal in the middle of the clipped area and around it: the reading is consistent.
+    maps = wood(seed=4)
+    metal = disc(30.0)
+    maps[0:3, metal] = 0.9
+    maps[7, metal] = 1.0
+    maps[6, metal] = 0.2
+    result = fill_clipped(maps, disc(10.0))
+    assert float(result.maps[7, disc(10.0)].min()) > 0.9
+    assert float(result.maps[0:3, disc(10.0)].min()) > 0.8
+
+
+def grid_tiles(vectors: tuple[tuple[float, float], tuple[float, float]]) -> Tensor:
+    """Light tiles with dark grout lines on the lattice ``vectors`` (pixels), as maps."""
+    (ax, ay), (bx, by) = vectors
+    ys, xs = torch.meshgrid(
+        torch.arange(SIZE, dtype=torch.float64), torch.arange(SIZE, dtype=torch.float64), indexing="ij"
+    )
+    # Cell coordinates: solve p = u·a + v·b.
+    det = ax * by - ay * bx
+    u = (xs * by - ys * bx) / det
+    v = (ys * ax - xs * ay) / det
+    line = torch.minimum(
+        (u - u.round()).abs() * math.hypot(ax, ay), (v - v.round()).abs() * math.hypot(bx, by)
+    )
+    grout = (line < 1.5).double()
+    maps = flat_maps(SIZE, SIZE, roughness=0.4).double()
+    maps[0:3] = (0.8 - 0.6 * grout).expand(3, SIZE, SIZE)
+    maps[6] = 0.3 + 0.5 * grout
+    return maps
+
+
+def test_a_periodic_material_is_filled_from_the_same_cell_elsewhere() -> None:
+    angle = math.radians(30.0)
+    vectors = (
+        (20.0 * math.cos(angle), 20.0 * math.sin(angle)),
+        (-20.0 * math.sin(angle), 20.0 * math.cos(angle)),
+    )
+    truth = grid_tiles(vectors)
+    inside = disc(9.0, (70.0, 58.0))
+    marked = with_flash_disc(truth, inside)
+    from_lattice = fill_clipped(marked, inside, lattice=vectors)
+    from_surroundings = fill_clipped(marked, inside)
+    assert from_lattice.method == "lattice" and from_lattice.lattice_fraction == pytest.approx(
+        from_lattice.clipped_fraction
+    )
+    lattice_error = (from_lattice.maps[0:3, inside] - truth[0:3, inside]).abs().mean()
+    surroundings_error = (from_surroundings.maps[0:3, inside] - truth[0:3, inside]).abs().mean()
+    # The grout lines crossing the hole come back (bilinear twins: a little blur at their edges).
+    assert lattice_error < 0.05 and lattice_error < 0.5 * surroundings_error, (
+        lattice_error,
+        surroundings_error,
+    )
+    filled, found = lattice_fill(marked[0:3], inside, vectors)
+    assert bool(found[inside].all()) and not bool(found[~inside].any())
+    assert torch.equal(filled[:, ~inside], marked[0:3, ~inside])
+    with pytest.raises(ValueError, match="lattice vectors"):
+        lattice_fill(marked[0:3], inside, ((10.0, 0.0), (20.0, 0.0)))
+
+
+def test_metal_in_thin_dark_grout_is_suppressed_and_real_metal_stays() -> None:
+    truth = grid_tiles(((16.0, 0.0), (0.0, 16.0)))
+    grout = truth[0] < 0.5
+    network = truth.clone()
+    network[7] = torch.where(grout, 0.7, 0.0)  # bluish metal lines between the tiles
+    # A bare metal plate in one corner: bright, metal, with a dark scratch across it that is metal.
+    plate = torch.zeros(SIZE, SIZE, dtype=torch.bool)
+    plate[80:, 80:] = True
+    network[0:3, plate] = 0.9
+    network[7, plate] = 1.0
+    network[0:3, 100:102, 80:] = 0.3
+    result, weight = suppress_false_metal(network)
+    validate_maps(result)
+    away_from_plate = grout.clone()
+    away_from_plate[64:, 64:] = False
+    assert float(result[7, away_from_plate].max()) < 0.05, float(result[7, away_from_plate].max())
+    assert float(weight[away_from_plate].mean()) > 0.9
+    interior = torch.zeros_like(plate)
+    interior[88:, 88:] = True
+    assert float(result[7, interior].min()) > 0.99  # the scratch at rows 100-101 included
+    # Only the metallic changes, and only downwards.
+    assert torch.equal(result[0:7], network[0:7]) and bool((result[7] <= network[7]).all())
+
+
+def test_the_highlight_radius_follows_the_glossy_lobe() -> None:
+    frame = centred_flash_frame(1, SIZE, SIZE, fov_deg=60.0, dtype=torch.float64)
+    matte = flat_maps(SIZE, SIZE, basecolor=(0.5, 0.5, 0.5), roughness=1.0).double()[None]
+    radii = []
+    for roughness in (0.25, 0.4):
+        glossy = matte.clone()
+        glossy[:, 6] = roughness
+        linear = srgb_to_linear(glossy[:, 0:3])
+        photo = flash_render(linear, glossy[:, 3:6], glossy[:, 6:7], glossy[:, 7:8], frame)[0]
+        radii.append(highlight_radius(photo / photo.max(), frame))
+    # A rougher surface spreads its highlight further; both stay under the cap.
+    assert 0.0 < radii[0] < radii[1] < 0.3 * SIZE, radii
+
+
+def clipped_render(truth: Tensor, ev: float) -> tuple[Tensor, Tensor]:
+    """A flash photo of ``truth``, the training's auto exposure raised by ``ev`` stops, clipped."""
+    frame = centred_flash_frame(1, SIZE, SIZE, fov_deg=60.0, dtype=torch.float64)
+    parts = truth[None]
+    hdr = flash_render(srgb_to_linear(parts[:, 0:3]), parts[:, 3:6], parts[:, 6:7], parts[:, 7:8], frame)
+    return (hdr * auto_exposure_scale(hdr)[:, None, None, None] * 2.0**ev).clamp(0.0, 1.0)[0], frame
+
+
+def test_remove_flash_takes_a_grey_disc_and_its_metal_out_of_a_clipped_render() -> None:
+    truth = wood(seed=5)
+    truth[6] = 0.3  # glossy: the hotspot clips
+    photo, frame = clipped_render(truth, 1.5)  # 3.7 % of the pixels clipped
+    clipped = (photo >= CLIP_LEVEL).any(dim=0)
+    assert 0.005 < float(clipped.float().mean()) < 0.1
+    radius = highlight_radius(photo, frame)
+    assert radius > 10.0
+    # The network's disc: greyed base colour and metal, fading out to the highlight's reach.
+    reach = hotspot_distance(frame[:, :2], SIZE, SIZE)[0]
+    strength = (1.0 - reach / radius).clamp(0.0, 1.0)
+    network = truth.clone()
+    network[0:3] = truth[0:3] + strength * (0.75 - truth[0:3])
+    network[7] = 0.6 * strength
+    maps, record = remove_flash(network, photo, frame)
+    validate_maps(maps)
+    inside = disc(0.1 * SIZE)
+    rest = reach > 0.2 * SIZE
+    error = lambda m, where: float((m[0:3, where] - truth[0:3, where]).abs().mean())  # noqa: E731
+    assert error(network, inside) > 5 * error(maps, inside)
+    assert error(maps, inside) < 0.03
+    assert float(maps[7, inside].mean()) < 0.05
+    assert torch.equal(maps[:, rest], network[:, rest])
+    assert "basecolor" in record.mark.levelled and "metallic" in record.mark.levelled
+    document = json.loads(json.dumps(record.to_json()))
+    assert document["highlight_radius"] == pytest.approx(radius)
+    assert document["clipped_fill"]["clipped_fraction"] > 0
+
+
+def test_bad_shapes_are_refused() -> None:
+    maps = wood()
+    with pytest.raises(ValueError, match="clipped"):
+        fill_clipped(maps, torch.zeros(SIZE, SIZE + 1, dtype=torch.bool))
+    with pytest.raises(ValueError, match="photo"):
+        remove_flash(maps, torch.zeros(3, SIZE, 8), centred_flash_frame(1, SIZE, SIZE))
+    with pytest.raises(ValueError):
+        suppress_false_metal(join_maps(maps[0:3], maps[3:6], maps[6:7], maps[7:8])[None])
