@@ -26,6 +26,7 @@ test sample's no-flash twin, undone with its ``meta["pair"]``), e.g. the OOD ben
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import time
 from collections.abc import Iterator, Sequence
@@ -244,14 +245,19 @@ def write_figure(path: Path, rows: list[np.ndarray]) -> None:
     write_image(path, with_column_header(canvas, FIGURE_COLUMNS))
 
 
-def figure_pairs(root: Path, count: int) -> Iterator[tuple[str, Pair]]:
-    """The figure's pairs, chosen by a rule fixed before looking: the first crop of each of the
-    first ``count`` scanned sets in key order."""
-    seen: set[str] = set()
+def figure_pairs(root: Path, count: int) -> list[tuple[str, Pair]]:
+    """The figure's pairs, chosen by a rule that does not look at any prediction: of each of the
+    first ``count`` scanned sets in key order, the crop with the most relief (the flat map's mean
+    angle to its true normals)."""
+    best: dict[str, tuple[float, Pair]] = {}
     for pair, family in zip(shard_pairs(root, scanned=True), shard_families(root, scanned=True), strict=True):
-        if family not in seen and len(seen) < count:
-            seen.add(family)
-            yield family.removeprefix("scanned/"), pair
+        if family not in best and len(best) == count:
+            continue
+        normal = pair.truth[NORMAL]
+        relief = float(torch.acos(normal[2].clamp(-1.0, 1.0)).mean())
+        if family not in best or relief > best[family][0]:
+            best[family] = (relief, pair)
+    return [(family.removeprefix("scanned/"), pair) for family, (_, pair) in best.items()]
 
 
 def shard_families(root: Path, scanned: bool, split: str = "test") -> Iterator[str]:
@@ -287,12 +293,13 @@ def score_shards(args: argparse.Namespace, v4: nn.Module, de_lit: nn.Module, con
     """``--shards``: the table of a generated dataset's Mitsuba pairs, or with ``--figure`` its figure."""
     if args.figure is not None:
         pairs = figure_pairs(args.shards, args.figure_rows)
-        write_figure(args.figure, [figure_row(pair, v4, config, label, 192) for label, pair in pairs])
+        write_figure(args.figure, [figure_row(pair, v4, config, label, 128) for label, pair in pairs])
         print(f"wrote {args.figure}")
         return
     shard_report = [f"# The pair fit on Mitsuba pairs: {args.shards} (no sensor)\n"]
-    for name, scanned in (("test split, procedural", False), ("test split, scans", True)):
-        scores, count = score(shard_pairs(args.shards, scanned), v4, de_lit, config)
+    for name, scanned in (("test split, scans", True), ("test split, procedural", False)):
+        pairs = itertools.islice(shard_pairs(args.shards, scanned), args.max_pairs or None)
+        scores, count = score(pairs, v4, de_lit, config)
         if count:
             shard_report.append(table(name, scores, count))
         write_text_atomic(args.out, "\n".join(shard_report))
@@ -320,8 +327,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument(
         "--figure", type=Path, default=None, help="with --shards: the before/after figure of its scans' pairs"
     )
-    parser.add_argument("--figure-rows", type=int, default=3)
+    parser.add_argument("--figure-rows", type=int, default=7)
+    parser.add_argument(
+        "--max-pairs", type=int, default=0, help="with --shards: the first N pairs of each group (0: all)"
+    )
     args = parser.parse_args(argv)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
     started = time.time()
     cfg = compose_config()
     spec: DatasetSpec = hydra.utils.instantiate(cfg.data.prepare.spec, _convert_="all")
