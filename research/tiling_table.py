@@ -173,7 +173,8 @@ def photo_frame(material: Tensor, frame: Frame) -> Tensor:
     work = material.double()
     axis = torch.arange(frame.size, dtype=torch.float64) + 0.5
     yy, xx = torch.meshgrid(axis, axis, indexing="ij")
-    points = frame.to_material(torch.stack([xx, yy], dim=-1).view(-1, 2), tuple(work.shape[-2:]))
+    size = (work.shape[-2], work.shape[-1])
+    points = frame.to_material(torch.stack([xx, yy], dim=-1).view(-1, 2), size)
     sampled = _sample_periodic(work, points).view(8, frame.size, frame.size)
     parts = split_maps(sampled)
     # The normal's x is the image's x, its y the image's up (−y).
@@ -764,7 +765,7 @@ def run_case(material: Material, maps: Tensor, truth: Basis | None, frame: Frame
     crop = photo_frame(maps, frame).float()  # the pipeline's maps are float32
     size = (maps.shape[-2], maps.shape[-1])
     crop_truth = frame.crop_vectors(truth) if truth is not None else None
-    base = {"material": material.name, "group": material.group, "angle": frame.degrees}
+    base: dict[str, Any] = {"material": material.name, "group": material.group, "angle": frame.degrees}
     base["perspective"] = frame.perspective != (0.0, 0.0)
     identity = torch.ones(frame.size, frame.size, dtype=torch.bool)
 
@@ -1071,6 +1072,8 @@ def main() -> None:
         default=CROP,
         help="crop side; above 256 the families are painted larger with the same cells, scans left out",
     )
+    parser.add_argument("--frames", choices=("both", "flat", "perspective"), default="both")
+    parser.add_argument("--groups", nargs="*", default=list(GROUPS), help="groups to run (default: all)")
     parser.add_argument(
         "--report", type=Path, default=None, help="report a run's JSON again, measuring nothing"
     )
@@ -1085,12 +1088,14 @@ def main() -> None:
     chosen = [
         m
         for m in materials()
-        if (args.only is None or m.name in args.only) and (args.crop == CROP or m.procedural)
+        if (args.only is None or m.name in args.only)
+        and (args.crop == CROP or m.procedural)
+        and m.group in args.groups
     ]
+    kinds = {"both": ((0.0, 0.0), tuple(args.perspective)), "flat": ((0.0, 0.0),)}
+    kinds["perspective"] = (tuple(args.perspective),)
     frames = [
-        Frame(args.crop, angle, perspective)
-        for perspective in ((0.0, 0.0), tuple(args.perspective))
-        for angle in args.angles
+        Frame(args.crop, angle, perspective) for perspective in kinds[args.frames] for angle in args.angles
     ]
     for material in chosen:
         maps = material.paint(side)
