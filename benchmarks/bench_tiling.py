@@ -10,10 +10,15 @@ previous method (:func:`brdfgan.core.seamless.blend_reference`) runs on the same
 for the before/after. Per map: the wrap ratio (:func:`~brdfgan.core.seamless.wrap_ratios`, the
 worse of columns and rows; ≤ 1.2 is the goal) and the copied fraction
 (:func:`~brdfgan.core.seamless.copied_fraction`: pixels within two 8-bit levels of one of the
-tile's copies; ≥ 0.85 is the goal). Last, the time of ``make_tileable`` on the first photo's maps
-enlarged to ``--large`` (content does not change the work much; the time does grow with the side).
+tile's copies; ≥ 0.85 is the goal). Last, the time of ``make_tileable`` at ``--large``² (2048²: a
+phone photo's maps) on two inputs, in the same run: the first photo that took today's cut, and a
+periodic one that takes the whole-cell path (``core.lattice``: detection, resampling, residual
+seams), the first such photo (the ceramic tiles among the samples), else a synthetic 45° grid of
+tiles. Each is the photo's maps enlarged (bilinear), so the path at that size is said beside it,
+with the CPU seconds of its steps timed again one by one: the flash-mark repair, the lattice
+detection and the tile on that path.
 
-    python -m benchmarks.bench_tiling [SOURCE] [--split test] [--weights W] [--large 1024]
+    python -m benchmarks.bench_tiling [SOURCE] [--split test] [--weights W] [--large 2048]
         [--threads N] [--json out.json]
 
 ``--threads 1`` gives steady times on a machine shared with other jobs: the tiling's operations
@@ -29,6 +34,7 @@ import statistics
 import sys
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -117,6 +123,7 @@ def measure(name: str, maps: Tensor, hotspot: tuple[float, float]) -> dict[str, 
         "size": int(maps.shape[-1]),
         "seconds": seconds,
         "cpu_seconds": cpu,
+        "whole_cells": record.cells is not None,
         "repaired": {map_name: record.flash_mark.scores[map_name] for map_name in record.flash_mark.repaired},
         "leak_scores": record.flash_mark.scores,
         "wrap_before": _worst(record.wrap_ratio_before),
@@ -125,16 +132,65 @@ def measure(name: str, maps: Tensor, hotspot: tuple[float, float]) -> dict[str, 
     }
 
 
-def _large(maps: Tensor, hotspot: tuple[float, float], side: int) -> tuple[float, float]:
-    """Wall and CPU seconds of ``make_tileable`` on ``maps`` enlarged to ``side``²."""
+def _large(maps: Tensor, hotspot: tuple[float, float], side: int) -> dict[str, Any]:
+    """Wall and CPU seconds of ``make_tileable`` on ``maps`` enlarged to ``side``², the path it took
+    there (``whole cells`` or ``cut``), and the CPU seconds of its steps timed again one by one (the
+    flash-mark repair, the lattice detection, the tile on that path)."""
+    from brdfgan.core.flash_mark import repair_flash_mark
+    from brdfgan.core.lattice import find_lattice, tile_whole_cells
+    from brdfgan.core.seamless import make_seamless
     from brdfgan.core.svbrdf import resize_maps
     from brdfgan.inference.pipeline import make_tileable
 
     factor = side / maps.shape[-1]
     large = resize_maps(maps, side)
+    centre = (hotspot[0] * factor, hotspot[1] * factor)
     start, cpu = time.perf_counter(), time.process_time()
-    make_tileable(large, (hotspot[0] * factor, hotspot[1] * factor))
-    return time.perf_counter() - start, time.process_time() - cpu
+    _, record = make_tileable(large, centre)
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
+    path = f"whole cells ({record.cells.cells})" if record.cells is not None else "cut"
+    step = time.process_time()
+    repaired, _ = repair_flash_mark(large, centre)
+    repair = time.process_time() - step
+    step = time.process_time()
+    find_lattice(repaired)
+    detection = time.process_time() - step
+    step = time.process_time()
+    if record.cells is not None:
+        tile_whole_cells(repaired, replace(record.cells, roll=(0, 0)))
+    else:
+        make_seamless(repaired)
+    tile = time.process_time() - step
+    return {
+        "seconds": wall,
+        "cpu_seconds": cpu,
+        "path": path,
+        "repair_cpu_seconds": repair,
+        "detection_cpu_seconds": detection,
+        "tile_cpu_seconds": tile,
+    }
+
+
+def synthetic_grid(side: int = 256) -> tuple[Tensor, tuple[float, float]]:
+    """A 45° grid of glazed tiles in recessed grout (the ceramic sample's layout, five cells a
+    side), with a little shading noise: a periodic input when the photos hold none. Shape:
+    ``(8, side, side)`` float32 and the centre as hotspot."""
+    from brdfgan.core.svbrdf import join_maps, normalize_normal
+
+    generator = torch.Generator().manual_seed(0)
+    axis = torch.arange(side, dtype=torch.float32) + 0.5
+    yy, xx = torch.meshgrid(axis, axis, indexing="ij")
+    pitch = side / 5.0
+    u, v = (xx + yy) / (pitch * 2**0.5), (xx - yy) / (pitch * 2**0.5)
+    to_grout = torch.minimum((u - torch.round(u)).abs(), (v - torch.round(v)).abs()) * pitch
+    grout = torch.exp(-((to_grout / 2.0) ** 2))
+    shade = 0.05 * torch.rand(side, side, generator=generator)
+    luminance = (0.75 - 0.45 * grout + shade).clamp(0, 1)
+    basecolor = luminance * torch.tensor([0.9, 0.92, 0.95]).view(3, 1, 1)
+    gy, gx = torch.gradient(-grout)
+    normal = normalize_normal(torch.stack([-0.6 * gx, 0.6 * gy, torch.ones_like(gx)]))
+    roughness = (0.2 + 0.6 * grout)[None]
+    return join_maps(basecolor, normal, roughness, torch.zeros_like(roughness)), (side / 2, side / 2)
 
 
 def _fmt(values: dict[str, float], digits: int = 2) -> str:
@@ -149,7 +205,7 @@ def main() -> None:
     parser.add_argument("--split", default="test", help="the dataset split when SOURCE holds shards")
     parser.add_argument("--weights", type=Path, default=None, help="a .safetensors file (default: shipped)")
     parser.add_argument(
-        "--large", type=int, default=1024, help="side of the timing on enlarged maps (0: skip)"
+        "--large", type=int, default=2048, help="side of the timings on enlarged maps (0: skip)"
     )
     parser.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
     parser.add_argument("--json", type=Path, default=None, help="write every row and the summary here")
@@ -178,11 +234,12 @@ def main() -> None:
     print("| " + " | ".join(columns) + " | repaired (score) |")
     print("|---|---|---|---|---|---|---|---|---|")
     rows: list[dict[str, Any]] = []
-    first: tuple[Tensor, tuple[float, float]] | None = None
+    # The inputs of the large timings: the first photo on each path (name, maps, hotspot).
+    large_inputs: dict[str, Item] = {}
     for name, maps, hotspot in items:
-        first = first or (maps, hotspot)
         row = measure(name, maps, hotspot)
         rows.append(row)
+        large_inputs.setdefault("periodic" if row["whole_cells"] else "non-periodic", (name, maps, hotspot))
         repaired = ", ".join(f"{key} {score:.2f}" for key, score in row["repaired"].items()) or "—"
         print(
             f"| {name} | {row['size']} | {row['seconds']:.2f} ({row['cpu_seconds']:.2f}) "
@@ -207,8 +264,13 @@ def main() -> None:
         "photos_repaired": sum(bool(row["repaired"]) for row in rows),
         "meets_goals": worst_wrap <= WRAP_GOAL and least_copied >= COPIED_GOAL,
     }
-    if args.large and first is not None:
-        summary[f"seconds_at_{args.large}"] = _large(*first, args.large)
+    if args.large:
+        if "periodic" not in large_inputs:
+            large_inputs["periodic"] = ("synthetic 45° grid", *synthetic_grid())
+        for kind in ("non-periodic", "periodic"):
+            if kind in large_inputs:
+                name, maps, hotspot = large_inputs[kind]
+                summary[f"{kind}_at_{args.large}"] = {"photo": name, **_large(maps, hotspot, args.large)}
     print()
     print(
         f"{len(rows)} photos: worst wrap ratio {worst_wrap:.2f} (blend {summary['worst_wrap_blend']:.2f}; "
@@ -218,9 +280,16 @@ def main() -> None:
         f"{summary['cpu_seconds'][0]:.2f}-{summary['cpu_seconds'][1]:.2f} s), "
         f"flash mark repaired in {summary['photos_repaired']}"
     )
-    if args.large and first is not None:
-        wall, cpu = summary[f"seconds_at_{args.large}"]
-        print(f"make_tileable at {args.large}²: {wall:.1f} s (CPU {cpu:.1f} s)")
+    for kind in ("non-periodic", "periodic"):
+        timing = summary.get(f"{kind}_at_{args.large}")
+        if timing is not None:
+            print(
+                f"make_tileable at {args.large}², {kind} ({timing['photo']}, {timing['path']}): "
+                f"{timing['seconds']:.1f} s (CPU {timing['cpu_seconds']:.1f} s: flash-mark repair "
+                f"{timing['repair_cpu_seconds']:.1f}, lattice detection "
+                f"{timing['detection_cpu_seconds']:.1f}, tile {timing['tile_cpu_seconds']:.1f}, "
+                "each on its own)"
+            )
     print("goals met" if summary["meets_goals"] else "GOALS NOT MET")
     if args.json is not None:
         args.json.write_text(json.dumps({"source": str(source), "rows": rows, "summary": summary}, indent=1))
