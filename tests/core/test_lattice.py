@@ -18,6 +18,7 @@ from brdfgan.core.lattice import (
     choose_cells,
     find_lattice,
     reduce_basis,
+    refine_lattice,
     tile_whole_cells,
 )
 from brdfgan.core.seamless import file_units, make_seamless, wrap_ratios
@@ -384,3 +385,22 @@ def test_the_records_round_trip() -> None:
     assert Lattice.from_json(lattice.to_json()) == lattice
     tiling = choose_cells(lattice.vectors, SIZE, SIZE)  # type: ignore[arg-type]
     assert tiling is not None and CellTiling.from_json(tiling.to_json()) == tiling
+
+
+def test_refining_a_basis_whose_second_vector_is_no_peak_uses_only_positive_peaks() -> None:
+    # A real scan (Concrete002 at 512²) reduced to a basis whose second vector sits where ρ < 0:
+    # the refinement took every local maximum above a negative level, square roots of negative
+    # weights made the least squares NaN, and make_tileable crashed.
+    generator = torch.Generator().manual_seed(0)
+    height, width = 64, 64
+    rho = -0.02 * torch.rand(2 * height, 2 * width, generator=generator, dtype=torch.float64)
+    a = (5.0, 4.0)
+    ys, xs = torch.meshgrid(
+        torch.arange(2 * height, dtype=torch.float64) - height,
+        torch.arange(2 * width, dtype=torch.float64) - width,
+        indexing="ij",
+    )
+    for i in range(-6, 7):  # ρ's peaks on the multiples of a only
+        rho += 0.3 * torch.exp(-((xs - i * a[0]) ** 2 + (ys - i * a[1]) ** 2) / 0.8)
+    refined_a, refined_b = refine_lattice(rho, a, (-20.0, 25.0), (height, width))
+    assert all(math.isfinite(v) for v in (*refined_a, *refined_b))

@@ -399,7 +399,9 @@ def refine_lattice(rho: Tensor, a: Vector, b: Vector, image_size: tuple[int, int
             if float(_lag_overlap(lag.view(1, 2), height, width)) < CHECK_OVERLAP:
                 continue
             position, value, local = _peak_near(rho, lag, SEARCH_FRACTION * shortest)
-            if local and value >= level:
+            # A negative ρ is no peak, however the level falls (a basis vector's own ρ can be
+            # negative, which would let every dip through and give the fit negative weights).
+            if local and value >= level and value > 0:
                 rows.append(coefficients[k])
                 targets.append(position)
                 weights.append(value)
