@@ -292,8 +292,8 @@ def score_shards(args: argparse.Namespace, v4: nn.Module, de_lit: nn.Module, con
                  started: float) -> None:  # fmt: skip
     """``--shards``: the table of a generated dataset's Mitsuba pairs, or with ``--figure`` its figure."""
     if args.figure is not None:
-        pairs = figure_pairs(args.shards, args.figure_rows)
-        write_figure(args.figure, [figure_row(pair, v4, config, label, 128) for label, pair in pairs])
+        chosen = figure_pairs(args.shards, args.figure_rows)
+        write_figure(args.figure, [figure_row(pair, v4, config, label, 128) for label, pair in chosen])
         print(f"wrote {args.figure}")
         return
     shard_report = [f"# The pair fit on Mitsuba pairs: {args.shards} (no sensor)\n"]

@@ -248,9 +248,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     if args.ood is not None:
         sets["ood"] = shard_batches(args.ood)
     if args.input in ("pair", "ratio"):
-        config = {k: v for k, v in OmegaConf.to_container(cfg.model.generator, resolve=True).items()
-                  if k != "_target_"}  # fmt: skip
-        generator: nn.Module = PairInputUNet(3, **config)
+        node = cast(dict[str, Any], OmegaConf.to_container(cfg.model.generator, resolve=True))
+        generator: nn.Module = PairInputUNet(3, **{k: v for k, v in node.items() if k != "_target_"})
     else:
         generator = hydra.utils.instantiate(cfg.model.generator, _convert_="all")
     optimizer = torch.optim.Adam(

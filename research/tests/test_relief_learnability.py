@@ -63,7 +63,7 @@ def test_the_widened_network_is_v4_when_its_extra_weights_are_zero() -> None:
         assert torch.allclose(
             widened.predict(photo, batch["flash"], channels), base(photo, batch["flash"]), atol=1e-6
         )
-        widened.encoder[0][0].weight[:, -3:] = 0.1
+        widened.state_dict()["encoder.0.0.weight"][:, -3:] = 0.1  # the extra channels' weights
         assert not torch.allclose(
             widened.predict(photo, batch["flash"], channels), base(photo, batch["flash"])
         )
