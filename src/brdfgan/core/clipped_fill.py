@@ -33,7 +33,10 @@ closing of the photo's luminance (else the base colour's) over a :data:`THIN_WIN
 side window by :data:`THIN_DARKNESS` (a gap or groove narrower than the window), the metallic is
 lowered to the opening of the metallic over the same window — the metal of the surroundings once
 features narrower than the window are removed — so a gap in a metal surface stays metal and a gap
-in wood becomes wood.
+in wood becomes wood. Where the surface around reads as metal on average (:data:`METAL_AROUND`
+over :data:`METAL_AROUND_WINDOWS` windows) the rule stands down: a perforated or engraved metal's
+holes are thin dark features too, and the network's metallic there is patchy, so the opening
+would eat real metal (measured: the pavers mixed with anodized metal lost 0.07 of their metal).
 
 :func:`remove_flash` chains the three: what ``brdfgan predict`` runs on every prediction. The
 constants were chosen on over-exposed renders of held-out materials
@@ -54,7 +57,7 @@ from brdfgan.core.checks import check_shape
 from brdfgan.core.delit import delit_photo
 from brdfgan.core.exposure import luminance
 from brdfgan.core.filtering import gaussian_blur
-from brdfgan.core.flash_geometry import check_flash_frame, hotspot_distance
+from brdfgan.core.flash_geometry import check_flash_frame, hotspot_distance, resize_flash_frame
 from brdfgan.core.flash_mark import FlashMark, repair_flash_mark
 from brdfgan.core.svbrdf import BASECOLOR, METALLIC, ROUGHNESS, check_single_maps, srgb_to_linear
 
@@ -63,12 +66,14 @@ CLIP_LEVEL = 0.98
 # The clipped mask is dilated by this fraction of the shorter side (2 px at 256²): a clipped
 # pixel's neighbours are blurred with it by the lens, the demosaic and the resize.
 CLIP_DILATION_FRACTION = 1.0 / 128.0
+# The smooth measures (the surroundings' range, the highlight's reach) run at most this many pixels
+# across, on an area-averaged copy.
+WORKING_SIDE = 256
 # The surroundings' range (surroundings_range): its Gaussian (fraction of the shorter side), the
-# share of known pixels a neighbourhood needs to be trusted, the working size, and the range's
-# half-width in standard deviations.
+# share of known pixels a neighbourhood needs to be trusted, and the range's half-width in
+# standard deviations.
 RANGE_SIGMA_FRACTION = 1.0 / 32.0
 RANGE_MIN_KNOWN = 0.25
-RANGE_WORKING_SIDE = 256
 RANGE_SPREAD = 1.0
 # The lattice fill looks this many periods away along each lattice vector.
 LATTICE_REACH = 2
@@ -76,12 +81,18 @@ LATTICE_REACH = 2
 # than the window's closing a texel must be (smoothstep from the first to the second value).
 THIN_WINDOW_FRACTION = 9.0 / 256.0
 THIN_DARKNESS = (0.15, 0.35)
+# The surroundings that read as metal (suppress_false_metal): the mean metallic over a box of this
+# many thin windows, and the smoothstep edges over which the rule stands down.
+METAL_AROUND_WINDOWS = 3
+METAL_AROUND = (0.25, 0.45)
+# The thin-dark rule runs at most this many pixels across (its window is 18 px there).
+THIN_WORKING_SIDE = 512
 # The highlight's extent (:func:`highlight_radius`): where the ring median of the de-lit photo
 # falls to (1 + HIGHLIGHT_EXCESS) × the far field's; never beyond HIGHLIGHT_MAX_FRACTION × side.
 HIGHLIGHT_EXCESS = 0.25
 HIGHLIGHT_MAX_FRACTION = 0.3
 HIGHLIGHT_FAR = (0.3, 0.5)  # the far field, in fractions of the shorter side
-HIGHLIGHT_STEP = 2.0  # ring width, pixels
+HIGHLIGHT_STEP = 2.0  # ring width, pixels at WORKING_SIDE
 
 
 def _smoothstep(edge0: float, edge1: float, x: Tensor) -> Tensor:
@@ -93,8 +104,7 @@ def _dilate(mask: Tensor, radius: int) -> Tensor:
     """``mask`` grown by a square of ``radius`` pixels. Shape: ``(H, W)`` bool → same."""
     if radius <= 0:
         return mask
-    grown = F.max_pool2d(mask.float()[None, None], 2 * radius + 1, stride=1, padding=radius)
-    return grown[0, 0] > 0
+    return _dilate_values(mask.float()[None, None], 2 * radius + 1)[0, 0] > 0
 
 
 def clipped_mask(photo: Tensor, level: float = CLIP_LEVEL) -> Tensor:
@@ -150,14 +160,14 @@ def surroundings_range(image: Tensor, known: Tensor, spread: float) -> tuple[Ten
     standard deviation under a Gaussian of :data:`RANGE_SIGMA_FRACTION` × the shorter side
     (normalised convolution), carried into holes wider than that by :func:`push_pull_fill` from the
     pixels whose neighbourhood is at least :data:`RANGE_MIN_KNOWN` known. Computed on a copy
-    area-averaged to at most :data:`RANGE_WORKING_SIDE` (the moments are smooth), then enlarged.
+    area-averaged to at most :data:`WORKING_SIDE` (the moments are smooth), then enlarged.
 
     Shape: image ``(C, H, W)``; known ``(H, W)`` in [0, 1] → low and high ``(C, H, W)``.
     """
     dims = check_shape(image, "C H W", name="image")
     check_shape(known, "H W", name="known", dims=dims)
     height, width = dims["H"], dims["W"]
-    factor = max(1, math.ceil(min(height, width) / RANGE_WORKING_SIDE))
+    factor = max(1, math.ceil(min(height, width) / WORKING_SIDE))
     size = (max(1, height // factor), max(1, width // factor))
     weight = known.to(image.dtype)[None, None]
     stack = torch.cat([weight, image[None] * weight, image[None].square() * weight], dim=1)
@@ -298,13 +308,22 @@ def highlight_radius(photo: Tensor, frame: Tensor) -> float:
     :data:`HIGHLIGHT_STEP` px) whose median de-lit luminance (the photo over the flat-surface
     falloff, :func:`~brdfgan.core.delit.delit_photo`) is at most (1 + :data:`HIGHLIGHT_EXCESS`) ×
     the median of the far field (:data:`HIGHLIGHT_FAR` × side from the hotspot, else the whole
-    photo); at most :data:`HIGHLIGHT_MAX_FRACTION` × the shorter side. Ring medians ignore texture:
-    a matte surface's reach is 0, a glossy one's its specular lobe.
+    photo); at most :data:`HIGHLIGHT_MAX_FRACTION` × the shorter side; rings and far field at most
+    :data:`WORKING_SIDE` pixels across. Ring medians ignore texture: a matte surface's reach is 0, a
+    glossy one's its specular lobe.
 
     Shape: photo ``(3, H, W)`` linear LDR; frame ``(1, 3)`` its flash frame.
     """
     dims = check_shape(photo, "3 H W", name="photo")
     check_flash_frame(frame, 1)
+    # Measured on a copy area-averaged to at most WORKING_SIDE (ring medians need no more), the
+    # radius scaled back.
+    factor = max(1, math.ceil(min(dims["H"], dims["W"]) / WORKING_SIDE))
+    if factor > 1:
+        size = (dims["H"] // factor, dims["W"] // factor)
+        small = F.interpolate(photo[None].double(), size=size, mode="area")[0]
+        scale = size[1] / dims["W"]
+        return highlight_radius(small, resize_flash_frame(frame.double(), scale)) / scale
     side = min(dims["H"], dims["W"])
     delit = delit_photo(photo[None].double(), frame.double(), clip=False)
     level = luminance(delit)[0, 0]
@@ -325,15 +344,16 @@ def thin_dark_weight(maps: Tensor, photo: Tensor | None = None) -> Tensor:
     :data:`THIN_DARKNESS` of ``1 − luminance / closing``, the closing over a square of
     :data:`THIN_WINDOW_FRACTION` × the shorter side, of the photo's luminance when given (a gap is
     dark in the photo even where the network painted it grey-blue: the wood-plank sample), else of
-    the linear base colour's. The ratio to a local closing ignores the flash's smooth falloff.
+    the linear base colour's; grown by a quarter window. The ratio to a local closing ignores the
+    flash's smooth falloff.
 
     Shape: maps ``(8, H, W)``; photo ``(3, H, W)`` linear, optional → ``(H, W)`` in [0, 1].
     """
     check_single_maps(maps)
     if photo is not None:
         check_shape(photo, "3 H W", name="photo", dims={"H": maps.shape[-2], "W": maps.shape[-1]})
-    window = _odd_window(maps)
     guide = srgb_to_linear(maps[BASECOLOR]) if photo is None else photo.to(maps.dtype)
+    window = _odd_window(maps)
     lum = luminance(guide[None])  # (1, 1, H, W)
     closed = _erode(_dilate_values(lum, window), window)
     darkness = _smoothstep(*THIN_DARKNESS, 1.0 - lum / closed.clamp_min(1e-6))
@@ -346,9 +366,21 @@ def _odd_window(maps: Tensor) -> int:
 
 
 def _dilate_values(image: Tensor, window: int) -> Tensor:
-    """Grey dilation (the max over a ``window`` square), mirrored at the edges. Shape: ``(1, 1, H, W)``."""
+    """Grey dilation (the max over a ``window`` square), the edges repeated; separable (rows, then
+    columns: the same max in 2·window comparisons a pixel instead of window²).
+
+    Shape: ``(1, 1, H, W)``."""
     pad = window // 2
-    return F.max_pool2d(F.pad(image, (pad, pad, pad, pad), mode="replicate"), window, stride=1)
+    rows = F.max_pool2d(F.pad(image, (pad, pad, 0, 0), mode="replicate"), (1, window), stride=1)
+    return F.max_pool2d(F.pad(rows, (0, 0, pad, pad), mode="replicate"), (window, 1), stride=1)
+
+
+def _box_mean(image: Tensor, radius: int) -> Tensor:
+    """:func:`~brdfgan.core.filtering.box_mean`, separable (a box cut at the border is a rectangle,
+    so rows then columns give the same mean). Shape: ``(1, 1, H, W)``."""
+    side = 2 * radius + 1
+    rows = F.avg_pool2d(image, (1, side), stride=1, padding=(0, radius), count_include_pad=False)
+    return F.avg_pool2d(rows, (side, 1), stride=1, padding=(radius, 0), count_include_pad=False)
 
 
 def _erode(image: Tensor, window: int) -> Tensor:
@@ -358,18 +390,41 @@ def _erode(image: Tensor, window: int) -> Tensor:
 def suppress_false_metal(maps: Tensor, photo: Tensor | None = None) -> tuple[Tensor, Tensor]:
     """The maps with the metallic of thin dark features lowered to their surroundings' (module
     docstring): ``m − w · max(0, m − opening(m))`` with ``w`` :func:`thin_dark_weight` (of the
-    ``photo`` when given); and ``w``. Only the metallic changes, and only downwards.
+    ``photo`` when given) where the surface around does not read as metal; and that weight. Only
+    the metallic changes, and only downwards. Above :data:`THIN_WORKING_SIDE` the lowering is
+    found on an area-averaged copy and enlarged (a gap spans several pixels there).
 
     Shape: maps ``(8, H, W)``; photo ``(3, H, W)`` linear, optional → ``(8, H, W)``, ``(H, W)``.
     """
     check_single_maps(maps)
-    window = _odd_window(maps)
-    weight = thin_dark_weight(maps, photo)
-    metallic = maps[METALLIC][None]  # (1, 1, H, W)
+    if photo is not None:
+        check_shape(photo, "3 H W", name="photo", dims={"H": maps.shape[-2], "W": maps.shape[-1]})
+    height, width = maps.shape[-2:]
+    factor = max(1, math.ceil(min(height, width) / THIN_WORKING_SIDE))
+    work, guide = maps, photo
+    if factor > 1:
+        size = (height // factor, width // factor)
+        work = F.interpolate(maps[None], size=size, mode="area")[0]
+        guide = (
+            None if photo is None else F.interpolate(photo[None].to(maps.dtype), size=size, mode="area")[0]
+        )
+    window = _odd_window(work)
+    metallic = work[METALLIC][None]  # (1, 1, h, w)
+    # A surface that reads as metal around the feature keeps its metal (perforated or engraved
+    # metal: its holes and grooves are thin dark features whose rims the network reads as metal).
+    around = _box_mean(metallic, METAL_AROUND_WINDOWS * (window // 2))
+    weight = thin_dark_weight(work, guide) * (1.0 - _smoothstep(*METAL_AROUND, around))[0, 0]
     opened = _dilate_values(_erode(metallic, window), window)
-    lowered = metallic - weight * (metallic - opened).clamp_min(0.0)
+    lowering = (weight * (metallic - opened).clamp_min(0.0))[0]  # (1, h, w)
+    if factor > 1:
+        lowering = F.interpolate(lowering[None], size=(height, width), mode="bilinear", align_corners=False)[
+            0
+        ]
+        weight = F.interpolate(
+            weight[None, None], size=(height, width), mode="bilinear", align_corners=False
+        )[0, 0]
     result = maps.clone()
-    result[METALLIC] = lowered[0]
+    result[METALLIC] = (maps[METALLIC] - lowering).clamp_min(0.0)
     return result, weight
 
 

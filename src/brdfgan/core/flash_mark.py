@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 
 from brdfgan.core.filtering import gaussian_blur
@@ -74,6 +75,7 @@ LEVEL_BINS = 12
 LEVEL_REFERENCE = (1.0, 1.5)
 LEVEL_REFERENCE_WIDE = 2.0
 LEVEL_MIN_PIXELS = 16
+LEVEL_WORKING_SIDE = 256
 LEVEL_THRESHOLD = 3.0
 METAL_SURFACE = (0.3, 0.6)
 LEVELLED_MAPS = ("basecolor", "roughness", "metallic")
@@ -291,50 +293,68 @@ def fill_disk(
 
 @dataclass(frozen=True)
 class LevelBias:
-    """The disc's bias profile (module docstring) in the window around the hotspot: ``field``, the
-    bias of every channel at every window pixel (0 beyond the radius); ``scores`` per map of
-    :data:`LEVELLED_MAPS`; ``metal``, how much the reference ring reads as metal (0-1)."""
+    """The disc's bias profile (module docstring): the hotspot ``centre`` and ``radius`` in the
+    maps' pixels, each channel's ``steps`` over the :data:`LEVEL_BINS` rings (map units),
+    ``scores`` per map of :data:`LEVELLED_MAPS`, and ``metal``, how much the reference ring reads as
+    metal (0-1)."""
 
-    window: _Window
-    field: Tensor  # (8, h, w)
+    centre: tuple[float, float]
+    radius: float
+    steps: Tensor  # (8, LEVEL_BINS)
     scores: dict[str, float]
     metal: float
 
+    def field(self, maps: Tensor) -> tuple[_Window, Tensor]:
+        """The window around the disc and the bias of every channel at its pixels: the steps
+        interpolated linearly over each ring's middle radius (by area), flat inside the first ring,
+        0 at the radius and beyond. Shape: maps ``(8, H, W)`` → field ``(8, h, w)``."""
+        window = _Window.around(maps, self.centre, self.radius + 1.0)
+        middles = [self.radius * math.sqrt((k + 0.5) / LEVEL_BINS) for k in range(LEVEL_BINS)]
+        knots = torch.tensor([0.0, *middles, self.radius], dtype=torch.float64, device=maps.device)
+        steps = self.steps.to(maps.device)
+        values = torch.cat([steps[:, :1], steps, torch.zeros_like(steps[:, :1])], dim=-1)  # (8, K + 2)
+        at = window.distance.clamp(max=self.radius).flatten().contiguous()
+        upper = torch.searchsorted(knots, at, right=True).clamp(1, len(knots) - 1)
+        lower = upper - 1
+        share = ((at - knots[lower]) / (knots[upper] - knots[lower])).clamp(0.0, 1.0)
+        bias = values[:, lower] + share * (values[:, upper] - values[:, lower])
+        bias = torch.where((window.distance < self.radius).flatten(), bias, torch.zeros_like(bias))
+        return window, bias.view(-1, window.height, window.width).to(maps.dtype)
+
 
 def level_bias(maps: Tensor, centre: tuple[float, float], radius: float) -> LevelBias | None:
-    """The bias profile of the disc of ``radius`` pixels around ``centre`` (module docstring);
-    ``None`` when the image holds too little of the disc or of its reference ring.
+    """The bias profile of the disc of ``radius`` pixels around ``centre`` (module docstring),
+    measured on a copy area-averaged to at most :data:`LEVEL_WORKING_SIDE` (the scores were
+    calibrated at 256²; ring medians need no more); ``None`` when the image holds too little of the
+    disc or of its reference ring.
 
-    Shape: maps ``(8, H, W)``; output field ``(8, h, w)`` over :class:`_Window`.
+    Shape: maps ``(8, H, W)``.
     """
     check_single_maps(maps)
-    window = _Window.around(maps, centre, LEVEL_REFERENCE_WIDE * radius + 1.0)
-    distance = window.distance
-    reference = (distance > LEVEL_REFERENCE[0] * radius) & (distance <= LEVEL_REFERENCE[1] * radius)
+    height, width = maps.shape[-2:]
+    factor = max(1, math.ceil(min(height, width) / LEVEL_WORKING_SIDE))
+    work = maps.detach().double()
+    if factor > 1:
+        work = F.interpolate(work[None], size=(height // factor, width // factor), mode="area")[0]
+    scale = work.shape[-1] / width
+    small_centre, small_radius = (centre[0] * scale, centre[1] * scale), radius * scale
+    window = _Window.around(work, small_centre, LEVEL_REFERENCE_WIDE * small_radius + 1.0)
+    distance = window.distance / small_radius  # in radii
+    reference = (distance > LEVEL_REFERENCE[0]) & (distance <= LEVEL_REFERENCE[1])
     if int(reference.sum()) < LEVEL_MIN_PIXELS:
-        reference = (distance > radius) & (distance <= LEVEL_REFERENCE_WIDE * radius)
-    edges = [radius * math.sqrt(k / LEVEL_BINS) for k in range(LEVEL_BINS + 1)]
+        reference = (distance > 1.0) & (distance <= LEVEL_REFERENCE_WIDE)
+    edges = [math.sqrt(k / LEVEL_BINS) for k in range(LEVEL_BINS + 1)]
     rings = [(distance >= lo) & (distance < hi) for lo, hi in itertools.pairwise(edges)]
     if int(reference.sum()) < LEVEL_MIN_PIXELS or any(int(ring.sum()) < LEVEL_MIN_PIXELS for ring in rings):
         return None
-    work = window.read(maps.detach()).double()
-    level = work[:, reference].median(dim=-1).values  # (8,)
-    spread = 1.4826 * (work[:, reference] - level[:, None]).abs().median(dim=-1).values + 1.0 / 255.0
-    steps = torch.stack([work[:, ring].median(dim=-1).values - level for ring in rings], dim=-1)  # (8, K)
-    # Piecewise linear over each ring's middle radius (by area), flat inside the first, 0 at the edge.
-    middles = [radius * math.sqrt((k + 0.5) / LEVEL_BINS) for k in range(LEVEL_BINS)]
-    knots = torch.tensor([0.0, *middles, radius], dtype=torch.float64, device=maps.device)
-    values = torch.cat([steps[:, :1], steps, torch.zeros_like(steps[:, :1])], dim=-1)  # (8, K + 2)
-    at = distance.clamp(max=radius).to(torch.float64)
-    upper = torch.searchsorted(knots, at.flatten().contiguous(), right=True).clamp(1, len(knots) - 1)
-    lower = upper - 1
-    share = ((at.flatten() - knots[lower]) / (knots[upper] - knots[lower])).clamp(0.0, 1.0)
-    bias = values[:, lower] + share * (values[:, upper] - values[:, lower])
-    bias = torch.where((distance < radius).flatten(), bias, torch.zeros_like(bias)).view_as(work)
+    pixels = window.read(work)
+    level = pixels[:, reference].median(dim=-1).values  # (8,)
+    spread = 1.4826 * (pixels[:, reference] - level[:, None]).abs().median(dim=-1).values + 1.0 / 255.0
+    steps = torch.stack([pixels[:, ring].median(dim=-1).values - level for ring in rings], dim=-1)  # (8, K)
     relative = (steps.abs() / spread[:, None]).amax(dim=-1)  # (8,)
     scores = {name: float(relative[CHANNELS[name]].max()) for name in LEVELLED_MAPS}
     metal = float(_smoothstep(*METAL_SURFACE, level[METALLIC].max()))
-    return LevelBias(window, bias.to(maps.dtype), scores, metal)
+    return LevelBias((float(centre[0]), float(centre[1])), float(radius), steps, scores, metal)
 
 
 def level_scores(maps: Tensor, centre: tuple[float, float], radius: float) -> dict[str, float]:
@@ -353,15 +373,15 @@ def level_disc(maps: Tensor, bias: LevelBias, names: tuple[str, ...]) -> Tensor:
 
     Shape: ``(8, H, W)`` → ``(8, H, W)``.
     """
-    window = bias.window
+    window, field = bias.field(maps)
     rows = slice(window.top, window.top + window.height)
     columns = slice(window.left, window.left + window.width)
     result = maps.clone()
     for name in names:
         part = CHANNELS[name]
-        levelled = (result[part, rows, columns] - bias.field[part]).clamp(0.0, 1.0)
+        inside = result[part, rows, columns]
         result[part, rows, columns] = torch.where(
-            bias.field[part] != 0, levelled, result[part, rows, columns]
+            field[part] != 0, (inside - field[part]).clamp(0.0, 1.0), inside
         )
     return result
 
