@@ -39,6 +39,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from brdfgan.core.clipped_fill import CLIP_LEVEL as CLIP
 from brdfgan.core.exposure import auto_exposure_scale
 from brdfgan.core.render import warp_maps_to_view
 from brdfgan.core.svbrdf import NORMAL, encode_normal, linear_to_srgb
@@ -48,7 +49,6 @@ from brdfgan.data.materials.scanned import read_scanned_material, scanned_materi
 from brdfgan.data.materials.source import PaintedMaterial
 from brdfgan.data.phone.conditions import sample_as_photographed
 from brdfgan.data.phone.environments import build_environment_pools
-from brdfgan.data.phone.pairs import CLIP_LEVEL as CLIP
 from brdfgan.data.phone.pairs import flash_only_photos
 from brdfgan.data.phone.sensor import SensorEffects
 from brdfgan.data.spec.dataset_spec import (

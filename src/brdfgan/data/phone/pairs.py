@@ -35,6 +35,10 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from brdfgan.core.checks import check_shape
+
+# A linear value at or above this in any channel is clipped: the difference of two photos is wrong
+# wherever one of them lost its top (issue 59).
+from brdfgan.core.clipped_fill import CLIP_LEVEL
 from brdfgan.data.phone.conditions import CaptureSampling
 from brdfgan.data.phone.sensor import SensorEffects
 from brdfgan.data.storage.shards import ShardError
@@ -64,9 +68,6 @@ PAIR_BATCH_KEYS = ("exposure_ratio", "white_balance")
 # two shots' log gains): a fixed number whatever the settings.
 _UNIFORMS = 4
 UNIT_GAINS = (1.0, 1.0, 1.0)
-# A linear value at or above this in any channel of either photo is clipped (issue 59): the
-# difference of two photos is wrong wherever one of them lost its top.
-CLIP_LEVEL = 0.98
 
 
 def draw_exposure_ev(sampling: CaptureSampling, u: float) -> float:

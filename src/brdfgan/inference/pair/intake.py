@@ -48,8 +48,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from brdfgan.core.clipped_fill import CLIP_LEVEL
 from brdfgan.core.exposure import luminance
-from brdfgan.data.phone.pairs import CLIP_LEVEL
 from brdfgan.inference.intake.exposure_settings import ExposureSettings
 from brdfgan.inference.intake.photo import Photo
 from brdfgan.inference.intake.preprocess import Crop, resize_crop
