@@ -19,8 +19,9 @@ map, the median of each of :data:`LEVEL_BINS` equal-area rings inside the highli
 the median of the reference ring outside it (:data:`LEVEL_REFERENCE` radii) is the disc's *bias
 profile*; its largest step over the reference's spread (1.4826 × its median absolute deviation,
 plus one 8-bit level) is the map's level score. Ring medians ignore the texture, so a stationary
-texture scores ~1-2 and a visible disc well above :data:`LEVEL_THRESHOLD`, which was chosen on
-over-exposed renders of held-out materials (research/notes/2026-12-flash-leak.md). A map whose
+texture scores ~1-2 and a visible disc well above :data:`LEVEL_THRESHOLD` (3: over-exposed
+renders of held-out materials did not separate 2-5, and the wood-plank sample's disc scores 4.6
+once its clipped pixels are filled; research/notes/2026-12-flash-leak.md). A map whose
 score is above it gets the bias profile subtracted (interpolated over the radius, 0 at its edge):
 the disc's level goes, the texture in it stays. Normals are left to the detail repair, and the
 level repair stands down where the surroundings read as metal (:data:`METAL_SURFACE`): there the
@@ -56,7 +57,9 @@ from brdfgan.core.svbrdf import CHANNELS, METALLIC, check_single_maps, normalize
 # marks of the shipped model span up to ~0.11 of the side (wood planks at 256²).
 FLASH_MARK_RADIUS_FRACTION = 0.1
 # A score above it is a leak. On the shipped samples the marked maps score 2.3–19 and the clean
-# ones at most 1.8 (docs/predict.md#tileable-maps---tileable).
+# ones at most 1.8 (docs/predict.md#tileable-maps---tileable); on over-exposed renders of held-out
+# materials 2, 4 and no detail repair at all scored within 0.002 (research/notes/2026-12-flash-leak.md):
+# a clipped hotspot's disc is smooth, the level check's to find.
 LEAK_THRESHOLD = 2.0
 # One 8-bit level, squared: fine detail below it does not show.
 ENERGY_FLOOR = (1.0 / 255.0) ** 2
@@ -76,7 +79,7 @@ LEVEL_REFERENCE = (1.0, 1.5)
 LEVEL_REFERENCE_WIDE = 2.0
 LEVEL_MIN_PIXELS = 16
 LEVEL_WORKING_SIDE = 256
-LEVEL_THRESHOLD = 3.0
+LEVEL_THRESHOLD = 3.0  # module docstring
 METAL_SURFACE = (0.3, 0.6)
 LEVELLED_MAPS = ("basecolor", "roughness", "metallic")
 PATCH_DISTANCES = (2.6, 3.2, 3.8, 4.4)
