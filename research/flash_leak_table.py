@@ -38,6 +38,7 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import hydra
@@ -316,12 +317,12 @@ def calibration(renders: Sequence[Render]) -> tuple[str, float, float, float]:
         maps = fill(render, spread)
         return repair_flash_mark(maps, render.hotspot, detail, radius=radius, level_threshold=threshold)[0]
 
-    spreads = {k: hotspot_row(renders, lambda r, k=k: fill(r, k)) for k in (1.0, 0.0, 0.5, 1.5, 2.0)}
+    spreads = {k: hotspot_row(renders, partial(fill, spread=k)) for k in (1.0, 0.0, 0.5, 1.5, 2.0)}
     for k, row in spreads.items():
         add(f"clipped fill, spread {k:g}", row)
     spread = _chosen(spreads)
     levels = {
-        t: hotspot_row(renders, lambda r, t=t: level(r, spread, t, LEAK_THRESHOLD))
+        t: hotspot_row(renders, partial(level, spread=spread, threshold=t, detail=LEAK_THRESHOLD))
         for t in (3.0, 1.0, 2.0, 5.0, 8.0, math.inf)
     }
     for t, row in levels.items():
@@ -329,7 +330,8 @@ def calibration(renders: Sequence[Render]) -> tuple[str, float, float, float]:
     threshold = _chosen(levels)
     details = {LEAK_THRESHOLD: levels[threshold]}
     details |= {
-        d: hotspot_row(renders, lambda r, d=d: level(r, spread, threshold, d)) for d in (4.0, math.inf)
+        d: hotspot_row(renders, partial(level, spread=spread, threshold=threshold, detail=d))
+        for d in (4.0, math.inf)
     }
     for d in (4.0, math.inf):
         add(f"fill {spread:g} + level {threshold:g} + detail threshold {d:g}", details[d])
