@@ -242,9 +242,11 @@ def levelled(
     spread: float = RANGE_SPREAD,
     level: float = LEVEL_THRESHOLD,
     detail: float = LEAK_THRESHOLD,
+    fill: Callable[[Render, float], Tensor] = filled,
 ) -> Tensor:
+    """``fill``: where the filled maps come from (the calibration passes a cached :func:`filled`)."""
     radius = highlight_radius(render.photo, render.frame)
-    maps = filled(render, spread)
+    maps = fill(render, spread)
     return repair_flash_mark(maps, render.hotspot, detail, radius=radius, level_threshold=level)[0]
 
 
@@ -312,17 +314,12 @@ def calibration(renders: Sequence[Render]) -> tuple[str, float, float, float]:
             cache[render.name, spread] = filled(render, spread)
         return cache[render.name, spread]
 
-    def level(render: Render, spread: float, threshold: float, detail: float) -> Tensor:
-        radius = highlight_radius(render.photo, render.frame)
-        maps = fill(render, spread)
-        return repair_flash_mark(maps, render.hotspot, detail, radius=radius, level_threshold=threshold)[0]
-
     spreads = {k: hotspot_row(renders, partial(fill, spread=k)) for k in (1.0, 0.0, 0.5, 1.5, 2.0)}
     for k, row in spreads.items():
         add(f"clipped fill, spread {k:g}", row)
     spread = _chosen(spreads)
     levels = {
-        t: hotspot_row(renders, partial(level, spread=spread, threshold=t, detail=LEAK_THRESHOLD))
+        t: hotspot_row(renders, partial(levelled, spread=spread, level=t, detail=LEAK_THRESHOLD, fill=fill))
         for t in (3.0, 1.0, 2.0, 5.0, 8.0, math.inf)
     }
     for t, row in levels.items():
@@ -330,7 +327,7 @@ def calibration(renders: Sequence[Render]) -> tuple[str, float, float, float]:
     threshold = _chosen(levels)
     details = {LEAK_THRESHOLD: levels[threshold]}
     details |= {
-        d: hotspot_row(renders, partial(level, spread=spread, threshold=threshold, detail=d))
+        d: hotspot_row(renders, partial(levelled, spread=spread, level=threshold, detail=d, fill=fill))
         for d in (4.0, math.inf)
     }
     for d in (4.0, math.inf):
