@@ -44,7 +44,7 @@ import torch
 from omegaconf import OmegaConf
 from torch import Tensor, nn
 
-from brdfgan.core.exposure import auto_exposure_scale
+from brdfgan.core.exposure import auto_expose
 from brdfgan.core.svbrdf import NORMAL
 from brdfgan.data.loading.datamodule import collate_samples
 from brdfgan.data.loading.rendered import RenderedDataModule
@@ -142,8 +142,7 @@ def network_inputs(batch: Mapping[str, Any], kind: str) -> tuple[Tensor, Tensor 
         return photo, None
     pair = flash_only_photos(photo, batch["photo_noflash"], batch["exposure_ratio"], batch["white_balance"])
     if kind == "flash_only":
-        exposure = auto_exposure_scale(pair.flash_only)[:, None, None, None]
-        return (pair.flash_only * exposure).clamp(0.0, 1.0), None
+        return auto_expose(pair.flash_only)[0], None
     if kind == "pair":
         return photo, batch["photo_noflash"].clamp_min(LOG_FLOOR).log()
     flash_gain = batch["white_balance"][:, 0, :, None, None].to(photo)

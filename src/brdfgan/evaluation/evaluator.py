@@ -25,7 +25,7 @@ from torch import Tensor, nn
 from torchmetrics import MetricCollection
 
 from brdfgan.capture import FLASH_PHOTO, NO_FLASH_PHOTO
-from brdfgan.core.exposure import auto_exposure_scale
+from brdfgan.core.exposure import auto_expose
 from brdfgan.core.render import FlashCapture, PointLights, render_point_lights
 from brdfgan.core.svbrdf import encode_normal, linear_to_srgb, split_maps
 from brdfgan.data.loading.datamodule import flash_frames
@@ -102,8 +102,7 @@ def pair_row_maps(
     pair = flash_only_photos(
         photo, batch[NO_FLASH_PHOTO.batch_key].to(photo), batch["exposure_ratio"], batch["white_balance"]
     )
-    exposure = auto_exposure_scale(pair.flash_only)[:, None, None, None]
-    network_input = (pair.flash_only * exposure).clamp(0.0, 1.0)
+    network_input, _ = auto_expose(pair.flash_only)
     out: dict[str, Tensor] = {}
     from_flash_only = {
         name: models[name](network_input, flash) for name in dict.fromkeys((*rows.flash_only, *rows.fit))
