@@ -60,12 +60,38 @@ def test_the_fit_reads_relief_the_flash_alone_leaves_ambiguous() -> None:
     assert record["kept"] == "fit" and len(record["room_light"]) == 3 and record["levels"] == [32, 64]
 
 
-def test_a_flat_surface_keeps_the_networks_normals() -> None:
+def bumps(amplitude: float) -> torch.Tensor:
+    y, x = torch.meshgrid(torch.linspace(0, 1, SIZE), torch.linspace(0, 1, SIZE), indexing="ij")
+    return (amplitude * torch.sin(2 * math.pi * 2 * x) * torch.sin(2 * math.pi * 1.5 * y))[None, None]
+
+
+def test_a_flat_surface_gets_flat_normals_whatever_the_network_drew() -> None:
     flash_only, room, maps, frame, _ = pair_of(torch.zeros(1, 1, SIZE, SIZE))
     noise = torch.Generator().manual_seed(1)
     room = room * (1 + 0.01 * torch.randn(room.shape, generator=noise))
-    result = fit_pair(flash_only, room, torch.ones(1, SIZE, SIZE), maps, frame, FAST)
-    assert result.kept == "prediction" and torch.equal(result.maps, maps)
+    invented = maps.clone()
+    invented[3:6] = normals_of_height(bumps(2.0))[0]  # relief the photos refute
+    result = fit_pair(flash_only, room, torch.ones(1, SIZE, SIZE), invented, frame, FAST)
+    assert result.kept == "flat" and result.residual_prediction > result.residual_flat
+    assert torch.equal(result.maps[3:6], maps[3:6]) and torch.equal(result.maps[:3], invented[:3])
+
+
+def test_the_networks_relief_stays_where_the_photos_bear_it_out() -> None:
+    flash_only, room, maps, frame, truth = pair_of(bumps(2.0))
+    network = maps.clone()
+    network[3:6] = truth  # the network read the relief; a fit of a few steps does not
+    quick = PairFitConfig(levels=(32, 64), steps=(2, 2), flat_prior=0.02)
+    result = fit_pair(flash_only, room, torch.ones(1, SIZE, SIZE), network, frame, quick)
+    assert result.kept == "prediction" and torch.equal(result.maps, network)
+    assert result.residual_prediction < 0.5 * min(result.residual_flat, result.residual_fit)
+
+
+def test_nothing_held_out_gives_flat_normals() -> None:
+    flash_only, room, maps, frame, _ = pair_of(torch.zeros(1, 1, SIZE, SIZE))
+    network = maps.clone()
+    network[3:6] = normals_of_height(bumps(2.0))[0]
+    result = fit_pair(flash_only, room, torch.zeros(1, SIZE, SIZE), network, frame, FAST)
+    assert result.kept == "flat" and result.residual_flat == 0 and torch.equal(result.maps[3:6], maps[3:6])
 
 
 def test_metal_glints_and_invalid_pixels_are_not_read() -> None:
