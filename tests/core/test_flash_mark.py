@@ -1,6 +1,7 @@
 """The flash mark (``core/flash_mark.py``): a synthetic hotspot is detected in the maps it leaked
 into and repaired there, clean maps stay untouched (also near the image's edge), a smooth grey disc
 is levelled given the highlight's radius (not on a metal surface, not on a plain texture), and what
+a clipped disc whose texture was lost gets texture back (only where the photo clipped it), and what
 was done round-trips through ``material.json``."""
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from torch import Tensor
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.flash_geometry import hotspot_distance
 from brdfgan.core.flash_mark import (
+    CLIPPED_DISK_SHARE,
     LEAK_THRESHOLD,
     LEVEL_THRESHOLD,
     REPAIR_INNER,
@@ -49,6 +51,27 @@ def with_mark(maps: Tensor, centre: tuple[float, float]) -> Tensor:
     tilted = marked[3:6] + torch.cat([1.2 * speckle[3:5], torch.zeros(1, SIZE, SIZE, dtype=torch.float64)])
     marked[3:6] = torch.where(inside, normalize_normal(tilted), marked[3:6])
     return marked
+
+
+def test_a_clipped_disc_that_lost_its_texture_gets_texture_back_only_where_the_photo_clipped() -> None:
+    centre = (64.0, 60.0)
+    distance = hotspot_distance(torch.tensor([centre]), SIZE, SIZE)[0]
+    clipped = distance <= 0.9 * mark_radius(SIZE, SIZE)
+    clean = surface()
+    planks = torch.sin(torch.arange(SIZE, dtype=torch.float64) * 2.1).view(SIZE, 1)  # a fine grain
+    clean[0:3] = (clean[0:3] + 0.15 * planks).clamp(0.0, 1.0)
+    smooth = clean.clone()  # the clipped pixels brought into range: their texture gone
+    smooth[0:3] = torch.where(clipped, clean[0:3, ~clipped].mean(dim=-1).view(3, 1, 1), clean[0:3])
+    assert leak_scores(smooth, centre)["basecolor"] < 1.0 / LEAK_THRESHOLD
+    # Without clipping a smooth disc is no mark (a plain tile among grout lines).
+    unchanged, plain = repair_flash_mark(smooth, centre)
+    assert plain.repaired == () and torch.equal(unchanged, smooth) and plain.clipped_share == 0.0
+    repaired, mark = repair_flash_mark(smooth, centre, clipped=clipped)
+    assert mark.clipped_share > CLIPPED_DISK_SHARE and "basecolor" in mark.repaired
+    assert "normal" not in mark.repaired  # its texture was never lost
+    validate_maps(repaired)
+    assert 0.5 < leak_scores(repaired, centre)["basecolor"] < 2.0
+    assert FlashMark.from_json(json.loads(json.dumps(mark.to_json()))) == mark
 
 
 @pytest.mark.parametrize("centre", [(64.0, 60.0), (9.5, 120.0)], ids=["centre", "near a corner"])

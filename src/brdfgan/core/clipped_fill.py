@@ -470,10 +470,11 @@ def remove_flash(
     check_single_maps(maps)
     check_shape(photo, "3 H W", name="photo", dims={"H": maps.shape[-2], "W": maps.shape[-1]})
     check_flash_frame(frame, 1)
-    fill = fill_clipped(maps, clipped_mask(photo) if clipped is None else clipped, lattice=lattice)
+    clipped = clipped_mask(photo) if clipped is None else clipped
+    fill = fill_clipped(maps, clipped, lattice=lattice)
     radius = highlight_radius(photo, frame)
     hotspot = (float(frame[0, 0]), float(frame[0, 1]))
-    repaired, mark = repair_flash_mark(fill.maps, hotspot, radius=radius)
+    repaired, mark = repair_flash_mark(fill.maps, hotspot, radius=radius, clipped=clipped)
     result, _ = suppress_false_metal(repaired, photo)
     lowered = float(((repaired[METALLIC] - result[METALLIC]) > 1.0 / 255.0).float().mean())
     return result, FlashRemoval(fill, radius, mark, lowered)

@@ -27,6 +27,14 @@ the disc's level goes, the texture in it stays. Normals are left to the detail r
 level repair stands down where the surroundings read as metal (:data:`METAL_SURFACE`): there the
 highlight is the metal's own look, and a disc of bright base colour belongs to it.
 
+**Lost texture.** Where the photo clipped most of the disk (:data:`CLIPPED_DISK_SHARE`), the
+maps there hold no evidence, and once the clipped pixels are brought into their surroundings'
+range (:func:`~brdfgan.core.clipped_fill.fill_clipped`) they are smooth: a disc of plain colour in a
+textured surface, which a tile repeats (the wood-plank sample's base colour scores 0.14). A map
+whose detail score is below ``1 / threshold`` there has lost its texture to the clipping and gets
+the same patch. Without clipping, a low score is no mark: the hotspot may fall on a plain tile
+with grout around it (the ceramic sample scores 0.19, its bricks 0.32).
+
 **Repair** (:func:`repair_flash_mark`). The leaked maps get the disk (to :data:`REPAIR_INNER`
 radii, fading out by :data:`REPAIR_OUTER`) replaced by a patch of their own texture from nearby:
 the displacement among :data:`PATCH_DIRECTIONS` directions at :data:`PATCH_DISTANCES` radii whose
@@ -48,6 +56,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from brdfgan.core.checks import check_shape
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.flash_geometry import hotspot_distance
 from brdfgan.core.seamless import MAP_GROUPS, MAP_NAMES, copy_error, local_contrast, map_scales
@@ -83,6 +92,8 @@ LEVEL_THRESHOLD = 3.0  # module docstring
 METAL_SURFACE = (0.3, 0.6)
 LEVELLED_MAPS = ("basecolor", "roughness", "metallic")
 PATCH_DISTANCES = (2.6, 3.2, 3.8, 4.4)
+# The share of the scoring disk the photo must clip before a smooth disk counts as lost texture.
+CLIPPED_DISK_SHARE = 0.25
 BUSY_WEIGHT = 1.0
 
 
@@ -105,6 +116,7 @@ class FlashMark:
     levelled: tuple[str, ...] = ()
     threshold: float = LEAK_THRESHOLD
     level_threshold: float = LEVEL_THRESHOLD
+    clipped_share: float = 0.0  # of the scoring disk, clipped in the photo (module docstring)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -118,6 +130,7 @@ class FlashMark:
             "level_threshold": self.level_threshold,
             "level_scores": dict(self.level_scores),
             "levelled": list(self.levelled),
+            "clipped_share": self.clipped_share,
         }
 
     @classmethod
@@ -134,6 +147,7 @@ class FlashMark:
             levelled=tuple(str(name) for name in record.get("levelled", ())),
             threshold=float(record.get("threshold", LEAK_THRESHOLD)),
             level_threshold=float(record.get("level_threshold", LEVEL_THRESHOLD)),
+            clipped_share=float(record.get("clipped_share", 0.0)),
         )
 
 
@@ -396,15 +410,17 @@ def repair_flash_mark(
     *,
     radius: float | None = None,
     level_threshold: float = LEVEL_THRESHOLD,
+    clipped: Tensor | None = None,
 ) -> tuple[Tensor, FlashMark]:
     """The maps with the flash mark removed (module docstring), and what was found and done: first,
     given the highlight's ``radius`` in pixels (:func:`~brdfgan.core.clipped_fill.highlight_radius`
     of the photo), the disc's level taken out of the maps whose level score is above
     ``level_threshold`` unless the surroundings read as metal (``None`` or 0: no level check, as
     without a photo); then the patch copied into the maps whose detail score is above
-    ``threshold``.
+    ``threshold``, or, where ``clipped`` (the photo's clipped pixels) covers
+    :data:`CLIPPED_DISK_SHARE` of the disk, below ``1 / threshold`` (lost texture).
 
-    Shape: ``(8, H, W)`` → ``(8, H, W)``; centre ``(x, y)`` in pixels.
+    Shape: ``(8, H, W)`` → ``(8, H, W)``; centre ``(x, y)`` in pixels; clipped ``(H, W)`` bool.
     """
     check_single_maps(maps)
     if not all(math.isfinite(v) for v in centre):
@@ -419,7 +435,12 @@ def repair_flash_mark(
         levelled = tuple(name for name in LEVELLED_MAPS if bias.scores[name] > level_threshold)
     levelled_maps = level_disc(maps, bias, levelled) if bias is not None and levelled else maps
     scores = leak_scores(levelled_maps, centre)
-    leaked = tuple(name for name in MAP_NAMES if scores[name] > threshold)
+    share = clipped_disk_share(clipped, centre) if clipped is not None else 0.0
+    leaked = tuple(
+        name
+        for name in MAP_NAMES
+        if scores[name] > threshold or (share >= CLIPPED_DISK_SHARE and scores[name] < 1.0 / threshold)
+    )
     offset = find_patch(levelled_maps, centre) if leaked else None
     repaired = fill_disk(levelled_maps, centre, offset, leaked) if offset is not None else levelled_maps
     record = FlashMark(
@@ -433,5 +454,28 @@ def repair_flash_mark(
         levelled=levelled,
         threshold=threshold,
         level_threshold=level_threshold,
+        clipped_share=share,
     )
     return repaired, record
+
+
+def clipped_disk_share(clipped: Tensor, centre: tuple[float, float]) -> float:
+    """The share of the scoring disk (:func:`mark_radius` around ``centre``) that ``clipped`` covers;
+    0 when the disk holds no pixel of the image.
+
+    Shape: ``(H, W)`` bool.
+
+    Example:
+        >>> clipped = torch.zeros(100, 100, dtype=torch.bool)
+        >>> clipped[40:60, 40:60] = True  # a 20-pixel square in the 10-pixel-radius disk
+        >>> clipped_disk_share(clipped, (50.0, 50.0))
+        1.0
+        >>> clipped_disk_share(clipped, (10.0, 10.0))
+        0.0
+    """
+    check_shape(clipped, "H W", name="clipped")
+    window = _Window.around(clipped[None], centre, mark_radius(*clipped.shape) + 1.0)
+    inside = window.distance <= mark_radius(*clipped.shape)
+    if not inside.any():
+        return 0.0
+    return float(window.read(clipped[None])[0][inside].float().mean())

@@ -6,7 +6,9 @@ For each photo::
       → preprocess (square crop on the flash hotspot, linear resize, the training auto exposure)
       → the generator, tiled with frozen normalisation statistics when large          model
       [→ refine_maps: the maps fitted to the photo with the differentiable renderer (--refine)]
-      [→ make_tileable: the flash mark repaired, then the maps rolled and cut into a tile that wraps
+      → remove_flash: clipped pixels filled, the hotspot's disc levelled, no metal on thin dark
+        features (core.clipped_fill)
+      [→ make_tileable: whole lattice cells, or the maps rolled and cut into a tile that wraps
          (--tileable)]
       → write_material (textures, material.glb, material.json, preview.png [, preview.gif/mp4],
                         index.html: the material viewer)                                   outputs
@@ -32,6 +34,7 @@ from typing import Any, Literal
 import torch
 from torch import Tensor, nn
 
+from brdfgan.core.clipped_fill import clipped_mask, remove_flash
 from brdfgan.core.flash_geometry import centred_flash_frame, resize_flash_frame
 from brdfgan.core.flash_mark import FlashMark, repair_flash_mark
 from brdfgan.core.lattice import (
@@ -55,7 +58,7 @@ from brdfgan.core.seamless import (
 from brdfgan.core.svbrdf import NUM_CHANNELS
 from brdfgan.inference.intake.lens import FieldOfView, crop_field_of_view
 from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, Photo, read_photo
-from brdfgan.inference.intake.preprocess import Crop, CropSized, Preprocessed, preprocess
+from brdfgan.inference.intake.preprocess import Crop, CropSized, Preprocessed, clipped_in_crop, preprocess
 from brdfgan.inference.model.guided import (
     DEFAULT_NETWORK_CAP,
     MapsAndCorrections,
@@ -330,7 +333,11 @@ class TileableRecord:
 
 
 def make_tileable(
-    maps: Tensor, hotspot: tuple[float, float], *, align_pattern: bool = False
+    maps: Tensor,
+    hotspot: tuple[float, float],
+    *,
+    align_pattern: bool = False,
+    flash_mark: FlashMark | None = None,
 ) -> tuple[Tensor, TileableRecord]:
     """``--tileable``: the flash mark repaired where it leaked into the maps (:mod:`brdfgan.core.flash_mark`,
     ``hotspot`` ``(x, y)`` in the maps' pixels), so that no tile repeats it; then, for a material
@@ -340,13 +347,15 @@ def make_tileable(
     own direction nearest an axis becomes it, ``--align-pattern``); for any other material, or a
     lattice whose cells do not fit, rolled and cut into a tile
     (:func:`~brdfgan.core.seamless.make_seamless`, unchanged), with the record of all.
+    ``flash_mark``: the repair already made (``brdfgan predict``'s
+    :func:`~brdfgan.core.clipped_fill.remove_flash`): the maps are taken as repaired.
 
     Shape: ``(8, H, W)`` → ``(8, H, W)``.
     """
     height, width = maps.shape[-2:]
     if min(height, width) < MIN_SIDE:
         raise PredictError(f"--tileable needs maps of at least {MIN_SIDE}×{MIN_SIDE}, got {height}×{width}")
-    repaired, mark = repair_flash_mark(maps, hotspot)
+    repaired, mark = repair_flash_mark(maps, hotspot) if flash_mark is None else (maps, flash_mark)
     before = {name: wrap_ratios(image) for name, image in zip(MAP_NAMES, file_units(maps), strict=True)}
     lattice = find_lattice(repaired)
     cells = None
@@ -533,11 +542,20 @@ def write_prediction(
     Shape: maps ``(8, N, N)``."""
     options = predictor.options
     prepared, flash_frame = reference.prepared, reference.flash_frame
+    with clock("flash"):
+        # Clipped in the network's input, or under a clipped pixel of the photo itself (exposure
+        # may have scaled a saturated source below the clipping level).
+        clipped = clipped_mask(prepared.photo)
+        if reference.photo.source != "exr":
+            clipped |= clipped_in_crop(reference.photo.linear, prepared.crop, reference.side)[0]
+        maps, flash_removal = remove_flash(maps, prepared.photo, flash_frame, clipped=clipped)
     tiling: TileableRecord | None = None
     if options.tileable:
         with clock("tileable"):
             hotspot = (float(flash_frame[0, 0]), float(flash_frame[0, 1]))
-            maps, tiling = make_tileable(maps, hotspot, align_pattern=options.align_pattern)
+            maps, tiling = make_tileable(
+                maps, hotspot, align_pattern=options.align_pattern, flash_mark=flash_removal.mark
+            )
         if tiling.note is not None:
             warnings = (*warnings, tiling.note)
     metadata = {
@@ -551,6 +569,9 @@ def write_prediction(
         # Which path ran: tiling, the network's side, the output's, the guided upsampling.
         "inference": predictor.inference_record(reference.side),
         **records,
+        # The flash taken out of the maps: clipped pixels filled, the hotspot's disc levelled,
+        # metal lowered on thin dark features (brdfgan.core.clipped_fill.remove_flash).
+        "flash_removal": flash_removal.to_json(),
         # --tileable: the flash mark's repair, the cut's copies, wrap ratios and copied fractions.
         "tileable": tiling.to_json() if tiling is not None else None,
         "input_statistics": prepared.stats,

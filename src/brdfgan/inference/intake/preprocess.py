@@ -37,6 +37,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from brdfgan.core.checks import check_shape
+from brdfgan.core.clipped_fill import CLIP_LEVEL
 from brdfgan.core.exposure import SATURATION_LEVEL, auto_expose, luminance
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.flash_geometry import pixel_scale
@@ -521,6 +522,16 @@ def resize_crop(region: Tensor, resolution: int) -> Tensor:
     else:
         out = F.interpolate(batch, size=(resolution, resolution), mode="bicubic", align_corners=False)
     return out[0]
+
+
+def clipped_in_crop(linear: Tensor, crop: Crop, side: int) -> Tensor:
+    """The output pixels of ``crop`` resized to ``side`` (as :func:`resize_crop` resizes it) with a
+    clipped source pixel under them: any channel at :data:`~brdfgan.core.clipped_fill.CLIP_LEVEL`
+    or more. Meaningful for sources where 1.0 is saturation (not EXR).
+
+    Shape: ``(3, H, W)`` source values → ``(1, N, N)`` bool."""
+    clipped = crop.slice((linear >= CLIP_LEVEL).any(dim=0, keepdim=True)).float()
+    return resize_crop(clipped, side) > 0
 
 
 def _subsampled(image: Tensor) -> Tensor:

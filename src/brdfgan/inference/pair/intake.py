@@ -52,7 +52,7 @@ from brdfgan.core.clipped_fill import CLIP_LEVEL
 from brdfgan.core.exposure import luminance
 from brdfgan.inference.intake.exposure_settings import ExposureSettings
 from brdfgan.inference.intake.photo import Photo
-from brdfgan.inference.intake.preprocess import Crop, resize_crop
+from brdfgan.inference.intake.preprocess import Crop, clipped_in_crop, resize_crop
 from brdfgan.inference.views.geometry import texture_to_photo
 from brdfgan.inference.views.register import (
     Registration,
@@ -371,13 +371,11 @@ def pair_images(
     Shape: frame ``(1, 3)`` of the ``side × side`` crop; outputs :class:`PairImages`."""
     flash_crop = resize_crop(crop.slice(flash.linear).float(), side)
     # Any clipped photo pixel under an output pixel makes it clipped.
-    flash_clipped = resize_crop(
-        crop.slice((flash.linear >= CLIP_LEVEL).any(dim=0, keepdim=True)).float(), side
-    )
+    flash_clipped = clipped_in_crop(flash.linear, crop, side)
     no_flash_from_crop = registration.homography @ texture_to_photo(crop, side)
     warped, seen = warp_to_reference(no_flash.linear, no_flash_from_crop, side)
     no_flash_clipped = no_flash.linear >= CLIP_LEVEL
-    valid = seen * (flash_clipped <= 0).float()
+    valid = seen * (~flash_clipped).float()
     if bool(no_flash_clipped.any()):  # rare in a no-flash photo: the second warp only when needed
         clipped_warped, _ = warp_to_reference(no_flash_clipped.float(), no_flash_from_crop, side)
         valid = valid * (clipped_warped <= 0).all(dim=0, keepdim=True).float()
