@@ -165,6 +165,30 @@ def test_a_periodic_material_is_filled_from_the_same_cell_elsewhere() -> None:
         lattice_fill(marked[0:3], inside, ((10.0, 0.0), (20.0, 0.0)))
 
 
+def test_a_periodic_materials_hotspot_dot_and_halo_come_from_its_cells_at_the_local_level() -> None:
+    vectors = ((40.0, 0.0), (0.0, 40.0))  # cells four times the disc's reach across
+    truth = grid_tiles(vectors)
+    # The network's maps drift in level across the photo, with a dot and a dark halo on the hotspot
+    # (the ceramic sample's): nothing clipped.
+    drift = 0.1 * torch.linspace(-1.0, 1.0, SIZE, dtype=torch.float64).view(1, SIZE)
+    network = truth.clone()
+    network[0:3] = truth[0:3] + drift
+    halo = disc(10.0) & ~disc(3.0)
+    network[0:3, halo] -= 0.1
+    network[0:3, disc(3.0)] = 0.95
+    frame = centred_flash_frame(1, SIZE, SIZE, dtype=torch.float64)
+    photo = 0.4 * flat_flash_falloff(frame, SIZE, SIZE)[0].expand(3, SIZE, SIZE)  # matte, unclipped
+    removed, record = remove_flash(network, photo, frame, lattice=vectors)
+    expected = truth[0:3] + drift  # the cells' pattern at the disc's own level
+    inside = disc(10.0)
+    before = float((network[0:3, inside] - expected[:, inside]).abs().mean())
+    after = float((removed[0:3, inside] - expected[:, inside]).abs().mean())
+    assert after < 0.02 < before, (before, after)
+    far = ~disc(1.3 * 1.1 * 0.1 * SIZE + 1.0)  # beyond the blend (REPAIR_INNER × the mark's radius)
+    assert torch.equal(removed[:, far], network[:, far]) and torch.equal(removed[3:6], network[3:6])
+    assert record.fill.method == "none"  # nothing clipped: the disc is the lattice's, not the fill's
+
+
 def test_metal_in_thin_dark_grout_is_suppressed_and_real_metal_stays() -> None:
     truth = grid_tiles(((24.0, 0.0), (0.0, 24.0)))
     grout = truth[0] < 0.5

@@ -114,11 +114,13 @@ def test_tileable_predictions_of_the_shipped_samples_wrap_and_plain_ones_are_unc
 ) -> None:
     from importlib import resources
 
+    from brdfgan.core.clipped_fill import remove_flash
+    from brdfgan.core.flash_geometry import DEFAULT_FOV_DEG
     from brdfgan.inference.intake.photo import read_photo
     from brdfgan.inference.intake.preprocess import preprocess
     from brdfgan.inference.model.weights import load_model
     from brdfgan.inference.outputs.export import ExportOptions, texture_set
-    from brdfgan.inference.pipeline import PredictOptions, Predictor, predict_photo
+    from brdfgan.inference.pipeline import PredictOptions, Predictor, input_clipped, predict_photo
     from brdfgan.io.images import read_image
 
     model = load_model(None)
@@ -138,11 +140,16 @@ def test_tileable_predictions_of_the_shipped_samples_wrap_and_plain_ones_are_unc
             image = torch.from_numpy(read_image(out / f"{name}.png")).permute(2, 0, 1).double()
             columns, rows = wrap_ratios(image)
             assert columns < 1.2 and rows < 1.2, (photo.name, name, columns, rows)
-    # Without --tileable the maps are the network's, as before (only height and ao are new files).
+    # Without --tileable the maps are the network's with the flash taken out, as before (only
+    # height and ao are new files).
     plain = Predictor.create(model, PredictOptions(preview=False))
     out = predict_photo(samples[0], tmp_path / "plain", plain).output
-    prepared = preprocess(read_photo(samples[0]), plain.resolution, None)
-    maps = plain.maps(prepared.photo)
+    photo = read_photo(samples[0])
+    prepared = preprocess(photo, plain.resolution, None)
+    frame = prepared.flash_frame(DEFAULT_FOV_DEG)
+    maps, _ = remove_flash(
+        plain.maps(prepared.photo, frame), prepared.photo, frame, clipped=input_clipped(photo, prepared)
+    )
     expected = texture_set(maps, ExportOptions())
     for name in ("basecolor", "normal", "roughness", "metallic"):
         stored = read_image(out / f"{name}.png")

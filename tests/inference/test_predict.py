@@ -17,7 +17,7 @@ from brdfgan.errors import USER_ERROR_EXIT_CODE
 from brdfgan.inference.model.weights import load_model
 from brdfgan.inference.outputs.export import ExportError, ExportOptions, texture_set, write_material
 from brdfgan.inference.outputs.gltf import PNG_SIGNATURE
-from brdfgan.inference.pipeline import PredictOptions, Predictor, output_names, predict_photo
+from brdfgan.inference.pipeline import PredictOptions, Predictor, input_clipped, output_names, predict_photo
 from brdfgan.io.images import read_image
 from brdfgan.models.anchored import AnchoredUNet
 from brdfgan.models.generator import Generator
@@ -352,10 +352,10 @@ def test_high_resolution_runs_tiled_and_matches_the_untiled_prediction(tmp_path:
 
 
 def test_a_flash_aware_model_gets_the_detected_hotspot_and_the_field_of_view(tmp_path: Path) -> None:
-    from brdfgan.core.clipped_fill import clipped_mask, remove_flash
+    from brdfgan.core.clipped_fill import remove_flash
     from brdfgan.core.flash_geometry import DEFAULT_FOV_DEG, centred_flash_frame, pixel_scale
     from brdfgan.inference.intake.photo import read_photo
-    from brdfgan.inference.intake.preprocess import Crop, clipped_in_crop, preprocess
+    from brdfgan.inference.intake.preprocess import Crop, preprocess
     from brdfgan.inference.model.tiling import predict_direct
 
     torch.manual_seed(0)
@@ -381,7 +381,7 @@ def test_a_flash_aware_model_gets_the_detected_hotspot_and_the_field_of_view(tmp
     loaded = load_model(path).generator
     expected = predict_direct(loaded, prepared.photo[None], frame)[0]
     # … with the flash taken out as predict takes it (the clipped hotspot's roughness filled).
-    clipped = clipped_mask(prepared.photo) | clipped_in_crop(read_photo(photo_path).linear, crop, 64)[0]
+    clipped = input_clipped(read_photo(photo_path), prepared)
     removed, _ = remove_flash(expected, prepared.photo, frame, clipped=clipped)
     written = torch.from_numpy(read_rgb(result.output / "roughness.png")[..., 0]).float()
     torch.testing.assert_close(written, removed[6], atol=0.6 / 255, rtol=0)

@@ -18,7 +18,9 @@ metallic there only as far as the surroundings contradict them:
 - **from the same cell elsewhere** (:func:`lattice_fill`), for a periodic material whose two
   lattice vectors are known: the median of the unclipped twins one or two periods away, which
   keeps the pattern (a grout line crossing the hole stays a grout line); pixels with no unclipped
-  twin fall back to the clamp.
+  twin fall back to the clamp. Given a lattice, :func:`remove_flash` fills the hotspot's whole disc
+  this way (the larger of the flash mark's reach and the highlight's), clipped or not: on a plain
+  tile the network leaves a dot and a halo there that a tiled sheet would repeat.
 
 Normals are kept: a clipped hotspot leaves them flat rather than wrong, and the flash-mark repair
 patches a dimple.
@@ -58,7 +60,7 @@ from brdfgan.core.delit import delit_photo
 from brdfgan.core.exposure import luminance
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.flash_geometry import check_flash_frame, hotspot_distance, resize_flash_frame
-from brdfgan.core.flash_mark import FlashMark, repair_flash_mark
+from brdfgan.core.flash_mark import REPAIR_INNER, FlashMark, mark_radius, repair_flash_mark
 from brdfgan.core.svbrdf import BASECOLOR, METALLIC, ROUGHNESS, check_single_maps, srgb_to_linear
 
 # A pixel with a channel at or above this is clipped (the refinement's and the pair fit's level).
@@ -232,6 +234,56 @@ def lattice_fill(
     return result, found
 
 
+# What a fill changes: normals are kept (module docstring).
+FILLED_MAPS = (BASECOLOR, ROUGHNESS, METALLIC)
+# The lattice disc blends into the maps over this many times its reach; the ring there sets its level.
+LATTICE_DISC_BLEND = 1.3
+
+
+def lattice_disc(
+    maps: Tensor, distance: Tensor, reach: float, vectors: tuple[tuple[float, float], tuple[float, float]]
+) -> Tensor:
+    """Base colour, roughness and metallic within ``reach`` of the hotspot (``distance`` in pixels)
+    taken from the same place in other cells (:func:`lattice_fill`), shifted by the median
+    difference between the maps and their twins on the ring out to :data:`LATTICE_DISC_BLEND` ×
+    ``reach`` (the network's maps drift in level across the photo: the twins are farther from the
+    flash) and blended out over that ring. Pixels with no twin, and beyond the ring, are unchanged.
+
+    Shape: maps ``(8, H, W)``; distance ``(H, W)`` → ``(8, H, W)``.
+    """
+    check_single_maps(maps)
+    check_shape(distance, "H W", name="distance", dims={"H": maps.shape[-2], "W": maps.shape[-1]})
+    outer = LATTICE_DISC_BLEND * reach
+    area = distance <= outer
+    if not bool(area.any()):
+        return maps
+    channels = _filled_channels(maps)
+    twins, found = lattice_fill(channels, area, vectors)
+    ring = found & (distance > reach) & area
+    if not bool(ring.any()):
+        return maps
+    level = (channels - twins)[:, ring].median(dim=-1).values.view(-1, 1, 1)
+    weight = (1.0 - _smoothstep(reach, outer, distance)).to(maps.dtype) * found.to(maps.dtype)
+    blended = (channels + weight * (twins + level - channels)).clamp(0.0, 1.0)
+    return _with_filled_maps(maps, torch.where(area[None], blended, channels))
+
+
+def _filled_channels(maps: Tensor) -> Tensor:
+    """The channels of :data:`FILLED_MAPS`, stacked. Shape: ``(8, H, W)`` → ``(5, H, W)``."""
+    return torch.cat([maps[part] for part in FILLED_MAPS])
+
+
+def _with_filled_maps(maps: Tensor, channels: Tensor) -> Tensor:
+    """``maps`` with :data:`FILLED_MAPS` replaced by ``channels``. Shape: ``(8, H, W)``, ``(5, H, W)``."""
+    result = maps.clone()
+    start = 0
+    for part in FILLED_MAPS:
+        count = part.stop - part.start
+        result[part] = channels[start : start + count]
+        start += count
+    return result
+
+
 @dataclass(frozen=True)
 class ClippedFill:
     """What :func:`fill_clipped` did: the ``maps``; the share of pixels clipped (the mask given), of
@@ -253,9 +305,6 @@ class ClippedFill:
             "lattice_fraction": self.lattice_fraction,
             "method": self.method,
         }
-
-
-FILLED_MAPS = (BASECOLOR, ROUGHNESS, METALLIC)
 
 
 def fill_clipped(
@@ -280,7 +329,7 @@ def fill_clipped(
     pixels = clipped.numel()
     if not bool(clipped.any()) or bool(clipped.all()):
         return ClippedFill(maps, float(clipped.float().mean()), 0.0, 0.0, "none")
-    channels = torch.cat([maps[part] for part in FILLED_MAPS])  # (5, H, W)
+    channels = _filled_channels(maps)
     low, high = surroundings_range(channels, (~clipped).to(maps.dtype), spread)
     filled = torch.minimum(torch.maximum(channels, low), high)
     found = torch.zeros_like(clipped)
@@ -288,14 +337,8 @@ def fill_clipped(
         twins, found = lattice_fill(channels, clipped, lattice)
         filled = torch.where(found[None], twins, filled)
     filled = torch.where(clipped[None], filled.clamp(0.0, 1.0), channels)
-    result = maps.clone()
-    start = 0
-    for part in FILLED_MAPS:
-        count = part.stop - part.start
-        result[part] = filled[start : start + count]
-        start += count
     return ClippedFill(
-        maps=result,
+        maps=_with_filled_maps(maps, filled),
         clipped_fraction=float(clipped.sum()) / pixels,
         changed_fraction=float((filled != channels).any(dim=0).sum()) / pixels,
         lattice_fraction=float((found & clipped).sum()) / pixels,
@@ -457,7 +500,8 @@ def remove_flash(
     lattice: tuple[tuple[float, float], tuple[float, float]] | None = None,
 ) -> tuple[Tensor, FlashRemoval]:
     """The flash taken out of maps predicted from ``photo`` (module docstring): the clipped pixels
-    filled (:func:`fill_clipped`, ``clipped`` defaulting to :func:`clipped_mask` of the photo), the
+    filled (:func:`fill_clipped`, ``clipped`` defaulting to :func:`clipped_mask` of the photo; with
+    a ``lattice``, the hotspot's disc too, from its twins in other cells), the
     hotspot's disc levelled and a leaked blotch patched within the highlight's radius
     (:func:`~brdfgan.core.flash_mark.repair_flash_mark`), and thin dark features' metal lowered
     (:func:`suppress_false_metal`). A photo with nothing clipped, no highlight and no thin dark
@@ -471,8 +515,15 @@ def remove_flash(
     check_shape(photo, "3 H W", name="photo", dims={"H": maps.shape[-2], "W": maps.shape[-1]})
     check_flash_frame(frame, 1)
     clipped = clipped_mask(photo) if clipped is None else clipped
-    fill = fill_clipped(maps, clipped, lattice=lattice)
     radius = highlight_radius(photo, frame)
+    if lattice is not None:
+        # A periodic material's hotspot disc comes from the same place in other cells: the mark's
+        # reach or the highlight's, whichever is larger (a dot and its halo on a plain tile).
+        distance = hotspot_distance(frame[:, :2].double(), *maps.shape[-2:])[0]
+        reach = max(REPAIR_INNER * mark_radius(*maps.shape[-2:]), radius)
+        maps = lattice_disc(maps, distance, reach, lattice)
+        clipped = clipped & (distance > reach)
+    fill = fill_clipped(maps, clipped, lattice=lattice)
     hotspot = (float(frame[0, 0]), float(frame[0, 1]))
     repaired, mark = repair_flash_mark(fill.maps, hotspot, radius=radius, clipped=clipped)
     result, _ = suppress_false_metal(repaired, photo)

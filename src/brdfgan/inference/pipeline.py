@@ -338,6 +338,7 @@ def make_tileable(
     *,
     align_pattern: bool = False,
     flash_mark: FlashMark | None = None,
+    lattice: Lattice | None = None,
 ) -> tuple[Tensor, TileableRecord]:
     """``--tileable``: the flash mark repaired where it leaked into the maps (:mod:`brdfgan.core.flash_mark`,
     ``hotspot`` ``(x, y)`` in the maps' pixels), so that no tile repeats it; then, for a material
@@ -348,7 +349,8 @@ def make_tileable(
     lattice whose cells do not fit, rolled and cut into a tile
     (:func:`~brdfgan.core.seamless.make_seamless`, unchanged), with the record of all.
     ``flash_mark``: the repair already made (``brdfgan predict``'s
-    :func:`~brdfgan.core.clipped_fill.remove_flash`): the maps are taken as repaired.
+    :func:`~brdfgan.core.clipped_fill.remove_flash`): the maps are taken as repaired; ``lattice``:
+    the maps' lattice found before that repair (else found here).
 
     Shape: ``(8, H, W)`` → ``(8, H, W)``.
     """
@@ -357,7 +359,7 @@ def make_tileable(
         raise PredictError(f"--tileable needs maps of at least {MIN_SIDE}×{MIN_SIDE}, got {height}×{width}")
     repaired, mark = repair_flash_mark(maps, hotspot) if flash_mark is None else (maps, flash_mark)
     before = {name: wrap_ratios(image) for name, image in zip(MAP_NAMES, file_units(maps), strict=True)}
-    lattice = find_lattice(repaired)
+    lattice = find_lattice(repaired) if lattice is None else lattice
     cells = None
     if lattice.periodic and lattice.vectors is not None:
         cells = choose_cells(lattice.vectors, height, width, align=align_pattern)
@@ -525,6 +527,18 @@ def network_reference(
     return ReferencePrediction(photo, prepared, fov_deg, fov_source, flash_frame, maps)
 
 
+def input_clipped(photo: Photo, prepared: Preprocessed) -> Tensor:
+    """The network input's pixels that say nothing of the surface but that it was bright: clipped
+    in the input itself, or under a clipped pixel of the photo (the exposure may have scaled a
+    saturated source below the clipping level; not for EXR, which has none).
+
+    Shape: → ``(N, N)`` bool, the input's size."""
+    clipped = clipped_mask(prepared.photo)
+    if photo.source != "exr":
+        clipped |= clipped_in_crop(photo.linear, prepared.crop, int(prepared.photo.shape[-1]))[0]
+    return clipped
+
+
 def write_prediction(
     reference: ReferencePrediction,
     maps: Tensor,
@@ -543,18 +557,23 @@ def write_prediction(
     options = predictor.options
     prepared, flash_frame = reference.prepared, reference.flash_frame
     with clock("flash"):
-        # Clipped in the network's input, or under a clipped pixel of the photo itself (exposure
-        # may have scaled a saturated source below the clipping level).
-        clipped = clipped_mask(prepared.photo)
-        if reference.photo.source != "exr":
-            clipped |= clipped_in_crop(reference.photo.linear, prepared.crop, reference.side)[0]
-        maps, flash_removal = remove_flash(maps, prepared.photo, flash_frame, clipped=clipped)
+        clipped = input_clipped(reference.photo, prepared)
+        # A tile's lattice, found first: a periodic material's hotspot disc is filled from its cells.
+        lattice = find_lattice(maps) if options.tileable else None
+        vectors = lattice.vectors if lattice is not None and lattice.periodic else None
+        maps, flash_removal = remove_flash(
+            maps, prepared.photo, flash_frame, clipped=clipped, lattice=vectors
+        )
     tiling: TileableRecord | None = None
     if options.tileable:
         with clock("tileable"):
             hotspot = (float(flash_frame[0, 0]), float(flash_frame[0, 1]))
             maps, tiling = make_tileable(
-                maps, hotspot, align_pattern=options.align_pattern, flash_mark=flash_removal.mark
+                maps,
+                hotspot,
+                align_pattern=options.align_pattern,
+                flash_mark=flash_removal.mark,
+                lattice=lattice,
             )
         if tiling.note is not None:
             warnings = (*warnings, tiling.note)
