@@ -45,11 +45,12 @@ WRAP_GOAL = 1.2
 COPIED_GOAL = 0.85
 
 
-Item = tuple[str, Tensor, tuple[float, float]]  # (name, maps, hotspot (x, y) in the maps' pixels)
+# (name, maps, flash frame (1, 3) of the maps' pixels, the network's input photo (None: synthetic))
+Item = tuple[str, Tensor, Tensor, Tensor | None]
 
 
 def photo_maps(photos: list[Path], weights: Path | None) -> Iterator[Item]:
-    """``(name, maps, hotspot)`` per photo file, as ``brdfgan predict`` makes the maps."""
+    """``(name, maps, frame, photo)`` per photo file, as ``brdfgan predict`` makes the maps."""
     from brdfgan.inference.intake.lens import crop_field_of_view
     from brdfgan.inference.intake.photo import read_photo
     from brdfgan.inference.intake.preprocess import preprocess
@@ -66,11 +67,11 @@ def photo_maps(photos: list[Path], weights: Path | None) -> Iterator[Item]:
         frame = prepared.flash_frame(fov)
         with torch.no_grad():
             maps = predictor.maps(prepared.photo, frame)
-        yield path.stem, maps, (float(frame[0, 0]), float(frame[0, 1]))
+        yield path.stem, maps, frame, prepared.photo
 
 
 def shard_maps(root: Path, split: str, weights: Path | None) -> Iterator[Item]:
-    """``(key, maps, hotspot)`` per sample of a dataset split, the network run on the stored photo
+    """``(key, maps, frame, photo)`` per sample of a dataset split, the network run on the stored photo
     with the sample's flash frame (what the evaluator does)."""
     from brdfgan.data.loading.datamodule import flash_frames
     from brdfgan.data.storage.shards import iter_shard, list_shards
@@ -87,7 +88,7 @@ def shard_maps(root: Path, split: str, weights: Path | None) -> Iterator[Item]:
             frame = flash_frames([sample.meta], height, width)
             with torch.no_grad():
                 maps = predictor.maps(sample.photo.float(), frame)
-            yield sample.key, maps, (float(frame[0, 0]), float(frame[0, 1]))
+            yield sample.key, maps, frame, sample.photo.float()
 
 
 def network_maps(source: Path, split: str = "test", weights: Path | None = None) -> Iterator[Item]:
@@ -132,10 +133,16 @@ def measure(name: str, maps: Tensor, hotspot: tuple[float, float]) -> dict[str, 
     }
 
 
-def _large(maps: Tensor, hotspot: tuple[float, float], side: int) -> dict[str, Any]:
+def _large(maps: Tensor, frame: Tensor, photo: Tensor | None, side: int) -> dict[str, Any]:
     """Wall and CPU seconds of ``make_tileable`` on ``maps`` enlarged to ``side``², the path it took
     there (``whole cells`` or ``cut``), and the CPU seconds of its steps timed again one by one (the
-    flash-mark repair, the lattice detection, the tile on that path)."""
+    flash-mark repair, the lattice detection, the tile on that path), and of ``brdfgan predict``'s
+    flash removal (:func:`~brdfgan.core.clipped_fill.remove_flash`, with the lattice on a periodic
+    material) on the photo enlarged with them (``None`` without a photo)."""
+    import torch.nn.functional as F
+
+    from brdfgan.core.clipped_fill import remove_flash
+    from brdfgan.core.flash_geometry import resize_flash_frame
     from brdfgan.core.flash_mark import repair_flash_mark
     from brdfgan.core.lattice import find_lattice, tile_whole_cells
     from brdfgan.core.seamless import make_seamless
@@ -144,7 +151,8 @@ def _large(maps: Tensor, hotspot: tuple[float, float], side: int) -> dict[str, A
 
     factor = side / maps.shape[-1]
     large = resize_maps(maps, side)
-    centre = (hotspot[0] * factor, hotspot[1] * factor)
+    large_frame = resize_flash_frame(frame, factor)
+    centre = (float(large_frame[0, 0]), float(large_frame[0, 1]))
     start, cpu = time.perf_counter(), time.process_time()
     _, record = make_tileable(large, centre)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu
@@ -161,6 +169,13 @@ def _large(maps: Tensor, hotspot: tuple[float, float], side: int) -> dict[str, A
     else:
         make_seamless(repaired)
     tile = time.process_time() - step
+    flash_removal = None
+    if photo is not None:
+        large_photo = F.interpolate(photo[None].float(), size=(side, side), mode="bilinear")[0].clamp(0, 1)
+        lattice = find_lattice(large)
+        step = time.process_time()
+        remove_flash(large, large_photo, large_frame, lattice=lattice.vectors if lattice.periodic else None)
+        flash_removal = time.process_time() - step
     return {
         "seconds": wall,
         "cpu_seconds": cpu,
@@ -168,13 +183,15 @@ def _large(maps: Tensor, hotspot: tuple[float, float], side: int) -> dict[str, A
         "repair_cpu_seconds": repair,
         "detection_cpu_seconds": detection,
         "tile_cpu_seconds": tile,
+        "flash_removal_cpu_seconds": flash_removal,
     }
 
 
-def synthetic_grid(side: int = 256) -> tuple[Tensor, tuple[float, float]]:
+def synthetic_grid(side: int = 256) -> tuple[Tensor, Tensor, None]:
     """A 45° grid of glazed tiles in recessed grout (the ceramic sample's layout, five cells a
     side), with a little shading noise: a periodic input when the photos hold none. Shape:
-    ``(8, side, side)`` float32 and the centre as hotspot."""
+    ``(8, side, side)`` float32, the centred flash frame, and no photo."""
+    from brdfgan.core.flash_geometry import centred_flash_frame
     from brdfgan.core.svbrdf import join_maps, normalize_normal
 
     generator = torch.Generator().manual_seed(0)
@@ -190,11 +207,28 @@ def synthetic_grid(side: int = 256) -> tuple[Tensor, tuple[float, float]]:
     gy, gx = torch.gradient(-grout)
     normal = normalize_normal(torch.stack([-0.6 * gx, 0.6 * gy, torch.ones_like(gx)]))
     roughness = (0.2 + 0.6 * grout)[None]
-    return join_maps(basecolor, normal, roughness, torch.zeros_like(roughness)), (side / 2, side / 2)
+    maps = join_maps(basecolor, normal, roughness, torch.zeros_like(roughness))
+    return maps, centred_flash_frame(1, side, side), None
 
 
 def _fmt(values: dict[str, float], digits: int = 2) -> str:
     return " / ".join(f"{value:.{digits}f}" for value in values.values())
+
+
+def print_large(kind: str, side: int, timing: dict[str, Any]) -> None:
+    """The large timings' lines (:func:`_large`)."""
+    print(
+        f"make_tileable at {side}², {kind} ({timing['photo']}, {timing['path']}): "
+        f"{timing['seconds']:.1f} s (CPU {timing['cpu_seconds']:.1f} s: flash-mark repair "
+        f"{timing['repair_cpu_seconds']:.1f}, lattice detection "
+        f"{timing['detection_cpu_seconds']:.1f}, tile {timing['tile_cpu_seconds']:.1f}, "
+        "each on its own)"
+    )
+    if timing["flash_removal_cpu_seconds"] is not None:
+        print(
+            f"remove_flash at {side}², {kind} ({timing['photo']}): "
+            f"CPU {timing['flash_removal_cpu_seconds']:.1f} s (every prediction runs it)"
+        )
 
 
 def main() -> None:
@@ -234,12 +268,13 @@ def main() -> None:
     print("| " + " | ".join(columns) + " | repaired (score) |")
     print("|---|---|---|---|---|---|---|---|---|")
     rows: list[dict[str, Any]] = []
-    # The inputs of the large timings: the first photo on each path (name, maps, hotspot).
+    # The inputs of the large timings: the first photo on each path.
     large_inputs: dict[str, Item] = {}
-    for name, maps, hotspot in items:
-        row = measure(name, maps, hotspot)
+    for item in items:
+        name, maps, frame, _ = item
+        row = measure(name, maps, (float(frame[0, 0]), float(frame[0, 1])))
         rows.append(row)
-        large_inputs.setdefault("periodic" if row["whole_cells"] else "non-periodic", (name, maps, hotspot))
+        large_inputs.setdefault("periodic" if row["whole_cells"] else "non-periodic", item)
         repaired = ", ".join(f"{key} {score:.2f}" for key, score in row["repaired"].items()) or "—"
         print(
             f"| {name} | {row['size']} | {row['seconds']:.2f} ({row['cpu_seconds']:.2f}) "
@@ -269,8 +304,8 @@ def main() -> None:
             large_inputs["periodic"] = ("synthetic 45° grid", *synthetic_grid())
         for kind in ("non-periodic", "periodic"):
             if kind in large_inputs:
-                name, maps, hotspot = large_inputs[kind]
-                summary[f"{kind}_at_{args.large}"] = {"photo": name, **_large(maps, hotspot, args.large)}
+                name, maps, frame, photo = large_inputs[kind]
+                summary[f"{kind}_at_{args.large}"] = {"photo": name, **_large(maps, frame, photo, args.large)}
     print()
     print(
         f"{len(rows)} photos: worst wrap ratio {worst_wrap:.2f} (blend {summary['worst_wrap_blend']:.2f}; "
@@ -283,13 +318,7 @@ def main() -> None:
     for kind in ("non-periodic", "periodic"):
         timing = summary.get(f"{kind}_at_{args.large}")
         if timing is not None:
-            print(
-                f"make_tileable at {args.large}², {kind} ({timing['photo']}, {timing['path']}): "
-                f"{timing['seconds']:.1f} s (CPU {timing['cpu_seconds']:.1f} s: flash-mark repair "
-                f"{timing['repair_cpu_seconds']:.1f}, lattice detection "
-                f"{timing['detection_cpu_seconds']:.1f}, tile {timing['tile_cpu_seconds']:.1f}, "
-                "each on its own)"
-            )
+            print_large(kind, args.large, timing)
     print("goals met" if summary["meets_goals"] else "GOALS NOT MET")
     if args.json is not None:
         args.json.write_text(json.dumps({"source": str(source), "rows": rows, "summary": summary}, indent=1))

@@ -255,6 +255,9 @@ VARIANTS: dict[str, Variant] = {
     "+ clipped fill": filled,
     "+ disc levelled": levelled,
     "+ thin-dark metal rule (remove_flash)": lambda r: remove_flash(r.predicted, r.photo, r.frame)[0],
+    "+ lost texture patched (--tileable)": lambda r: remove_flash(
+        r.predicted, r.photo, r.frame, restore_texture=True
+    )[0],
 }
 
 

@@ -498,6 +498,7 @@ def remove_flash(
     *,
     clipped: Tensor | None = None,
     lattice: tuple[tuple[float, float], tuple[float, float]] | None = None,
+    restore_texture: bool = False,
 ) -> tuple[Tensor, FlashRemoval]:
     """The flash taken out of maps predicted from ``photo`` (module docstring): the clipped pixels
     filled (:func:`fill_clipped`, ``clipped`` defaulting to :func:`clipped_mask` of the photo; with
@@ -506,6 +507,12 @@ def remove_flash(
     (:func:`~brdfgan.core.flash_mark.repair_flash_mark`), and thin dark features' metal lowered
     (:func:`suppress_false_metal`). A photo with nothing clipped, no highlight and no thin dark
     feature under metal returns the maps unchanged, bit for bit.
+
+    ``restore_texture`` (``--tileable``): a disc whose texture the clipping took gets a patch of
+    the maps' own texture (:func:`~brdfgan.core.flash_mark.repair_flash_mark`'s lost texture). A
+    patch is a plausible texture, not the surface's: it raises the disc's base-colour error over
+    the smooth fill's (research/notes/2026-12-flash-leak.md), so only a tile, where a smooth disc
+    would repeat, asks for it.
 
     Shape: maps ``(8, H, W)``; photo ``(3, H, W)`` linear LDR at the maps' size (the network's
     input, preprocessed); frame ``(1, 3)`` its flash frame; clipped ``(H, W)`` bool, optional →
@@ -525,7 +532,9 @@ def remove_flash(
         clipped = clipped & (distance > reach)
     fill = fill_clipped(maps, clipped, lattice=lattice)
     hotspot = (float(frame[0, 0]), float(frame[0, 1]))
-    repaired, mark = repair_flash_mark(fill.maps, hotspot, radius=radius, clipped=clipped)
+    repaired, mark = repair_flash_mark(
+        fill.maps, hotspot, radius=radius, clipped=clipped if restore_texture else None
+    )
     result, _ = suppress_false_metal(repaired, photo)
     lowered = float(((repaired[METALLIC] - result[METALLIC]) > 1.0 / 255.0).float().mean())
     return result, FlashRemoval(fill, radius, mark, lowered)

@@ -27,13 +27,15 @@ the disc's level goes, the texture in it stays. Normals are left to the detail r
 level repair stands down where the surroundings read as metal (:data:`METAL_SURFACE`): there the
 highlight is the metal's own look, and a disc of bright base colour belongs to it.
 
-**Lost texture.** Where the photo clipped most of the disk (:data:`CLIPPED_DISK_SHARE`), the
+**Lost texture.** Where the photo clipped half the disk or more (:data:`CLIPPED_DISK_SHARE`), the
 maps there hold no evidence, and once the clipped pixels are brought into their surroundings'
 range (:func:`~brdfgan.core.clipped_fill.fill_clipped`) they are smooth: a disc of plain colour in a
-textured surface, which a tile repeats (the wood-plank sample's base colour scores 0.14). A map
-whose detail score is below ``1 / threshold`` there has lost its texture to the clipping and gets
-the same patch. Without clipping, a low score is no mark: the hotspot may fall on a plain tile
-with grout around it (the ceramic sample scores 0.19, its bricks 0.32).
+textured surface, which a tile repeats (the wood-plank sample's base colour scores 0.14). A
+textured map (:data:`TEXTURED_MAPS`) whose detail score is below ``1 / threshold`` there has lost
+its texture to the clipping and gets the same patch (asked for by ``--tileable`` only:
+:func:`~brdfgan.core.clipped_fill.remove_flash`). Without clipping, a low score is no mark: the
+hotspot may fall on a plain tile with grout around it (the ceramic sample scores 0.19, its bricks
+0.32).
 
 **Repair** (:func:`repair_flash_mark`). The leaked maps get the disk (to :data:`REPAIR_INNER`
 radii, fading out by :data:`REPAIR_OUTER`) replaced by a patch of their own texture from nearby:
@@ -92,8 +94,12 @@ LEVEL_THRESHOLD = 3.0  # module docstring
 METAL_SURFACE = (0.3, 0.6)
 LEVELLED_MAPS = ("basecolor", "roughness", "metallic")
 PATCH_DISTANCES = (2.6, 3.2, 3.8, 4.4)
-# The share of the scoring disk the photo must clip before a smooth disk counts as lost texture.
-CLIPPED_DISK_SHARE = 0.25
+# The share of the scoring disk the photo must clip before a smooth disk counts as lost texture,
+# and the maps whose texture can be lost: a metallic map is mostly plain (0 or 1), and a patch of it
+# from elsewhere brings metal into a dielectric disc (measured: the OOD renders' disc metal 0.07 →
+# 0.12 with it).
+CLIPPED_DISK_SHARE = 0.5
+TEXTURED_MAPS = ("basecolor", "normal", "roughness")
 BUSY_WEIGHT = 1.0
 
 
@@ -439,7 +445,8 @@ def repair_flash_mark(
     leaked = tuple(
         name
         for name in MAP_NAMES
-        if scores[name] > threshold or (share >= CLIPPED_DISK_SHARE and scores[name] < 1.0 / threshold)
+        if scores[name] > threshold
+        or (share >= CLIPPED_DISK_SHARE and name in TEXTURED_MAPS and scores[name] < 1.0 / threshold)
     )
     offset = find_patch(levelled_maps, centre) if leaked else None
     repaired = fill_disk(levelled_maps, centre, offset, leaked) if offset is not None else levelled_maps

@@ -562,7 +562,12 @@ def write_prediction(
         lattice = find_lattice(maps) if options.tileable else None
         vectors = lattice.vectors if lattice is not None and lattice.periodic else None
         maps, flash_removal = remove_flash(
-            maps, prepared.photo, flash_frame, clipped=clipped, lattice=vectors
+            maps,
+            prepared.photo,
+            flash_frame,
+            clipped=clipped,
+            lattice=vectors,
+            restore_texture=options.tileable,
         )
     tiling: TileableRecord | None = None
     if options.tileable:
