@@ -34,7 +34,7 @@ from typing import Any, Literal
 import torch
 from torch import Tensor, nn
 
-from brdfgan.core.clipped_fill import clipped_mask, remove_flash
+from brdfgan.core.clipped_fill import FlashRemoval, clipped_mask, remove_flash
 from brdfgan.core.flash_geometry import centred_flash_frame, resize_flash_frame
 from brdfgan.core.flash_mark import FlashMark, repair_flash_mark
 from brdfgan.core.lattice import (
@@ -539,6 +539,43 @@ def input_clipped(photo: Photo, prepared: Preprocessed) -> Tensor:
     return clipped
 
 
+def finish_maps(
+    maps: Tensor,
+    reference: ReferencePrediction,
+    *,
+    tileable: bool,
+    align_pattern: bool = False,
+    clock: StageClock | None = None,
+) -> tuple[Tensor, FlashRemoval, TileableRecord | None]:
+    """What every prediction's maps go through before they are written: the flash taken out
+    (:func:`~brdfgan.core.clipped_fill.remove_flash`, with the clipped pixels of
+    :func:`input_clipped`), then with ``tileable`` the tile (:func:`make_tileable`). A tile's
+    lattice is found first, so that a periodic material's hotspot disc is filled from its cells, and
+    a clipped disc that lost its texture gets a patch of it (a smooth disc would repeat).
+
+    Shape: ``(8, N, N)`` → ``(8, N, N)``."""
+    clock = clock or StageClock({})
+    prepared, frame = reference.prepared, reference.flash_frame
+    with clock("flash"):
+        lattice = find_lattice(maps) if tileable else None
+        maps, removal = remove_flash(
+            maps,
+            prepared.photo,
+            frame,
+            clipped=input_clipped(reference.photo, prepared),
+            lattice=lattice.vectors if lattice is not None and lattice.periodic else None,
+            restore_texture=tileable,
+        )
+    if not tileable:
+        return maps, removal, None
+    with clock("tileable"):
+        hotspot = (float(frame[0, 0]), float(frame[0, 1]))
+        maps, tiling = make_tileable(
+            maps, hotspot, align_pattern=align_pattern, flash_mark=removal.mark, lattice=lattice
+        )
+    return maps, removal, tiling
+
+
 def write_prediction(
     reference: ReferencePrediction,
     maps: Tensor,
@@ -549,39 +586,18 @@ def write_prediction(
     records: dict[str, Any],
     warnings: tuple[str, ...],
 ) -> PhotoResult:
-    """The write-out of a prediction: ``--tileable``, ``material.json``'s metadata (with
+    """The write-out of a prediction: :func:`finish_maps`, ``material.json``'s metadata (with
     ``records``, the fits' entries), the previews, the viewer, and :func:`write_material`, which
     replaces ``out_dir`` atomically (nothing is left half-written on an error).
 
     Shape: maps ``(8, N, N)``."""
     options = predictor.options
-    prepared, flash_frame = reference.prepared, reference.flash_frame
-    with clock("flash"):
-        clipped = input_clipped(reference.photo, prepared)
-        # A tile's lattice, found first: a periodic material's hotspot disc is filled from its cells.
-        lattice = find_lattice(maps) if options.tileable else None
-        vectors = lattice.vectors if lattice is not None and lattice.periodic else None
-        maps, flash_removal = remove_flash(
-            maps,
-            prepared.photo,
-            flash_frame,
-            clipped=clipped,
-            lattice=vectors,
-            restore_texture=options.tileable,
-        )
-    tiling: TileableRecord | None = None
-    if options.tileable:
-        with clock("tileable"):
-            hotspot = (float(flash_frame[0, 0]), float(flash_frame[0, 1]))
-            maps, tiling = make_tileable(
-                maps,
-                hotspot,
-                align_pattern=options.align_pattern,
-                flash_mark=flash_removal.mark,
-                lattice=lattice,
-            )
-        if tiling.note is not None:
-            warnings = (*warnings, tiling.note)
+    prepared = reference.prepared
+    maps, flash_removal, tiling = finish_maps(
+        maps, reference, tileable=options.tileable, align_pattern=options.align_pattern, clock=clock
+    )
+    if tiling is not None and tiling.note is not None:
+        warnings = (*warnings, tiling.note)
     metadata = {
         "name": out_dir.name,
         "model": predictor.model.to_json(),
