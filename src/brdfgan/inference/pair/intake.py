@@ -176,10 +176,11 @@ def no_flash_problem(flash: Photo, no_flash: Photo) -> tuple[dict[str, float], s
     return measures, None
 
 
-def clipped_mask(linear: Tensor) -> np.ndarray:
+def feature_exclusion_mask(linear: Tensor) -> np.ndarray:
     """255 on the pixels at :data:`CLIP_LEVEL` or more in any channel, dilated by 0.5 % of the long
     side (at least 3 px), else 0: where no feature is taken on the no-flash photo, which has no
-    flash highlight to mask.
+    flash highlight to mask (OpenCV's mask on the full-size photo; the maps' clipped pixels are
+    :func:`~brdfgan.core.clipped_fill.clipped_mask`'s).
 
     Shape: ``(3, H, W)`` → ``(H, W)`` uint8."""
     clipped = (linear >= CLIP_LEVEL).any(dim=0).numpy().astype(np.uint8) * 255
@@ -199,7 +200,8 @@ def register_no_flash(flash: Photo, no_flash: Photo, crop: Crop) -> Registration
     flash highlight and the clipped pixels), checked by ``check_registration`` on the flash photo's
     ``crop``; or the one-line reason the two do not show one surface."""
     features = detect_features(luminance(flash.linear)[0].numpy(), highlight_mask(flash.linear))
-    found = homography_to_view(features, luminance(no_flash.linear)[0].numpy(), clipped_mask(no_flash.linear))
+    excluded = feature_exclusion_mask(no_flash.linear)
+    found = homography_to_view(features, luminance(no_flash.linear)[0].numpy(), excluded)
     if found is None:
         return "too few features match the flash photo's: a different surface, or the phone moved too much"
     reason = check_registration(
