@@ -66,6 +66,7 @@ from brdfgan.core.flash_mark import (
     mark_radius,
     repair_flash_mark,
 )
+from brdfgan.core.lattice import find_lattice
 from brdfgan.core.svbrdf import resize_maps, split_maps, srgb_to_linear
 from brdfgan.data.materials.families import FAMILIES
 from brdfgan.data.materials.scanned import read_scanned_material, scanned_material_folders
@@ -255,10 +256,18 @@ VARIANTS: dict[str, Variant] = {
     "+ clipped fill": filled,
     "+ disc levelled": levelled,
     "+ thin-dark metal rule (remove_flash)": lambda r: remove_flash(r.predicted, r.photo, r.frame)[0],
-    "+ lost texture patched (--tileable)": lambda r: remove_flash(
-        r.predicted, r.photo, r.frame, restore_texture=True
-    )[0],
+    "--tileable: + lattice disc, lost texture patched": lambda r: tileable_removal(r),
 }
+
+
+def tileable_removal(render: Render) -> Tensor:
+    """:func:`remove_flash` as ``--tileable`` runs it (``inference.pipeline.finish_maps``): the
+    predicted maps' lattice found first, the lost texture patched."""
+    lattice = find_lattice(render.predicted)
+    vectors = lattice.vectors if lattice.periodic else None
+    return remove_flash(render.predicted, render.photo, render.frame, lattice=vectors, restore_texture=True)[
+        0
+    ]
 
 
 def _average(values: Sequence[float]) -> float:
