@@ -82,7 +82,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from brdfgan.core.lattice import PROMINENCE_THRESHOLD, find_lattice, pattern_features, reduce_basis
+from brdfgan.core.lattice import PROMINENCE_THRESHOLD, find_lattice, pattern_features, rectify, reduce_basis
 from brdfgan.core.seamless import file_units
 from brdfgan.core.svbrdf import check_single_maps, join_maps, normalize_normal, split_maps
 from brdfgan.data.spec.determinism import derive_seed
@@ -869,11 +869,18 @@ def _fill_new(
         return
     affine = record.cells.affine()
     row.stretch = record.cells.stretch
-    reference, valid, to_crop = tile_frame_reference(crop, affine, record.cells.origin)
+    # A rectified perspective: the cells were cut from the rectified crop, whose Jacobian at the
+    # centre is the identity (the crop's lattice there is the truth's), and whose positions lead
+    # back to the crop's through the perspective.
+    perspective = record.perspective
+    source = crop if perspective is None else rectify(crop, perspective)
+    reference, valid, to_source = tile_frame_reference(source, affine, record.cells.origin)
     tile_lattice = transform_vectors(affine, crop_truth) if crop_truth is not None else None
+    row.extra["keystone"] = None if perspective is None else list(perspective.keystone)
 
     def to_material(points: Tensor) -> Tensor:
-        return crop_to_material(to_crop(points))
+        positions = to_source(points)
+        return crop_to_material(positions if perspective is None else perspective.to_image(positions))
 
     measure_tile(row, tiled, reference, valid, to_material, tile_lattice, truth)
 

@@ -58,6 +58,20 @@ def test_a_periodic_material_is_tiled_by_whole_cells_and_recorded() -> None:
     assert not torch.equal(tiled, todays_tile(maps))
 
 
+def test_a_lattice_in_mild_perspective_is_rectified_before_its_cells_are_cut_and_recorded() -> None:
+    g = (0.02 / (SIZE / 2), 0.015 / (SIZE / 2))
+    maps = lattice_maps(polar(24.0, 30.0), polar(30.0, 120.0), perspective=g, seed=11)
+    tiled, record = make_tileable(maps, HOTSPOT)
+    validate_maps(tiled)
+    assert record.cells is not None and record.perspective is not None
+    assert record.perspective.keystone == pytest.approx((0.02, 0.015), abs=0.003)
+    document = round_trip(record)
+    assert "perspective rectified" in str(document["method"])
+    assert document["lattice"]["perspective"]["keystone"] == pytest.approx([0.02, 0.015], abs=0.003)  # type: ignore[index]
+    # Square-on tiles are not rectified (the record above says so only when it was).
+    assert make_tileable(tiles(), HOTSPOT)[1].perspective is None
+
+
 def test_a_non_periodic_material_keeps_todays_cut_bit_for_bit() -> None:
     maps = noise_maps(1)
     tiled, record = make_tileable(maps, HOTSPOT)

@@ -531,6 +531,191 @@ def find_lattice(maps: Tensor) -> Lattice:
     return Lattice((scaled[0], scaled[1]), score, periodic, notes=notes)
 
 
+# Perspective (module docstring, step 3b): the lattice measured in a grid of windows this many a
+# side, each the smallest share of the maps' side from WINDOW_SHARE (overlapping) in which each
+# lattice vector fits MIN_WINDOW_CELLS times; a keystone (scale change from the centre to an edge)
+# below MIN_KEYSTONE is left alone, one above MAX_KEYSTONE is no mild perspective; the fit must
+# bring the windows' lattices together (their spread about the model) to at most
+# PERSPECTIVE_GAIN of their spread about one lattice.
+PERSPECTIVE_WINDOWS = 3
+WINDOW_SHARE = (0.5, 0.75)
+MIN_WINDOW_CELLS = 2.0
+MIN_KEYSTONE = 0.0025
+MAX_KEYSTONE = 0.1
+PERSPECTIVE_GAIN = 0.5
+
+
+@dataclass(frozen=True)
+class Perspective:
+    """A mild perspective of the maps (module docstring, step 3b): image offset ``d`` from the maps'
+    ``centre`` shows the rectified offset ``q = d / (1 + g·d)`` (and ``d = q / (1 − g·q)``), ``g``
+    per pixel; ``keystone`` the scale change from the centre to the right and bottom edges
+    (``g · half side``); ``spread_before`` and ``spread_after`` the windows' lattice vectors' RMS
+    distance (px) from one lattice and from the model's."""
+
+    g: Vector
+    centre: Vector
+    keystone: Vector
+    spread_before: float
+    spread_after: float
+
+    def to_image(self, rectified: Tensor) -> Tensor:
+        """Rectified positions → the maps' positions. Shape: ``(*, 2)`` → ``(*, 2)``."""
+        centre = torch.tensor(self.centre, dtype=rectified.dtype, device=rectified.device)
+        g = torch.tensor(self.g, dtype=rectified.dtype, device=rectified.device)
+        q = rectified - centre
+        return centre + q / (1.0 - (q * g).sum(dim=-1, keepdim=True))
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "g_per_pixel": list(self.g),
+            "centre": list(self.centre),
+            "keystone": list(self.keystone),
+            "spread_before_px": self.spread_before,
+            "spread_after_px": self.spread_after,
+        }
+
+    @classmethod
+    def from_json(cls, record: dict[str, Any]) -> Perspective:
+        return cls(
+            g=_vector(record["g_per_pixel"]),
+            centre=_vector(record["centre"]),
+            keystone=_vector(record["keystone"]),
+            spread_before=float(record["spread_before_px"]),
+            spread_after=float(record["spread_after_px"]),
+        )
+
+
+def fit_perspective(centres: Tensor, vectors: Tensor) -> tuple[Tensor, Tensor, float, float]:
+    """The perspective ``g`` and the rectified lattice ``m`` that explain lattice vectors measured
+    around the maps: to first order in ``g``, the vector ``v`` seen at offset ``d`` from the centre
+    is ``m + (v dᵀ + d vᵀ) g`` (the rectified lattice through the Jacobian of ``q = d / (1 + g·d)``),
+    solved by least squares; with the spreads of the vectors about one lattice (``g = 0``) and about
+    the model.
+
+    Shape: centres ``(K, 2)``, vectors ``(K, V, 2)`` → ``g`` ``(2,)``, ``m`` ``(V, 2)``, two floats.
+
+    Example:
+        Vectors that shrink by 2 % to the right (a 10-pixel lattice seen at ±100 px):
+
+        >>> f64 = torch.float64
+        >>> m = torch.tensor([[10.0, 0.0], [0.0, 10.0]], dtype=f64)
+        >>> centres = 100.0 * torch.tensor([[-1.0, 0], [1, 0], [0, -1], [0, 1]], dtype=f64)
+        >>> g_true = torch.tensor([2e-4, 0.0], dtype=f64)
+        >>> def seen_at(d):  # the image vectors whose rectified images are m's rows
+        ...     w = 1 + g_true @ d
+        ...     jacobian = (torch.eye(2, dtype=f64) * w - torch.outer(d, g_true)) / w**2
+        ...     return torch.linalg.solve(jacobian, m.T).T
+        >>> seen = torch.stack([seen_at(d) for d in centres])
+        >>> g, lattice, before, after = fit_perspective(centres, seen)
+        >>> [round(v * 1e4, 2) for v in g.tolist()], after < 0.05 * before
+        ([2.0, 0.0], True)
+    """
+    count, per_window = vectors.shape[:2]
+    rows, targets = [], []
+    for k in range(count):
+        d = centres[k]
+        for j in range(per_window):
+            v = vectors[k, j]
+            block = torch.zeros(2, 2 + 2 * per_window, dtype=vectors.dtype)
+            block[:, :2] = torch.outer(v, d) + torch.outer(d, v)
+            block[:, 2 + 2 * j : 4 + 2 * j] = torch.eye(2, dtype=vectors.dtype)
+            rows.append(block)
+            targets.append(v)
+    design, target = torch.cat(rows), torch.cat(targets)
+    solution = torch.linalg.lstsq(design, target[:, None]).solution[:, 0]
+    spread_before = float((vectors - vectors.mean(dim=0)).square().sum(dim=-1).mean().sqrt())
+    spread_after = float((design @ solution - target).view(-1, 2).square().sum(dim=-1).mean().sqrt())
+    return solution[:2], solution[2:].view(per_window, 2), spread_before, spread_after
+
+
+def find_perspective(maps: Tensor, lattice: Lattice) -> Perspective | None:
+    """The maps' mild perspective from how their lattice changes across them (module docstring,
+    step 3b), or ``None``: no periodic lattice, too few cells in a window, a window whose lattice
+    is not the maps', a keystone below :data:`MIN_KEYSTONE` or above :data:`MAX_KEYSTONE`, or a
+    fit that does not bring the windows' lattices together.
+
+    Shape: ``(8, H, W)``.
+    """
+    check_single_maps(maps)
+    if not lattice.periodic or lattice.vectors is None:
+        return None
+    height, width = maps.shape[-2:]
+    features = pattern_features(maps.detach().double())
+    scale = max(height, width) / DETECT_SIDE
+    if scale > 1.0:
+        features = F.interpolate(
+            features[None], size=(max(1, round(height / scale)), max(1, round(width / scale))), mode="area"
+        )[0]
+    small_h, small_w = features.shape[-2:]
+    factor = torch.tensor([width / small_w, height / small_h], dtype=torch.float64)
+    start = [torch.tensor(vector, dtype=torch.float64) / factor for vector in lattice.vectors]
+    extent = torch.stack(start).abs().amax(dim=0)  # the lattice vectors' reach along x and y
+    share = max(
+        WINDOW_SHARE[0], MIN_WINDOW_CELLS * max(float(extent[0]) / small_w, float(extent[1]) / small_h)
+    )
+    if share > WINDOW_SHARE[1]:
+        return None  # too few cells to see the lattice change across the maps
+    window_h, window_w = round(share * small_h), round(share * small_w)
+    centres, measured = [], []
+    for row in range(PERSPECTIVE_WINDOWS):
+        for column in range(PERSPECTIVE_WINDOWS):
+            top = round(row * (small_h - window_h) / (PERSPECTIVE_WINDOWS - 1))
+            left = round(column * (small_w - window_w) / (PERSPECTIVE_WINDOWS - 1))
+            window = features[:, top : top + window_h, left : left + window_w]
+            rho = autocorrelation(window)
+            a, b = refine_lattice(
+                rho, _vector(start[0].tolist()), _vector(start[1].tolist()), (window_h, window_w)
+            )
+            local = torch.tensor([a, b], dtype=torch.float64)
+            if float((local - torch.stack(start)).norm(dim=-1).max()) > SEARCH_FRACTION * float(
+                torch.stack(start).norm(dim=-1).min()
+            ):
+                return None  # the window's lattice is not the maps' (a window of grout, a stain)
+            centres.append([(left + window_w / 2) * float(factor[0]) - width / 2,
+                            (top + window_h / 2) * float(factor[1]) - height / 2])  # fmt: skip
+            measured.append(local * factor)
+    g, _, spread_before, spread_after = fit_perspective(
+        torch.tensor(centres, dtype=torch.float64), torch.stack(measured)
+    )
+    keystone = (float(g[0]) * width / 2, float(g[1]) * height / 2)
+    size = max(abs(keystone[0]), abs(keystone[1]))
+    if not (MIN_KEYSTONE <= size <= MAX_KEYSTONE) or spread_after > PERSPECTIVE_GAIN * spread_before:
+        return None
+    return Perspective(
+        g=_vector(g.tolist()),
+        centre=(width / 2, height / 2),
+        keystone=keystone,
+        spread_before=spread_before,
+        spread_after=spread_after,
+    )
+
+
+def rectify(maps: Tensor, perspective: Perspective) -> Tensor:
+    """The maps with their perspective taken out: output pixel ``q`` samples the maps at
+    :meth:`Perspective.to_image` (bilinear, the border extended; normals renormalised). The
+    Jacobian at the centre is the identity, so the lattice there keeps its vectors.
+
+    Shape: ``(8, H, W)`` → ``(8, H, W)`` in the maps' dtype.
+    """
+    check_single_maps(maps)
+    height, width = maps.shape[-2:]
+    ys = torch.arange(height, dtype=torch.float64, device=maps.device) + 0.5
+    xs = torch.arange(width, dtype=torch.float64, device=maps.device) + 0.5
+    yy, xx = torch.meshgrid(ys, xs, indexing="ij")
+    points = perspective.to_image(torch.stack([xx, yy], dim=-1))
+    grid = torch.stack([2.0 * points[..., 0] / width - 1.0, 2.0 * points[..., 1] / height - 1.0], dim=-1)
+    sampled = F.grid_sample(
+        maps.detach()[None],
+        grid.to(maps.dtype)[None],
+        mode="bilinear",
+        padding_mode="border",
+        align_corners=False,
+    )[0]
+    parts = split_maps(sampled)
+    return join_maps(parts.basecolor, normalize_normal(parts.normal), parts.roughness, parts.metallic)
+
+
 def _distortion(u: Tensor, v: Tensor, height: int, width: int) -> tuple[Tensor, Tensor]:
     """The stretch (log of the singular values' ratio: 0 for a rotation with a uniform scale) and
     the turn (radians, clockwise on screen; the rotation of the polar decomposition) of the affine

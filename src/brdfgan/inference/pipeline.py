@@ -42,8 +42,11 @@ from brdfgan.core.lattice import (
     PROMINENCE_THRESHOLD,
     CellTiling,
     Lattice,
+    Perspective,
     choose_cells,
     find_lattice,
+    find_perspective,
+    rectify,
     tile_whole_cells,
 )
 from brdfgan.core.seamless import (
@@ -288,6 +291,7 @@ class TileableRecord:
     lattice: Lattice | None = None
     cells: CellTiling | None = None
     note: str | None = None
+    perspective: Perspective | None = None
 
     def to_json(self) -> dict[str, Any]:
         measures = self.after.to_json()
@@ -296,11 +300,13 @@ class TileableRecord:
             lattice = {
                 **self.lattice.to_json(),
                 "cells": None if self.cells is None else self.cells.to_json(),
+                "perspective": None if self.perspective is None else self.perspective.to_json(),
             }
         return {
             "method": (
-                "flash mark repaired, then resampled to whole lattice cells and each wrap cut along a "
-                "minimum-error path between copies one period apart"
+                "flash mark repaired, then resampled to whole lattice cells"
+                + (" (the perspective rectified first)" if self.perspective is not None else "")
+                + " and each wrap cut along a minimum-error path between copies one period apart"
                 if self.cells is not None
                 else "flash mark repaired, then rolled and cut along minimum-error paths"
             ),
@@ -318,6 +324,7 @@ class TileableRecord:
         before = record["wrap_ratio_before"]
         lattice = record.get("lattice")
         cells = None if lattice is None else lattice.get("cells")
+        perspective = None if lattice is None else lattice.get("perspective")
         note = record.get("note")
         return cls(
             flash_mark=FlashMark.from_json(record["flash_mark"]),
@@ -329,6 +336,7 @@ class TileableRecord:
             lattice=None if lattice is None else Lattice.from_json(lattice),
             cells=None if cells is None else CellTiling.from_json(cells),
             note=None if note is None else str(note),
+            perspective=None if perspective is None else Perspective.from_json(perspective),
         )
 
 
@@ -363,11 +371,27 @@ def make_tileable(
     cells = None
     if lattice.periodic and lattice.vectors is not None:
         cells = choose_cells(lattice.vectors, height, width, align=align_pattern)
+    perspective = find_perspective(repaired, lattice)
+    if perspective is not None:
+        # Mild perspective: the cells are taken from the rectified maps, where they all match
+        # (kept only where whole cells fit there; the cut runs on the maps as they are).
+        rectified = rectify(repaired, perspective)
+        straight = find_lattice(rectified)
+        straight_cells = None
+        if straight.periodic and straight.vectors is not None:
+            straight_cells = choose_cells(straight.vectors, height, width, align=align_pattern)
+        if straight_cells is not None:
+            repaired, lattice, cells = rectified, straight, straight_cells
+        else:
+            perspective = None
     note = _lattice_note(lattice, cells, align_pattern)
     if cells is not None:
         whole = tile_whole_cells(repaired, cells)
         shifts = ((height, width), (height, 0), (0, width), (0, 0))
-        return whole.maps, TileableRecord(mark, shifts, before, whole.measures, lattice, whole.tiling, note)
+        record = TileableRecord(
+            mark, shifts, before, whole.measures, lattice, whole.tiling, note, perspective
+        )
+        return whole.maps, record
     tile = make_seamless(repaired)
     after = tiling_measures(tile.maps, repaired, tile.shifts)
     return tile.maps, TileableRecord(
