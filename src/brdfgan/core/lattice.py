@@ -24,6 +24,15 @@ synthesis of regular repeatable patterns"). The steps:
    and the combinations ``a ± b``, ``2a``, ``2b`` that the maps are large enough to show (at least
    one of them), reaches :data:`PROMINENCE_THRESHOLD`: a spurious pair of noise maxima has no peak
    at its sum.
+3b. **Mild perspective** (:func:`find_perspective`, :func:`rectify`): a phone tilted by a degree or
+   two shrinks the cells towards one side, so whole periods at the centre are off by a pixel or
+   more at the wraps. The lattice is refined again in a 3 × 3 grid of overlapping windows (each
+   the smallest share of the side, from 1/2 to 3/4, that holds two cells), and a homography about
+   the centre, ``q = d / (1 + g·d)`` (the Jacobian at the centre the identity), is fitted to how
+   the windows' vectors change: to first order the vector seen at offset ``d`` is
+   ``m + (v dᵀ + d vᵀ) g`` (:func:`fit_perspective`). Where it explains the windows (their spread
+   at most halved) with a keystone of 0.25-10 %, the maps are resampled through it and the rest
+   runs on the rectified maps.
 4. **Whole cells** (:func:`choose_cells`): integer combinations ``u = m₁a + n₁b`` (about
    horizontal) and ``v = m₂a + n₂b`` (about vertical) spanning a parallelogram that fits in the
    maps, the largest with the least stretch and turn; with ``align`` the frame is turned so that the
