@@ -247,8 +247,6 @@ PYRAMID_OCTAVES = 5
 
 def _pyramid_height(start: Tensor, grids: list[Tensor]) -> Tensor:
     size = start.shape[-1]
-    if not grids:
-        return start
     enlarged = [F.interpolate(g, size=(size, size), mode="bilinear", align_corners=False) for g in grids]
     return start + torch.stack(enlarged).sum(0)
 
@@ -259,15 +257,13 @@ def _fit_level(
     light: Tensor,
     steps: int,
     config: PairFitConfig,
-    octaves: int = PYRAMID_OCTAVES,
 ) -> tuple[Tensor, Tensor]:
     """Adam on the room light and a pyramid correction of the height ``start`` (pixel units) at
-    one working size (``octaves=0``: the light alone, the height held); the height is returned
-    with its mean (a ramp-free sample's) removed."""
+    one working size; the height is returned with its mean (a ramp-free sample's) removed."""
     size = start.shape[-1]
     grids = [
         torch.zeros(1, 1, max(size >> octave, 2), max(size >> octave, 2), requires_grad=True)
-        for octave in range(octaves)
+        for octave in range(PYRAMID_OCTAVES)
     ]
     light = light.detach().clone().requires_grad_(True)
     optimizer = torch.optim.Adam([light, *grids], lr=config.learning_rate)
@@ -367,7 +363,8 @@ def fit_pair(
         level = fitted if level_size == sizes[-1] else _Level.of(log_ratio, usable, frame, level_size)
         # Twice the pixels across: the same rise is twice as many (smaller) pixels high.
         height = _enlarge(height, level_size)
-        _, flat_light = _fit_level(level, torch.zeros_like(height), flat_light, steps, config, octaves=0)
+        flat = normals_of_height(torch.zeros_like(height))
+        flat_light = _fit_light(level, flat, flat_light, steps, config)
         height, light = _fit_level(level, height, light, steps, config)
         done += steps
         if on_step is not None:
