@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -76,10 +75,9 @@ from brdfgan.inference.intake.photo import read_photo
 from brdfgan.inference.intake.preprocess import preprocess
 from brdfgan.inference.model.weights import load_model
 from brdfgan.io.atomic import write_text_atomic
-from research.relief_tables import compose_config
+from research.relief_tables import OOD_SCANS, compose_config
 
 ROOT = Path(__file__).resolve().parents[1]
-OOD = Path(os.environ.get("BRDFGAN_OOD_DIR", ROOT.parent / "shared" / "ood" / "ambientcg"))
 SIDE = 256
 EVS = (1.0, 1.25, 1.5, 1.75, 2.0)
 CLIPPED_RANGE = (0.01, 0.10)
@@ -177,7 +175,7 @@ def fresh_materials(spec: DatasetSpec, seed: int) -> list[tuple[str, Tensor]]:
 def ood_materials() -> list[tuple[str, Tensor]]:
     return [
         (f"ood/{folder.name}", read_scanned_material(folder, 512))
-        for folder in scanned_material_folders(str(OOD))
+        for folder in scanned_material_folders(str(OOD_SCANS))
     ]
 
 

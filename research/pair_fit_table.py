@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import os
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -67,10 +66,9 @@ from brdfgan.io.atomic import write_text_atomic
 from brdfgan.io.images import write_image
 from brdfgan.losses.parameter import angular_distance
 from brdfgan.metrics import SVBRDFMetrics
-from research.relief_tables import HandfulBank, compose_config, log
+from research.relief_tables import OOD_SCANS, HandfulBank, compose_config, log
 
 ROOT = Path(__file__).resolve().parents[1]
-OOD = Path(os.environ.get("BRDFGAN_OOD_DIR", ROOT.parent / "shared" / "ood" / "ambientcg"))
 DE_LIT = ROOT / "src" / "brdfgan" / "weights" / "references" / "de_lit.safetensors"
 ROWS = ("flat", "v4 flash", "v4 flash-only", "de-lit flash-only", "pair fit")
 COLUMNS = (
@@ -115,7 +113,7 @@ def held_out_sets(spec: DatasetSpec) -> dict[str, list[PaintedMaterial]]:
     return {
         "val procedural": procedural,
         "val scans": [scanned(folders[i]) for i in split_scan_sets(spec)["val"]],
-        "OOD scans": [scanned(folder) for folder in scanned_material_folders(str(OOD))],
+        "OOD scans": [scanned(folder) for folder in scanned_material_folders(str(OOD_SCANS))],
     }
 
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import os
 import sys
 import tempfile
 import time
@@ -81,6 +82,9 @@ from research.relief import (
 )
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
+# The OOD benchmark's scans, where conf/dataset_spec/ood.yaml's ``scanned`` finds them: the held-out
+# tables report on them (never trained or tuned on).
+OOD_SCANS = Path(os.environ.get("BRDFGAN_OOD_DIR", CONF.parent.parent / "shared" / "ood" / "ambientcg"))
 ENVIRONMENT_SPLIT = 0.5  # environment-to-flash irradiance ratio splitting the photos in two
 
 
