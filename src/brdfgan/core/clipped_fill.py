@@ -58,7 +58,7 @@ from torch import Tensor
 from brdfgan.core.checks import check_shape
 from brdfgan.core.delit import delit_photo
 from brdfgan.core.exposure import luminance
-from brdfgan.core.filtering import gaussian_blur
+from brdfgan.core.filtering import gaussian_blur, smoothstep
 from brdfgan.core.flash_geometry import check_flash_frame, hotspot_distance, resize_flash_frame
 from brdfgan.core.flash_mark import REPAIR_INNER, FlashMark, mark_radius, repair_flash_mark
 from brdfgan.core.svbrdf import BASECOLOR, METALLIC, ROUGHNESS, check_single_maps, srgb_to_linear
@@ -95,11 +95,6 @@ HIGHLIGHT_EXCESS = 0.25
 HIGHLIGHT_MAX_FRACTION = 0.3
 HIGHLIGHT_FAR = (0.3, 0.5)  # the far field, in fractions of the shorter side
 HIGHLIGHT_STEP = 2.0  # ring width, pixels at WORKING_SIDE
-
-
-def _smoothstep(edge0: float, edge1: float, x: Tensor) -> Tensor:
-    t = ((x - edge0) / (edge1 - edge0)).clamp(0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
 
 
 def _dilate(mask: Tensor, radius: int) -> Tensor:
@@ -263,7 +258,7 @@ def lattice_disc(
     if not bool(ring.any()):
         return maps
     level = (channels - twins)[:, ring].median(dim=-1).values.view(-1, 1, 1)
-    weight = (1.0 - _smoothstep(reach, outer, distance)).to(maps.dtype) * found.to(maps.dtype)
+    weight = (1.0 - smoothstep(reach, outer, distance)).to(maps.dtype) * found.to(maps.dtype)
     blended = (channels + weight * (twins + level - channels)).clamp(0.0, 1.0)
     return _with_filled_maps(maps, torch.where(area[None], blended, channels))
 
@@ -399,7 +394,7 @@ def thin_dark_weight(maps: Tensor, photo: Tensor | None = None) -> Tensor:
     window = _odd_window(maps)
     lum = luminance(guide[None])  # (1, 1, H, W)
     closed = _erode(_dilate_values(lum, window), window)
-    darkness = _smoothstep(*THIN_DARKNESS, 1.0 - lum / closed.clamp_min(1e-6))
+    darkness = smoothstep(*THIN_DARKNESS, 1.0 - lum / closed.clamp_min(1e-6))
     # Grown by a quarter window: the network's metal line is a little wider than the gap it read.
     return _dilate_values(darkness, window // 4 * 2 + 1)[0, 0]
 
@@ -456,7 +451,7 @@ def suppress_false_metal(maps: Tensor, photo: Tensor | None = None) -> tuple[Ten
     # A surface that reads as metal around the feature keeps its metal (perforated or engraved
     # metal: its holes and grooves are thin dark features whose rims the network reads as metal).
     around = _box_mean(metallic, METAL_AROUND_WINDOWS * (window // 2))
-    weight = thin_dark_weight(work, guide) * (1.0 - _smoothstep(*METAL_AROUND, around))[0, 0]
+    weight = thin_dark_weight(work, guide) * (1.0 - smoothstep(*METAL_AROUND, around))[0, 0]
     opened = _dilate_values(_erode(metallic, window), window)
     lowering = (weight * (metallic - opened).clamp_min(0.0))[0]  # (1, h, w)
     if factor > 1:

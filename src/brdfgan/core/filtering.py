@@ -1,6 +1,7 @@
 """Image filters shared by the inference stages (the hotspot detector, test-time refinement, the
 guided fast path's upsampling) and the photo-anchored generator (its anchor,
-:mod:`brdfgan.models.anchored`)."""
+:mod:`brdfgan.models.anchored`), and the smooth step the masks and the procedural textures blend
+with."""
 
 from __future__ import annotations
 
@@ -14,6 +15,17 @@ from torch import Tensor
 from brdfgan.core.checks import check_shape
 
 Border = Literal["zeros", "reflect"]
+
+
+def smoothstep(edge0: float, edge1: float, x: Tensor) -> Tensor:
+    """Hermite step from 0 at ``edge0`` to 1 at ``edge1``. Shape: any.
+
+    Example:
+        >>> smoothstep(0.0, 2.0, torch.tensor([-1.0, 0.5, 1.0, 3.0])).tolist()
+        [0.0, 0.15625, 0.5, 1.0]
+    """
+    t = ((x - edge0) / (edge1 - edge0)).clamp(0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
 
 
 def gaussian_blur(image: Tensor, sigma: float, border: Border = "zeros") -> Tensor:

@@ -59,7 +59,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from brdfgan.core.checks import check_shape
-from brdfgan.core.filtering import gaussian_blur
+from brdfgan.core.filtering import gaussian_blur, smoothstep
 from brdfgan.core.flash_geometry import hotspot_distance
 from brdfgan.core.seamless import MAP_GROUPS, MAP_NAMES, copy_error, local_contrast, map_scales
 from brdfgan.core.svbrdf import CHANNELS, METALLIC, check_single_maps, normalize_normal
@@ -196,12 +196,6 @@ def leak_scores(maps: Tensor, centre: tuple[float, float]) -> dict[str, float]:
     return scores
 
 
-def _smoothstep(edge0: float, edge1: float, x: Tensor) -> Tensor:
-    """0 below ``edge0``, 1 above ``edge1``, a smooth cubic between."""
-    t = ((x - edge0) / (edge1 - edge0)).clamp(0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
-
-
 @dataclass(frozen=True)
 class _Window:
     """The rows ``top : top + height`` and columns ``left : left + width`` of the maps that hold
@@ -293,7 +287,7 @@ def fill_disk(
     check_single_maps(maps)
     radius = mark_radius(*maps.shape[-2:])
     window = _Window.around(maps, centre, MATCH_OUTER * radius)
-    weight = 1.0 - _smoothstep(REPAIR_INNER * radius, REPAIR_OUTER * radius, window.distance)
+    weight = 1.0 - smoothstep(REPAIR_INNER * radius, REPAIR_OUTER * radius, window.distance)
     ring = (window.distance > REPAIR_OUTER * radius) & (window.distance <= MATCH_OUTER * radius)
     ring &= window.inside(maps, *offset)
     around, patch = window.read(maps), window.read(maps, *offset)
@@ -376,7 +370,7 @@ def level_bias(maps: Tensor, centre: tuple[float, float], radius: float) -> Leve
     steps = torch.stack([pixels[:, ring].median(dim=-1).values - level for ring in rings], dim=-1)  # (8, K)
     relative = (steps.abs() / spread[:, None]).amax(dim=-1)  # (8,)
     scores = {name: float(relative[CHANNELS[name]].max()) for name in LEVELLED_MAPS}
-    metal = float(_smoothstep(*METAL_SURFACE, level[METALLIC].max()))
+    metal = float(smoothstep(*METAL_SURFACE, level[METALLIC].max()))
     return LevelBias((float(centre[0]), float(centre[1])), float(radius), steps, scores, metal)
 
 

@@ -226,12 +226,6 @@ def random_per_cell(cell_id: Tensor, count: int, generator: torch.Generator, cha
     return table.t().contiguous().index_select(1, cell_id.flatten()).view(channels, *cell_id.shape)
 
 
-def smoothstep(edge0: float, edge1: float, x: Tensor) -> Tensor:
-    """Hermite step from 0 at ``edge0`` to 1 at ``edge1``. Shape: any."""
-    t = ((x - edge0) / (edge1 - edge0)).clamp(0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
-
-
 def lerp_color(a: tuple[float, float, float], b: tuple[float, float, float], t: Tensor) -> Tensor:
     """Per-texel blend of two sRGB colours. Shape: t ``(1, H, W)`` or ``(H, W)`` → ``(3, H, W)``."""
     t = t if t.ndim == 3 else t[None]

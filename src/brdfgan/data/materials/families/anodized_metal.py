@@ -41,13 +41,13 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.core.svbrdf import linear_to_srgb, srgb_to_linear
 from brdfgan.data.materials.albedo import DIELECTRIC_ALBEDO_LINEAR, METAL_F0_LINEAR, metal_basecolor
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
 from brdfgan.data.materials.noise import (
     gradient_noise,
     hsv_to_rgb,
-    smoothstep,
     stretched_value_noise,
     texel_coordinates,
     value_noise,

@@ -32,12 +32,12 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
 from brdfgan.data.materials.noise import (
     hsv_to_rgb,
     random_per_cell,
-    smoothstep,
     texel_coordinates,
     value_noise,
     worley,

@@ -22,8 +22,9 @@ from collections.abc import Mapping
 
 import torch
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import fbm, hsv_to_rgb, smoothstep, value_noise
+from brdfgan.data.materials.noise import fbm, hsv_to_rgb, value_noise
 
 
 def _generate(params: Mapping[str, float], size: int, generator: torch.Generator) -> MaterialLayers:

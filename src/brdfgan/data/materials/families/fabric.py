@@ -41,9 +41,10 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import hsv_to_rgb, smoothstep
+from brdfgan.data.materials.noise import hsv_to_rgb
 
 PATTERNS = ("solid", "two_tone", "stripes", "checks", "print")
 # Colour index of each of the four bands of one pattern repeat (0 main, 1 accent, 2 third).

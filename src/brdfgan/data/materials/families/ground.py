@@ -25,8 +25,9 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import fbm, lerp_color, smoothstep, texel_coordinates
+from brdfgan.data.materials.noise import fbm, lerp_color, texel_coordinates
 
 LEAF_GREEN = (0.36, 0.42, 0.14)
 LEAF_YELLOW = (0.62, 0.50, 0.18)

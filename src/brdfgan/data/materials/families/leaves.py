@@ -37,9 +37,10 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import fbm, hsv_to_rgb, smoothstep, texel_coordinates, value_noise
+from brdfgan.data.materials.noise import fbm, hsv_to_rgb, texel_coordinates, value_noise
 from brdfgan.data.materials.noise import lookup as _lookup
 
 GROUNDS = ("soil", "moss", "bark")

@@ -22,8 +22,9 @@ from collections.abc import Mapping
 
 import torch
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import fbm, hsv_to_rgb, smoothstep, texel_coordinates
+from brdfgan.data.materials.noise import fbm, hsv_to_rgb, texel_coordinates
 
 # Relief as a fraction of the image width: polished stone is nearly flat.
 _RELIEF = 0.0006

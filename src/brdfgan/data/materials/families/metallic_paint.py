@@ -47,10 +47,11 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.core.svbrdf import linear_to_srgb, srgb_to_linear
 from brdfgan.data.materials.albedo import METAL_F0_LINEAR, clamp_dielectric_albedo, metal_basecolor
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import gradient_noise, hsv_to_rgb, smoothstep, texel_coordinates
+from brdfgan.data.materials.noise import gradient_noise, hsv_to_rgb, texel_coordinates
 
 FOIL_METALS: tuple[str, ...] = ("aluminium", "silver", "gold", "copper")
 # Flake disc radius in flake pitches; its centre is jittered only so far that the disc stays in

@@ -35,13 +35,13 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
 from brdfgan.data.materials.noise import (
     hsv_to_rgb,
     random_per_cell,
     smooth_fbm,
-    smoothstep,
     texel_coordinates,
     value_noise,
 )

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
 from brdfgan.data.materials.noise import (
@@ -47,7 +48,6 @@ from brdfgan.data.materials.noise import (
     hsv_to_rgb,
     lerp_color,
     random_per_cell,
-    smoothstep,
     texel_coordinates,
     value_noise,
     worley,

@@ -36,9 +36,10 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import fbm, hsv_to_rgb, smoothstep, value_noise
+from brdfgan.data.materials.noise import fbm, hsv_to_rgb, value_noise
 
 STUCCO_STYLES = ("orange_peel", "trowel", "knock_down")
 # Hairline crack groove depth as a fraction of the image width (independent of the stucco relief).

@@ -36,13 +36,13 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
 from brdfgan.data.materials.noise import (
     gradient_noise,
     hsv_to_rgb,
     smooth_fbm,
-    smoothstep,
     texel_coordinates,
     value_noise,
 )

@@ -36,9 +36,10 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.albedo import metal_basecolor
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import smooth_fbm, smoothstep, value_noise, worley, wrapped_upsample
+from brdfgan.data.materials.noise import smooth_fbm, value_noise, worley, wrapped_upsample
 
 # The metals of the ``metal`` parameter, in index order (names of albedo.METAL_F0_LINEAR).
 METALS: tuple[str, ...] = (

@@ -22,8 +22,9 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import fbm, hsv_to_rgb, lerp_color, smoothstep, value_noise
+from brdfgan.data.materials.noise import fbm, hsv_to_rgb, lerp_color, value_noise
 
 STEEL = (0.77, 0.78, 0.78)  # F0 of iron/steel, sRGB
 RUST_ORANGE = (0.58, 0.29, 0.11)

@@ -21,8 +21,9 @@ from collections.abc import Mapping
 
 import torch
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import fbm, hsv_to_rgb, random_per_cell, smoothstep, worley
+from brdfgan.data.materials.noise import fbm, hsv_to_rgb, random_per_cell, worley
 
 
 def _generate(params: Mapping[str, float], size: int, generator: torch.Generator) -> MaterialLayers:

@@ -33,6 +33,7 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.albedo import clamp_dielectric_albedo, metal_basecolor
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
 from brdfgan.data.materials.noise import (
@@ -40,7 +41,6 @@ from brdfgan.data.materials.noise import (
     lerp_color,
     random_per_cell,
     smooth_fbm,
-    smoothstep,
     texel_coordinates,
     value_noise,
 )

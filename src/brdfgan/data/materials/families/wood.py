@@ -23,8 +23,9 @@ from collections.abc import Mapping
 import torch
 from torch import Tensor
 
+from brdfgan.core.filtering import smoothstep
 from brdfgan.data.materials.base import MaterialFamily, MaterialLayers, Parameter
-from brdfgan.data.materials.noise import fbm, hsv_to_rgb, random_per_cell, smoothstep, texel_coordinates
+from brdfgan.data.materials.noise import fbm, hsv_to_rgb, random_per_cell, texel_coordinates
 
 # Relief as fractions of the image width, so normals look alike at every resolution.
 _GAP_DEPTH = 0.004
