@@ -14,7 +14,10 @@ Rows:
 - ``v4 flash``: the shipped network on the flash photo (today's predict);
 - ``v4 flash-only``: on the flash-only image (the room light subtracted, re-exposed);
 - ``de-lit flash-only``: the de-lit reference on the flash-only image;
-- ``pair fit``: :func:`~brdfgan.inference.pair.relief_fit.fit_pair` started from ``v4 flash-only``.
+- ``pair fit``: :func:`~brdfgan.inference.pair.relief_fit.fit_pair` started from ``v4 flash-only``;
+- ``v4 flash, as written`` and ``pair fit, as written``: the two as ``brdfgan predict`` writes them,
+  through :func:`~brdfgan.core.clipped_fill.remove_flash` (what every prediction goes through)
+  with the photo the network saw (the flash photo; the flash-only image).
 
 ``--shards DIR`` scores a generated dataset's Mitsuba pairs instead (``dataset_spec.pairs``: each
 test sample's no-flash twin, undone with its ``meta["pair"]``), e.g. the OOD benchmark's:
@@ -39,6 +42,7 @@ import torch
 from torch import Tensor, nn
 
 from brdfgan.core.clipped_fill import CLIP_LEVEL as CLIP
+from brdfgan.core.clipped_fill import remove_flash
 from brdfgan.core.exposure import auto_exposure_scale
 from brdfgan.core.render import warp_maps_to_view
 from brdfgan.core.svbrdf import NORMAL, encode_normal, linear_to_srgb
@@ -70,7 +74,15 @@ from research.relief_tables import OOD_SCANS, HandfulBank, compose_config, log
 
 ROOT = Path(__file__).resolve().parents[1]
 DE_LIT = ROOT / "src" / "brdfgan" / "weights" / "references" / "de_lit.safetensors"
-ROWS = ("flat", "v4 flash", "v4 flash-only", "de-lit flash-only", "pair fit")
+ROWS = (
+    "flat",
+    "v4 flash",
+    "v4 flash-only",
+    "de-lit flash-only",
+    "pair fit",
+    "v4 flash, as written",
+    "pair fit, as written",
+)
 COLUMNS = (
     ("angle / flat", "normal_angle_deg"),
     ("observable / flat", "normal_angle_deg/observable"),
@@ -199,14 +211,15 @@ def predictions(
     flat[NORMAL.start + 2] = 1.0
     yield "flat", flat
     with torch.no_grad():
-        yield "v4 flash", v4(pair.flash[None], pair.frame)[0]
+        single = v4(pair.flash[None], pair.frame)[0]
+        yield "v4 flash", single
         from_flash_only = v4(pair.flash_only[None], pair.frame)[0]
         yield "v4 flash-only", from_flash_only
         yield "de-lit flash-only", de_lit(pair.flash_only[None], pair.frame)[0]
-    yield (
-        "pair fit",
-        fit_pair(pair.flash_only, pair.room, pair.valid, from_flash_only, pair.frame, config).maps,
-    )
+    fitted = fit_pair(pair.flash_only, pair.room, pair.valid, from_flash_only, pair.frame, config).maps
+    yield "pair fit", fitted
+    yield "v4 flash, as written", remove_flash(single, pair.flash, pair.frame)[0]
+    yield "pair fit, as written", remove_flash(fitted, pair.flash_only, pair.frame)[0]
 
 
 FIGURE_COLUMNS = ("flash photo", "no-flash photo", "normal: truth", "v4, flash photo", "pair fit")

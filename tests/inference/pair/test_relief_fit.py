@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import torch
+import torch.nn.functional as F
 
 from brdfgan.core.delit import flash_render
 from brdfgan.core.flash_geometry import centred_flash_frame
@@ -27,19 +29,24 @@ def mean_angle(a: torch.Tensor, b: torch.Tensor) -> float:
     return float(torch.rad2deg(torch.acos((a * b).sum(0).clamp(-1, 1))).mean())
 
 
-def pair_of(height_px: torch.Tensor, *, metal: float = 0.0) -> tuple[torch.Tensor, ...]:
-    """A diffuse surface with a blocky albedo, its flash-only image and its room light's share
-    (a side-lit order-2 irradiance) — the model the fit assumes, rendered by the project's flash."""
+def pair_of(
+    height_px: torch.Tensor, *, metal: float = 0.0, albedo: torch.Tensor | None = None, sheen: float = 0.0
+) -> tuple[torch.Tensor, ...]:
+    """A diffuse surface with a blocky albedo (or ``albedo``, ``(1, 3, SIZE, SIZE)``), its
+    flash-only image and its room light's share (a side-lit order-2 irradiance) — the model the fit
+    assumes, rendered by the project's flash — plus ``sheen``, an even reflection of the room that
+    the model lacks."""
     normal = normals_of_height(height_px)
-    generator = torch.Generator().manual_seed(0)
-    albedo = (0.3 + 0.4 * torch.rand(1, 3, SIZE // 8, SIZE // 8, generator=generator)).repeat_interleave(8, 2)
-    albedo = albedo.repeat_interleave(8, 3)
+    if albedo is None:
+        generator = torch.Generator().manual_seed(0)
+        blocks = 0.3 + 0.4 * torch.rand(1, 3, SIZE // 8, SIZE // 8, generator=generator)
+        albedo = blocks.repeat_interleave(8, 2).repeat_interleave(8, 3)
     frame = centred_flash_frame(1, SIZE, SIZE, fov_deg=50.0)
     roughness, metallic = torch.full((1, 1, SIZE, SIZE), 0.8), torch.full((1, 1, SIZE, SIZE), metal)
     flash_only = flash_render(albedo, normal, roughness, metallic, frame)[0]
     light = torch.zeros(3, SH_TERMS)
     light[:, 0], light[:, 3], light[:, 1] = 1.0, 0.6, 0.3  # constant, from +x, from +y
-    room = 0.2 * albedo[0] * torch.einsum("ck,bkhw->bchw", light, sh_basis(normal))[0].clamp_min(0)
+    room = 0.2 * albedo[0] * torch.einsum("ck,bkhw->bchw", light, sh_basis(normal))[0].clamp_min(0) + sheen
     flat = torch.tensor([0.0, 0.0, 1.0]).view(3, 1, 1).expand(3, SIZE, SIZE)
     maps = join_maps(linear_to_srgb(albedo[0]), flat, roughness[0], metallic[0])
     return flash_only, room, maps, frame, normal[0]
@@ -84,6 +91,26 @@ def test_the_networks_relief_stays_where_the_photos_bear_it_out() -> None:
     result = fit_pair(flash_only, room, torch.ones(1, SIZE, SIZE), network, frame, quick)
     assert result.kept == "prediction" and torch.equal(result.maps, network)
     assert result.residual_prediction < 0.5 * min(result.residual_flat, result.residual_fit)
+
+
+def test_a_ratio_that_follows_the_material_is_no_relief() -> None:
+    # A flat surface whose albedo varies smoothly, and an even sheen of the room's reflection in the
+    # no-flash photo: the ratio is brighter where the surface is darker, which a smooth relief can
+    # imitate. Scored against a flat surface alone, the fit's 10°+ of invented relief is kept; given
+    # the material's own terms, every relief is turned away.
+    y, x = torch.meshgrid(torch.linspace(0, 1, SIZE), torch.linspace(0, 1, SIZE), indexing="ij")
+    albedo = 0.35 + 0.25 * torch.sin(2 * math.pi * x) * torch.cos(1.5 * math.pi * y)
+    flat_height = torch.zeros(1, 1, SIZE, SIZE)
+    flash_only, room, maps, frame, truth = pair_of(
+        flat_height, albedo=albedo.expand(1, 3, SIZE, SIZE).clone(), sheen=0.01
+    )
+    valid = torch.ones(1, SIZE, SIZE)
+    plain = fit_pair(flash_only, room, valid, maps, frame, replace(FAST, guard_with_maps=False))
+    drawn = normals_of_height(F.interpolate(plain.height, size=(SIZE, SIZE), mode="bilinear"))[0]
+    assert plain.kept == "fit" and mean_angle(drawn, truth) > 10.0
+    guarded = fit_pair(flash_only, room, valid, maps, frame, FAST)
+    assert guarded.kept == "flat" and torch.equal(guarded.maps, maps)
+    assert guarded.residual_flat < 0.5 * min(guarded.residual_fit, plain.residual_flat)
 
 
 def test_nothing_held_out_gives_flat_normals() -> None:
