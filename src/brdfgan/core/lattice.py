@@ -37,6 +37,15 @@ synthesis of regular repeatable patterns"). The steps:
    horizontal) and ``v = m₂a + n₂b`` (about vertical) spanning a parallelogram that fits in the
    maps, the largest with the least stretch and turn; with ``align`` the frame is turned so that the
    lattice's own direction nearest an axis becomes that axis (the pattern is rectified).
+4b. **Closure** (:func:`close_cells`): the lattice is measured to a fraction of a per cent, but a
+   tile spans many cells, so 0.5 % becomes a step of a pixel or more where the wrap joins the
+   tile's last cell to its first (a checkerboard of two periods a crop: 2.7-4.9 px). ``u`` and
+   ``v`` themselves are measured instead: each moves to the sub-pixel shift, within
+   :data:`CLOSURE_REACH` pixels, at which the maps best match themselves (the normalised
+   correlation of the detrended pattern features over the overlap, a parabola through the best
+   whole shift and its neighbours). That is the shift the wrap makes, so the wrap closes whatever
+   the lattice's precision. Kept where the match is a clear peak (at least
+   :data:`CLOSURE_MIN_CORRELATION`) inside the search and the cells still fit with their margin.
 5. **Resample** (:func:`sample_cells`): the affine map taking ``u`` to ``(W, 0)`` and ``v`` to
    ``(0, H)`` samples the maps (bilinear, ``grid_sample``; normals renormalised), a margin of whole
    pixels beyond each edge included. The result repeats by whole periods: its wrap joins a cell to
@@ -154,6 +163,11 @@ MAX_STRETCH = 0.15
 MAX_MARGIN = 1.0 / 16.0
 MIN_MARGIN = 1.0 / 32.0
 MIN_BAND = 4
+# Closure (close_cells): the tile's edges are searched this many pixels (at most a quarter of the
+# shorter lattice vector) around the lattice's combinations, on features of at most DETECT_SIDE,
+# and moved where the maps match themselves with at least this correlation.
+CLOSURE_REACH = 3
+CLOSURE_MIN_CORRELATION = 0.5
 
 
 @dataclass(frozen=True)
@@ -764,6 +778,8 @@ class CellTiling:
     margin: tuple[int, int]
     aligned: bool = False
     roll: tuple[int, int] = (0, 0)
+    # How far close_cells moved u and v (pixels of the maps; 0 where it kept the lattice's).
+    closure: tuple[float, float] = (0.0, 0.0)
 
     @property
     def cells(self) -> int:
@@ -807,6 +823,7 @@ class CellTiling:
             "margin": list(self.margin),
             "aligned": self.aligned,
             "roll": list(self.roll),
+            "closure_px": list(self.closure),
             "stretch": self.stretch,
             "turn_deg": self.turn_deg,
         }
@@ -823,6 +840,7 @@ class CellTiling:
             margin=(int(record["margin"][0]), int(record["margin"][1])),
             aligned=bool(record["aligned"]),
             roll=(int(record["roll"][0]), int(record["roll"][1])),
+            closure=_vector(record.get("closure_px", (0.0, 0.0))),
         )
 
 
@@ -931,6 +949,90 @@ def choose_cells(
         margin=(math.floor(fraction * width), math.floor(fraction * height)),
         aligned=align,
     )
+
+
+def _shift_match(features: Tensor, dx: int, dy: int) -> float:
+    """The normalised correlation of ``features`` with themselves shifted by ``(dx, dy)`` whole
+    pixels (each pixel ``p`` against ``p + (dx, dy)``) over the pixels that have a partner.
+    Shape: ``(C, H, W)`` → a number in [−1, 1]."""
+    _, height, width = features.shape
+    x0, x1 = max(0, -dx), width - max(0, dx)
+    y0, y1 = max(0, -dy), height - max(0, dy)
+    if x1 - x0 < 2 or y1 - y0 < 2:
+        return -1.0
+    here = features[:, y0:y1, x0:x1].flatten()
+    there = features[:, y0 + dy : y1 + dy, x0 + dx : x1 + dx].flatten()
+    here, there = here - here.mean(), there - there.mean()
+    return float((here * there).sum() / (here.norm() * there.norm()).clamp_min(1e-12))
+
+
+def _parabola_vertex(below: float, centre: float, above: float) -> float:
+    """The offset in (−½, ½) of the vertex of the parabola through three equally spaced values
+    whose middle one is the largest."""
+    curvature = below - 2.0 * centre + above
+    return 0.0 if curvature >= 0 else max(-0.5, min(0.5, 0.5 * (below - above) / curvature))
+
+
+def closing_shift(features: Tensor, shift: Vector, reach: int) -> tuple[Vector, float] | None:
+    """The sub-pixel shift within ``reach`` whole pixels of ``shift`` at which ``features`` best
+    match themselves (:func:`_shift_match` on a grid of whole shifts, then a parabola through the
+    best and its neighbours on each axis), and that match; ``None`` where the best lies on the
+    search's rim (no peak inside it).
+
+    Shape: ``(C, H, W)``, ``(dx, dy)`` → ``((dx, dy), correlation)`` or ``None``.
+    """
+    cx, cy = round(shift[0]), round(shift[1])
+    span = range(-reach - 1, reach + 2)
+    grid = torch.tensor([[_shift_match(features, cx + i, cy + j) for i in span] for j in span])
+    row, column = divmod(int(torch.argmax(grid)), len(span))
+    if not (0 < row < len(span) - 1 and 0 < column < len(span) - 1):
+        return None
+    dx = _parabola_vertex(*grid[row, column - 1 : column + 2].tolist())
+    dy = _parabola_vertex(*grid[row - 1 : row + 2, column].tolist())
+    return (cx + span[column] + dx, cy + span[row] + dy), float(grid[row, column])
+
+
+def close_cells(maps: Tensor, tiling: CellTiling) -> CellTiling:
+    """The tiling with ``u`` and ``v`` moved to the shifts at which the maps match themselves
+    (module docstring, step 4b: :func:`closing_shift` over the detrended pattern features, on a
+    copy of at most :data:`DETECT_SIDE` a side), re-centred; each kept as the lattice gave it
+    where no clear match lies within :data:`CLOSURE_REACH` pixels (at most a quarter of the
+    shorter lattice vector, from ``u``, ``v`` and their counts), and both where the cells would no
+    longer fit their margin.
+
+    Shape: ``(8, H, W)``, :class:`CellTiling` for them → :class:`CellTiling`.
+    """
+    check_single_maps(maps)
+    height, width = tiling.size
+    features = pattern_features(maps.detach().double())
+    scale = max(1.0, max(height, width) / DETECT_SIDE)
+    if scale > 1.0:
+        size = (max(1, round(height / scale)), max(1, round(width / scale)))
+        features = F.interpolate(features[None], size=size, mode="area")[0]
+    features = _detrend(features)
+    features = features / features.flatten(1).std(dim=1).clamp_min(FEATURE_FLOOR).view(-1, 1, 1)
+    edges = torch.tensor([tiling.u, tiling.v], dtype=torch.float64)
+    lattice = torch.linalg.solve(torch.tensor(tiling.counts, dtype=torch.float64), edges)  # rows a, b
+    shortest = float(lattice.norm(dim=1).min()) / scale
+    reach = min(CLOSURE_REACH, math.floor(0.25 * shortest))
+    if reach < 1:
+        return tiling
+    closed: list[Vector] = []
+    for edge in (tiling.u, tiling.v):
+        found = closing_shift(features, (edge[0] / scale, edge[1] / scale), reach)
+        if found is None or found[1] < CLOSURE_MIN_CORRELATION:
+            closed.append(edge)
+        else:
+            closed.append((found[0][0] * scale, found[0][1] * scale))
+    u, v = closed
+    room = float(
+        _margins(torch.tensor(u, dtype=torch.float64), torch.tensor(v, dtype=torch.float64), height, width)
+    )
+    if room * width < tiling.margin[0] or room * height < tiling.margin[1]:
+        return tiling
+    moved = (math.dist(u, tiling.u), math.dist(v, tiling.v))
+    origin = (0.5 * (width - u[0] - v[0]), 0.5 * (height - u[1] - v[1]))
+    return replace(tiling, u=u, v=v, origin=origin, closure=moved)
 
 
 def _count(pair: Tensor) -> tuple[int, int]:
@@ -1066,8 +1168,9 @@ class CellTile:
 
 
 def tile_whole_cells(maps: Tensor, tiling: CellTiling) -> CellTile:
-    """The maps resampled to whole lattice cells, their wraps cut and the tile rolled to a quiet
-    wrap (module docstring, steps 5–7), in the maps' dtype, with
+    """The tiling closed on the maps (:func:`close_cells`), the maps resampled to its whole lattice
+    cells, their wraps cut and the tile rolled to a quiet wrap (module docstring, steps 4b–7), in
+    the maps' dtype, with
     :class:`~brdfgan.core.seamless.TilingMeasures` (wrap ratios of the tile; copied fractions
     against the resampled maps, :func:`period_copied_fraction`, which a roll does not change).
 
@@ -1076,6 +1179,7 @@ def tile_whole_cells(maps: Tensor, tiling: CellTiling) -> CellTile:
     check_single_maps(maps)
     if tuple(maps.shape[-2:]) != tiling.size:
         raise ValueError(f"the tiling is for maps of {tiling.size}, got {tuple(maps.shape[-2:])}")
+    tiling = close_cells(maps, tiling)
     resampled = sample_cells(maps, tiling)
     tile = cut_wrap(resampled, tiling.margin)
     roll_x = quiet_cut(tile, -1, MAP_GROUPS)
