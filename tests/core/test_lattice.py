@@ -185,6 +185,18 @@ def test_mild_perspective_is_measured_and_taken_out_so_that_every_cell_stays_who
     assert find_perspective(flat, find_lattice(flat)) is None
 
 
+def test_a_lattice_too_foreshortened_to_pass_is_found_once_rectified() -> None:
+    # A 6 % keystone broadens the autocorrelation's peaks until the score falls under the threshold;
+    # the perspective is still measured from the candidate lattice, and the rectified maps pass.
+    g = (0.06 / (SIZE / 2), -0.045 / (SIZE / 2))
+    maps = lattice_maps(polar(24.0, 30.0), polar(30.0, 120.0), perspective=g, seed=1)
+    found = find_lattice(maps)
+    assert found.ambiguous and not found.periodic, found
+    perspective = find_perspective(maps, found)
+    assert perspective is not None and perspective.keystone == pytest.approx((0.06, -0.045), abs=0.005)
+    assert find_lattice(rectify(maps, perspective)).score > 4 * found.score
+
+
 def brick_maps(width: float, height: float, degrees: float, *, size: int = SIZE, seed: int = 0) -> Tensor:
     """Running-bond bricks ``width × height`` (every other course shifted by half a brick), turned
     ``degrees``: the horizontal mortar runs through (a ridge in the autocorrelation), only the

@@ -72,6 +72,15 @@ def test_a_lattice_in_mild_perspective_is_rectified_before_its_cells_are_cut_and
     assert make_tileable(tiles(), HOTSPOT)[1].perspective is None
 
 
+def test_a_lattice_found_only_once_rectified_is_tiled_by_cells() -> None:
+    g = (0.06 / (SIZE / 2), -0.045 / (SIZE / 2))  # the score falls short before rectification
+    maps = lattice_maps(polar(24.0, 30.0), polar(30.0, 120.0), perspective=g, seed=1)
+    assert not find_lattice(maps).periodic
+    _, record = make_tileable(maps, HOTSPOT)
+    assert record.cells is not None and record.perspective is not None
+    assert record.lattice is not None and record.lattice.periodic and record.note is None
+
+
 def test_a_non_periodic_material_keeps_todays_cut_bit_for_bit() -> None:
     maps = noise_maps(1)
     tiled, record = make_tileable(maps, HOTSPOT)
