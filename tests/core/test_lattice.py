@@ -24,6 +24,7 @@ from brdfgan.core.lattice import (
     rectify,
     reduce_basis,
     refine_lattice,
+    refine_perspective,
     sample_cells,
     tile_whole_cells,
 )
@@ -195,6 +196,19 @@ def test_a_lattice_too_foreshortened_to_pass_is_found_once_rectified() -> None:
     perspective = find_perspective(maps, found)
     assert perspective is not None and perspective.keystone == pytest.approx((0.06, -0.045), abs=0.005)
     assert find_lattice(rectify(maps, perspective)).score > 4 * found.score
+
+
+def test_a_perspective_that_overshoots_is_measured_again_on_the_maps_it_rectifies() -> None:
+    truth = (0.02, -0.015)
+    g = (truth[0] / (SIZE / 2), truth[1] / (SIZE / 2))
+    maps = lattice_maps(polar(24.0, 30.0), polar(30.0, 120.0), perspective=g, seed=7)
+    centre = (SIZE / 2, SIZE / 2)
+    overshot = Perspective((1.3 * g[0], 1.3 * g[1]), centre, (1.3 * truth[0], 1.3 * truth[1]), 1.0, 0.5)
+    refined = refine_perspective(maps, overshot)
+    assert refined.keystone == pytest.approx(truth, abs=0.002) and refined.spread_before == 1.0
+    assert refined.g == pytest.approx((refined.keystone[0] / (SIZE / 2), refined.keystone[1] / (SIZE / 2)))
+    # A perspective that leaves nothing to measure is returned as it is.
+    assert refine_perspective(maps, refined) == refined
 
 
 def brick_maps(width: float, height: float, degrees: float, *, size: int = SIZE, seed: int = 0) -> Tensor:

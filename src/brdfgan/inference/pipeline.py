@@ -47,6 +47,7 @@ from brdfgan.core.lattice import (
     find_lattice,
     find_perspective,
     rectify,
+    refine_perspective,
     tile_whole_cells,
 )
 from brdfgan.core.seamless import (
@@ -373,6 +374,7 @@ def make_tileable(
         cells = choose_cells(lattice.vectors, height, width, align=align_pattern)
     perspective = find_perspective(repaired, lattice)
     if perspective is not None:
+        perspective = refine_perspective(repaired, perspective)
         # Mild perspective: the cells are taken from the rectified maps, where they all match
         # (kept only where whole cells fit there; the cut runs on the maps as they are).
         rectified = rectify(repaired, perspective)
