@@ -204,11 +204,16 @@ def test_a_perspective_that_overshoots_is_measured_again_on_the_maps_it_rectifie
     maps = lattice_maps(polar(24.0, 30.0), polar(30.0, 120.0), perspective=g, seed=7)
     centre = (SIZE / 2, SIZE / 2)
     overshot = Perspective((1.3 * g[0], 1.3 * g[1]), centre, (1.3 * truth[0], 1.3 * truth[1]), 1.0, 0.5)
-    refined = refine_perspective(maps, overshot)
+    refined, rectified, straight = refine_perspective(maps, overshot)
+    assert torch.equal(rectified, rectify(maps, refined)) and straight.vectors is not None
+    again = find_lattice(rectified).vectors
+    assert again is not None and torch.allclose(
+        torch.tensor(straight.vectors), torch.tensor(again), atol=1e-6
+    )
     assert refined.keystone == pytest.approx(truth, abs=0.002) and refined.spread_before == 1.0
     assert refined.g == pytest.approx((refined.keystone[0] / (SIZE / 2), refined.keystone[1] / (SIZE / 2)))
     # A perspective that leaves nothing to measure is returned as it is.
-    assert refine_perspective(maps, refined) == refined
+    assert refine_perspective(maps, refined)[0] == refined
 
 
 def brick_maps(width: float, height: float, degrees: float, *, size: int = SIZE, seed: int = 0) -> Tensor:

@@ -240,6 +240,22 @@ def pattern_features(maps: Tensor) -> Tensor:
     return torch.cat([luminance(parts.basecolor), slopes])
 
 
+def detection_features(maps: Tensor) -> tuple[Tensor, Tensor]:
+    """:func:`pattern_features` area-averaged to at most :data:`DETECT_SIDE` a side, float64, and
+    the factor ``(x, y)`` from their pixels to the maps' (1 where they were not shrunk).
+
+    Shape: ``(8, H, W)`` → ``(3, h, w)``, ``(2,)``.
+    """
+    height, width = maps.shape[-2:]
+    features = pattern_features(maps.detach().double())
+    scale = max(height, width) / DETECT_SIDE
+    if scale > 1.0:
+        size = (max(1, round(height / scale)), max(1, round(width / scale)))
+        features = F.interpolate(features[None], size=size, mode="area")[0]
+    small_h, small_w = features.shape[-2:]
+    return features, torch.tensor([width / small_w, height / small_h], dtype=torch.float64)
+
+
 def _detrend(features: Tensor) -> Tensor:
     """Each channel minus its least-squares quadratic in ``(x, y)``: the shading and vignetting a
     photo's maps keep would otherwise dominate ρ at every lag. Shape: ``(C, H, W)`` → same."""
@@ -533,14 +549,8 @@ def find_lattice(maps: Tensor) -> Lattice:
     Shape: ``(8, H, W)`` → :class:`Lattice`.
     """
     check_single_maps(maps)
-    height, width = maps.shape[-2:]
-    features = pattern_features(maps.detach().double())
-    scale = max(height, width) / DETECT_SIDE
-    if scale > 1.0:
-        size = (max(1, round(height / scale)), max(1, round(width / scale)))
-        features = F.interpolate(features[None], size=size, mode="area")[0]
+    features, factor = detection_features(maps)
     small_h, small_w = features.shape[-2:]
-    factor = torch.tensor([width / small_w, height / small_h], dtype=torch.float64)
     rho = autocorrelation(features)
     pair = _pick_pair(rho, _candidates(rho, small_h, small_w))
     if pair is None:
@@ -673,14 +683,8 @@ def find_perspective(maps: Tensor, lattice: Lattice) -> Perspective | None:
     if lattice.vectors is None or not (lattice.periodic or lattice.ambiguous):
         return None
     height, width = maps.shape[-2:]
-    features = pattern_features(maps.detach().double())
-    scale = max(height, width) / DETECT_SIDE
-    if scale > 1.0:
-        features = F.interpolate(
-            features[None], size=(max(1, round(height / scale)), max(1, round(width / scale))), mode="area"
-        )[0]
+    features, factor = detection_features(maps)
     small_h, small_w = features.shape[-2:]
-    factor = torch.tensor([width / small_w, height / small_h], dtype=torch.float64)
     start = [torch.tensor(vector, dtype=torch.float64) / factor for vector in lattice.vectors]
     extent = torch.stack(start).abs().amax(dim=0)  # the lattice vectors' reach along x and y
     share = max(
@@ -723,26 +727,31 @@ def find_perspective(maps: Tensor, lattice: Lattice) -> Perspective | None:
     )
 
 
-def refine_perspective(maps: Tensor, perspective: Perspective) -> Perspective:
-    """The perspective measured once more on the maps it rectifies: where the first fit over- or
-    undershoots by more than :data:`MIN_KEYSTONE` (a tread plate at 45°: 2.4 % for the truth's 2 %),
-    the rectified maps show the rest, and since two such homographies about one centre compose by
-    adding their ``g`` (``q = d / (1 + (g₁ + g₂)·d)``), the sum is returned (its spread after being
-    the second fit's); else ``perspective`` as it is.
+def refine_perspective(maps: Tensor, perspective: Perspective) -> tuple[Perspective, Tensor, Lattice]:
+    """The perspective measured once more on the maps it rectifies, with the maps rectified
+    through the result and their lattice: where the first fit over- or undershoots by more than
+    :data:`MIN_KEYSTONE` (a tread plate at 45°: 2.4 % for the truth's 2 %), the rectified maps show
+    the rest, and since two such homographies about one centre compose by adding their ``g``
+    (``q = d / (1 + (g₁ + g₂)·d)``), the sum is returned (its spread after being the second fit's);
+    else ``perspective`` as it is.
 
-    Shape: ``(8, H, W)`` and their :class:`Perspective` → :class:`Perspective`.
+    Shape: ``(8, H, W)`` and their :class:`Perspective` → :class:`Perspective`, ``(8, H, W)``,
+    :class:`Lattice`.
     """
     rectified = rectify(maps, perspective)
-    rest = find_perspective(rectified, find_lattice(rectified))
+    straight = find_lattice(rectified)
+    rest = find_perspective(rectified, straight)
     if rest is None:
-        return perspective
-    return Perspective(
+        return perspective, rectified, straight
+    combined = Perspective(
         g=(perspective.g[0] + rest.g[0], perspective.g[1] + rest.g[1]),
         centre=perspective.centre,
         keystone=(perspective.keystone[0] + rest.keystone[0], perspective.keystone[1] + rest.keystone[1]),
         spread_before=perspective.spread_before,
         spread_after=rest.spread_after,
     )
+    rectified = rectify(maps, combined)
+    return combined, rectified, find_lattice(rectified)
 
 
 def rectify(maps: Tensor, perspective: Perspective) -> Tensor:
@@ -1036,30 +1045,25 @@ def close_cells(maps: Tensor, tiling: CellTiling) -> CellTiling:
     """
     check_single_maps(maps)
     height, width = tiling.size
-    features = pattern_features(maps.detach().double())
-    scale = max(1.0, max(height, width) / DETECT_SIDE)
-    if scale > 1.0:
-        size = (max(1, round(height / scale)), max(1, round(width / scale)))
-        features = F.interpolate(features[None], size=size, mode="area")[0]
+    features, factor = detection_features(maps)
     features = _detrend(features)
     features = features / features.flatten(1).std(dim=1).clamp_min(FEATURE_FLOOR).view(-1, 1, 1)
-    edges = torch.tensor([tiling.u, tiling.v], dtype=torch.float64)
+    edges = torch.tensor([tiling.u, tiling.v], dtype=torch.float64) / factor  # detection pixels
     lattice = torch.linalg.solve(torch.tensor(tiling.counts, dtype=torch.float64), edges)  # rows a, b
-    shortest = float(lattice.norm(dim=1).min()) / scale
-    reach = min(CLOSURE_REACH, math.floor(0.25 * shortest))
+    reach = min(CLOSURE_REACH, math.floor(0.25 * float(lattice.norm(dim=1).min())))
     if reach < 1:
         return tiling
     closed: list[Vector] = []
-    for edge in (tiling.u, tiling.v):
-        found = closing_shift(features, (edge[0] / scale, edge[1] / scale), reach)
+    for edge, small in zip((tiling.u, tiling.v), edges.tolist(), strict=True):
+        found = closing_shift(features, _vector(small), reach)
         if (
             found is None
             or found[1] < CLOSURE_MIN_CORRELATION
-            or math.dist(found[0], (edge[0] / scale, edge[1] / scale)) < CLOSURE_MIN_MOVE
+            or math.dist(found[0], small) < CLOSURE_MIN_MOVE
         ):
             closed.append(edge)
         else:
-            closed.append((found[0][0] * scale, found[0][1] * scale))
+            closed.append(_vector((torch.tensor(found[0], dtype=torch.float64) * factor).tolist()))
     u, v = closed
     room = float(
         _margins(torch.tensor(u, dtype=torch.float64), torch.tensor(v, dtype=torch.float64), height, width)

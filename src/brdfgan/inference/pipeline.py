@@ -46,7 +46,6 @@ from brdfgan.core.lattice import (
     choose_cells,
     find_lattice,
     find_perspective,
-    rectify,
     refine_perspective,
     tile_whole_cells,
 )
@@ -374,11 +373,9 @@ def make_tileable(
         cells = choose_cells(lattice.vectors, height, width, align=align_pattern)
     perspective = find_perspective(repaired, lattice)
     if perspective is not None:
-        perspective = refine_perspective(repaired, perspective)
         # Mild perspective: the cells are taken from the rectified maps, where they all match
         # (kept only where whole cells fit there; the cut runs on the maps as they are).
-        rectified = rectify(repaired, perspective)
-        straight = find_lattice(rectified)
+        perspective, rectified, straight = refine_perspective(repaired, perspective)
         straight_cells = None
         if straight.periodic and straight.vectors is not None:
             straight_cells = choose_cells(straight.vectors, height, width, align=align_pattern)
