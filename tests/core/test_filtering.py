@@ -1,4 +1,4 @@
-"""brdfgan.core.filtering: the shared Gaussian and binomial blurs."""
+"""brdfgan.core.filtering: the shared Gaussian and binomial blurs and the box mean."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from brdfgan.core.filtering import binomial_blur, gaussian_blur
+from brdfgan.core.filtering import binomial_blur, box_mean, gaussian_blur
 
 
 def test_reflect_keeps_a_constant_and_zeros_darkens_the_border() -> None:
@@ -40,3 +40,19 @@ def test_the_binomial_blur_flattens_every_period_2_pattern_and_keeps_smooth_imag
     torch.testing.assert_close(binomial_blur(ramp)[..., 1:-1, 1:-1], ramp[..., 1:-1, 1:-1])
     with pytest.raises(ValueError, match="H, W >= 2"):
         binomial_blur(torch.zeros(1, 3, 1, 8))
+
+
+def test_box_mean_is_the_mean_over_each_window_cut_at_the_border() -> None:
+    image = torch.rand(2, 3, 9, 13, generator=torch.Generator().manual_seed(0))
+    radius = 3
+    expected = torch.empty_like(image)
+    for row in range(9):
+        for column in range(13):
+            window = image[
+                ..., max(row - radius, 0) : row + radius + 1, max(column - radius, 0) : column + radius + 1
+            ]
+            expected[..., row, column] = window.mean(dim=(-2, -1))
+    assert torch.allclose(box_mean(image, radius), expected, atol=1e-6)
+    assert torch.equal(box_mean(image, 0), image)
+    with pytest.raises(ValueError, match="radius"):
+        box_mean(image, -1)

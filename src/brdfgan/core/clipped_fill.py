@@ -58,7 +58,7 @@ from torch import Tensor
 from brdfgan.core.checks import check_shape
 from brdfgan.core.delit import delit_photo
 from brdfgan.core.exposure import luminance
-from brdfgan.core.filtering import gaussian_blur, smoothstep
+from brdfgan.core.filtering import box_mean, gaussian_blur, smoothstep
 from brdfgan.core.flash_geometry import check_flash_frame, hotspot_distance, resize_flash_frame
 from brdfgan.core.flash_mark import REPAIR_INNER, FlashMark, mark_radius, repair_flash_mark
 from brdfgan.core.svbrdf import BASECOLOR, METALLIC, ROUGHNESS, check_single_maps, srgb_to_linear
@@ -413,14 +413,6 @@ def _dilate_values(image: Tensor, window: int) -> Tensor:
     return F.max_pool2d(F.pad(rows, (0, 0, pad, pad), mode="replicate"), (window, 1), stride=1)
 
 
-def _box_mean(image: Tensor, radius: int) -> Tensor:
-    """:func:`~brdfgan.core.filtering.box_mean`, separable (a box cut at the border is a rectangle,
-    so rows then columns give the same mean). Shape: ``(1, 1, H, W)``."""
-    side = 2 * radius + 1
-    rows = F.avg_pool2d(image, (1, side), stride=1, padding=(0, radius), count_include_pad=False)
-    return F.avg_pool2d(rows, (side, 1), stride=1, padding=(radius, 0), count_include_pad=False)
-
-
 def _erode(image: Tensor, window: int) -> Tensor:
     return -_dilate_values(-image, window)
 
@@ -450,7 +442,7 @@ def suppress_false_metal(maps: Tensor, photo: Tensor | None = None) -> tuple[Ten
     metallic = work[METALLIC][None]  # (1, 1, h, w)
     # A surface that reads as metal around the feature keeps its metal (perforated or engraved
     # metal: its holes and grooves are thin dark features whose rims the network reads as metal).
-    around = _box_mean(metallic, METAL_AROUND_WINDOWS * (window // 2))
+    around = box_mean(metallic, METAL_AROUND_WINDOWS * (window // 2))
     weight = thin_dark_weight(work, guide) * (1.0 - smoothstep(*METAL_AROUND, around))[0, 0]
     opened = _dilate_values(_erode(metallic, window), window)
     lowering = (weight * (metallic - opened).clamp_min(0.0))[0]  # (1, h, w)
