@@ -8,6 +8,9 @@ flash-only image and of a flat map are kept, so that every threshold is scored o
 (:func:`~brdfgan.inference.pair.relief_fit.choose_relief`, as the fit itself chooses).
 
     python -m research.pair_guard --shards data/pas_pairs --out outputs/pair_fit/guard.md
+
+``--fit KEY=VALUE`` (repeatable) sets a field of :class:`PairFitConfig` for every fit, e.g. the masks
+chosen before the guard existed (``--fit min_roughness=0.3``).
 """
 
 from __future__ import annotations
@@ -16,31 +19,52 @@ import argparse
 import itertools
 import json
 import time
+from dataclasses import fields
 from pathlib import Path
 
 import torch
 
 from brdfgan.core.svbrdf import NORMAL
 from brdfgan.inference.model.weights import load_model
-from brdfgan.inference.pair.relief_fit import Kept, choose_relief, fit_pair, with_relief
+from brdfgan.inference.pair.relief_fit import Kept, PairFitConfig, choose_relief, fit_pair, with_relief
 from brdfgan.io.atomic import write_text_atomic
 from brdfgan.losses.parameter import angular_distance
 from research.pair_fit_table import shard_pairs
 
 THRESHOLDS = (0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.5)
+# The fitted relief shrunk toward flat: the angle of a relief that is right in part (slope cosine c,
+# slope ratio r) is least at the scale c / r, kept in the rows for the study of a fixed shrink.
+RELIEF_SCALES = (0.25, 0.5, 0.75)
 
 
 def mean_angle(normal: torch.Tensor, truth: torch.Tensor) -> float:
     return float(angular_distance(normal, truth, dim=0).mean()) * 180.0
 
 
-def measure(root: Path, split: str, scanned: bool, limit: int) -> list[dict[str, float]]:
+def fit_config(settings: list[str]) -> PairFitConfig:
+    """``KEY=VALUE`` strings → the config with those fields set (each value of its field's type)."""
+    types = {f.name: type(getattr(PairFitConfig(), f.name)) for f in fields(PairFitConfig)}
+    values: dict[str, object] = {}
+    for setting in settings:
+        key, _, value = setting.partition("=")
+        if key not in types or types[key] not in (int, float, bool, tuple):
+            raise SystemExit(f"--fit {setting}: not a number field of PairFitConfig")
+        if types[key] is tuple:  # the levels' sizes and steps: comma-separated integers
+            values[key] = tuple(int(v) for v in value.split(","))
+        else:
+            values[key] = value.lower() in ("1", "true") if types[key] is bool else types[key](value)
+    return PairFitConfig(**values)  # type: ignore[arg-type]
+
+
+def measure(
+    root: Path, split: str, scanned: bool, limit: int, config: PairFitConfig
+) -> list[dict[str, float]]:
     v4 = load_model(None).generator.eval()
     rows = []
     for pair in itertools.islice(shard_pairs(root, scanned, split), limit or None):
         with torch.no_grad():
             network = v4(pair.flash_only[None], pair.frame)[0]
-        fitted = fit_pair(pair.flash_only, pair.room, pair.valid, network, pair.frame)
+        fitted = fit_pair(pair.flash_only, pair.room, pair.valid, network, pair.frame, config)
         # The fitted relief whatever the guard chose: every candidate's angle is kept.
         relief = with_relief(network, fitted.height, pair.frame)
         flat = torch.zeros_like(pair.truth[NORMAL])
@@ -52,6 +76,12 @@ def measure(root: Path, split: str, scanned: bool, limit: int) -> list[dict[str,
             "flat": mean_angle(flat, pair.truth[NORMAL]),
             "prediction": mean_angle(network[NORMAL], pair.truth[NORMAL]),
             "fit": mean_angle(relief[NORMAL], pair.truth[NORMAL]),
+            "masked": fitted.masked_fraction,
+            **{
+                f"fit@{scale}": mean_angle(with_relief(network, scale * fitted.height, pair.frame)[NORMAL],
+                                           pair.truth[NORMAL])
+                for scale in RELIEF_SCALES
+            },
         })  # fmt: skip
     return rows
 
@@ -75,7 +105,12 @@ def table(rows: list[dict[str, float]]) -> str:
         angle = sum(r[k] for r, k in zip(rows, kept, strict=True)) / flat
         counts = " / ".join(str(kept.count(name)) for name in ("fit", "prediction", "flat"))
         lines.append(f"| {threshold} | {counts} | {angle:.3f} |")
-    return "\n".join(lines) + f"\n\nflat map's angle {flat / len(rows):.2f}°\n"
+    unseen = sum(r["residual_flat"] == 0 for r in rows)
+    masked = sum(r.get("masked", float("nan")) for r in rows) / len(rows)
+    return "\n".join(lines) + (
+        f"\n\nflat map's angle {flat / len(rows):.2f}°; masked {masked:.2f} of the pixels on average,"
+        f" nothing held out on {unseen} of {len(rows)} pairs\n"
+    )
 
 
 def main() -> None:
@@ -91,14 +126,16 @@ def main() -> None:
         default=["val:scans", "val:procedural", "test:scans", "test:procedural"],
         help="split:scans or split:procedural (the OOD benchmark: test:scans)",
     )
+    parser.add_argument("--fit", nargs="*", default=[], help="PairFitConfig fields, KEY=VALUE")
     args = parser.parse_args()
+    config = fit_config(args.fit)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     started = time.time()
-    report = [f"# The pair fit's guard: {args.shards}\n"]
+    report = [f"# The pair fit's guard: {args.shards}, {' '.join(args.fit) or 'defaults'}\n"]
     for chosen_set in args.sets:
         split, kind = chosen_set.split(":")
         scanned = kind == "scans"
-        rows = measure(args.shards, split, scanned, args.limit)
+        rows = measure(args.shards, split, scanned, args.limit, config)
         name = f"{split} {kind}"
         report += [f"**{name}** ({len(rows)} pairs, {time.time() - started:.0f} s)\n", table(rows)]
         write_text_atomic(args.out, "\n".join(report))

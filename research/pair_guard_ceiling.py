@@ -1,0 +1,103 @@
+"""What the pair's ratio can show of a relief at all (issue 59): the held-out residual of the *true*
+normals against a flat surface's, each scored as the fit's guard scores a relief (the room light
+and the material terms refitted for it on the fitted pixels, the residual read on the held-out
+ones; :func:`~brdfgan.inference.pair.relief_fit.fit_pair`). Where the truth itself does not lower
+the flat surface's residual by the guard's ``min_improvement``, no fit of this model could pass the
+guard with the right relief: the ratio's evidence, not the fit, is the limit there.
+
+    python -m research.pair_guard_ceiling --shards data/pas_pairs --out outputs/pair_fit/ceiling.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+from pathlib import Path
+
+import torch
+
+from brdfgan.core.svbrdf import NORMAL
+from brdfgan.inference.model.weights import load_model
+from brdfgan.inference.pair.relief_fit import (
+    CONFOUNDS,
+    GUARD_STEPS,
+    VALUE_FLOOR,
+    PairFitConfig,
+    _fit_light,
+    _initial_light,
+    _Level,
+    _working_normals,
+    material_confounds,
+    usable_ratio_mask,
+)
+from brdfgan.io.atomic import write_text_atomic
+from research.pair_fit_table import Pair, shard_pairs
+
+
+# The fit's own private pieces (_Level, _fit_light, …) are used: the truth must be scored exactly as
+# the guard scores a relief.
+def residuals(pair: Pair, network: torch.Tensor, config: PairFitConfig) -> dict[str, float] | None:
+    """Held-out residuals of flat, the truth and the network's normals (None: nothing usable)."""
+    usable = usable_ratio_mask(pair.flash_only, pair.room, pair.valid, network, pair.frame, config)
+    log_ratio = pair.room.clamp_min(VALUE_FLOOR).log() - pair.flash_only.clamp_min(VALUE_FLOOR).log()
+    size = min(config.levels[-1], pair.flash_only.shape[-1])
+    confounds = material_confounds(network, usable) if config.guard_with_maps else None
+    fitted, held_out = _Level.of(log_ratio, usable, pair.frame, size, confounds).split()
+    if held_out.weight.sum() == 0:
+        return None
+    start = _initial_light(fitted, torch.zeros(1, 1, size, size))
+    if confounds is not None:
+        start = torch.cat([start, torch.zeros(3, CONFOUNDS)], 1)
+    flat = torch.zeros(1, 3, size, size)
+    flat[:, 2] = 1.0
+    out: dict[str, float] = {}
+    for name, normal in (("flat", flat), ("truth", _working_normals(pair.truth[NORMAL], size)),
+                         ("network", _working_normals(network[NORMAL], size))):  # fmt: skip
+        light = _fit_light(fitted, normal, start, 2 * GUARD_STEPS, config)
+        with torch.no_grad():
+            out[name] = float(held_out.residual_of_normals(normal, light))
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--shards", type=Path, required=True)
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--limit", type=int, default=24)
+    parser.add_argument(
+        "--sets", nargs="+", default=["val:scans", "val:procedural", "test:scans", "test:procedural"]
+    )
+    args = parser.parse_args()
+    config = PairFitConfig()
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    v4 = load_model(None).generator.eval()
+    report = [
+        f"# The guard's ceiling: {args.shards}\n",
+        "| set | pairs | scored | truth / flat residual: median | truth passes the guard | network / flat |",
+        "|---|---|---|---|---|---|",
+    ]
+    all_rows: dict[str, list[dict[str, float] | None]] = {}
+    for chosen_set in args.sets:
+        split, kind = chosen_set.split(":")
+        rows = []
+        for pair in itertools.islice(shard_pairs(args.shards, kind == "scans", split), args.limit or None):
+            with torch.no_grad():
+                network = v4(pair.flash_only[None], pair.frame)[0]
+            rows.append(residuals(pair, network, config))
+        scored = [r for r in rows if r is not None]
+        ratios = torch.tensor([r["truth"] / r["flat"] for r in scored])
+        network_ratios = torch.tensor([r["network"] / r["flat"] for r in scored])
+        passes = int((ratios < 1 - config.min_improvement).sum())
+        report.append(f"| {split} {kind} | {len(rows)} | {len(scored)} | {ratios.median():.3f} | {passes} |"
+                      f" {network_ratios.median():.3f} |")  # fmt: skip
+        all_rows[chosen_set] = rows
+        print(report[-1], flush=True)
+        write_text_atomic(args.out, "\n".join(report) + "\n")
+        write_text_atomic(args.out.with_suffix(".json"), json.dumps(all_rows))
+
+
+if __name__ == "__main__":
+    main()
