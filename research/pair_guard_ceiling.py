@@ -33,6 +33,7 @@ from brdfgan.inference.pair.relief_fit import (
 )
 from brdfgan.io.atomic import write_text_atomic
 from research.pair_fit_table import Pair, shard_pairs
+from research.pair_guard import fit_config
 
 
 # The fit's own private pieces (_Level, _fit_light, …) are used: the truth must be scored exactly as
@@ -70,12 +71,13 @@ def main() -> None:
     parser.add_argument(
         "--sets", nargs="+", default=["val:scans", "val:procedural", "test:scans", "test:procedural"]
     )
+    parser.add_argument("--fit", nargs="*", default=[], help="PairFitConfig fields, KEY=VALUE")
     args = parser.parse_args()
-    config = PairFitConfig()
+    config = fit_config(args.fit)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     v4 = load_model(None).generator.eval()
     report = [
-        f"# The guard's ceiling: {args.shards}\n",
+        f"# The guard's ceiling: {args.shards}, {' '.join(args.fit) or 'defaults'}\n",
         "| set | pairs | scored | truth / flat residual: median | truth passes the guard | network / flat |",
         "|---|---|---|---|---|---|",
     ]
