@@ -44,7 +44,14 @@ def test_the_binomial_blur_flattens_every_period_2_pattern_and_keeps_smooth_imag
 
 def test_box_mean_is_the_mean_over_each_window_cut_at_the_border() -> None:
     image = torch.rand(2, 3, 9, 13, generator=torch.Generator().manual_seed(0))
-    radius = 3
+    for radius in (1, 3):
+        _check_box_mean(image, radius)
+    assert torch.equal(box_mean(image, 0), image)
+    with pytest.raises(ValueError, match="radius"):
+        box_mean(image, -1)
+
+
+def _check_box_mean(image: torch.Tensor, radius: int) -> None:
     expected = torch.empty_like(image)
     for row in range(9):
         for column in range(13):
@@ -53,6 +60,3 @@ def test_box_mean_is_the_mean_over_each_window_cut_at_the_border() -> None:
             ]
             expected[..., row, column] = window.mean(dim=(-2, -1))
     assert torch.allclose(box_mean(image, radius), expected, atol=1e-6)
-    assert torch.equal(box_mean(image, 0), image)
-    with pytest.raises(ValueError, match="radius"):
-        box_mean(image, -1)

@@ -113,8 +113,11 @@ def box_mean(image: Tensor, radius: int) -> Tensor:
     if radius < 0:
         raise ValueError(f"radius must be non-negative, got {radius}")
     side = 2 * radius + 1
+    if radius <= 1:  # one 3 × 3 pass is faster than two (13 against 18 ms at 1024², 2 threads)
+        return F.avg_pool2d(image, side, stride=1, padding=radius, count_include_pad=False)
     # Separable: a box cut at the border is a rectangle, so rows then columns give the same mean in
-    # 2·side additions a pixel instead of side² (the thin-feature rule's windows span 50+ pixels).
+    # 2·side additions a pixel instead of side² (radius 4: 23 against 36 ms at 1024²; 16: 104
+    # against 711 ms; the thin-feature rule's windows span 50+ pixels).
     rows = F.avg_pool2d(image, (1, side), stride=1, padding=(0, radius), count_include_pad=False)
     return F.avg_pool2d(rows, (side, 1), stride=1, padding=(radius, 0), count_include_pad=False)
 
