@@ -48,7 +48,7 @@ def fit_config(settings: list[str]) -> PairFitConfig:
     for setting in settings:
         key, _, value = setting.partition("=")
         if key not in types or types[key] not in (int, float, bool, tuple):
-            raise SystemExit(f"--fit {setting}: not a number field of PairFitConfig")
+            raise SystemExit(f"--fit {setting}: not a number, switch or sizes field of PairFitConfig")
         if types[key] is tuple:  # the levels' sizes and steps: comma-separated integers
             values[key] = tuple(int(v) for v in value.split(","))
         else:
@@ -106,7 +106,7 @@ def table(rows: list[dict[str, float]]) -> str:
         counts = " / ".join(str(kept.count(name)) for name in ("fit", "prediction", "flat"))
         lines.append(f"| {threshold} | {counts} | {angle:.3f} |")
     unseen = sum(r["residual_flat"] == 0 for r in rows)
-    masked = sum(r.get("masked", float("nan")) for r in rows) / len(rows)
+    masked = sum(r["masked"] for r in rows) / len(rows)
     return "\n".join(lines) + (
         f"\n\nflat map's angle {flat / len(rows):.2f}°; masked {masked:.2f} of the pixels on average,"
         f" nothing held out on {unseen} of {len(rows)} pairs\n"

@@ -1,9 +1,11 @@
 """What the pair's ratio can show of a relief at all (issue 59): the held-out residual of the *true*
 normals against a flat surface's, each scored as the fit's guard scores a relief (the room light
 and the material terms refitted for it on the fitted pixels, the residual read on the held-out
-ones; :func:`~brdfgan.inference.pair.relief_fit.fit_pair`). Where the truth itself does not lower
-the flat surface's residual by the guard's ``min_improvement``, no fit of this model could pass the
-guard with the right relief: the ratio's evidence, not the fit, is the limit there.
+ones; :func:`~brdfgan.inference.pair.relief_fit.fit_pair`), with one difference: the guard refits
+from each relief's own fitted light for ``GUARD_STEPS``, here every relief starts from the flat
+surface's median light and gets twice the steps, since no fit precedes it. Where the truth itself
+does not lower the flat surface's residual by the guard's ``min_improvement``, no fit of this model
+could pass the guard with the right relief: the ratio's evidence, not the fit, is the limit there.
 
     python -m research.pair_guard_ceiling --shards data/pas_pairs --out outputs/pair_fit/ceiling.md
 """
@@ -22,13 +24,13 @@ from brdfgan.inference.model.weights import load_model
 from brdfgan.inference.pair.relief_fit import (
     CONFOUNDS,
     GUARD_STEPS,
-    VALUE_FLOOR,
     PairFitConfig,
     _fit_light,
     _initial_light,
     _Level,
     _working_normals,
     material_confounds,
+    pair_log_ratio,
     usable_ratio_mask,
 )
 from brdfgan.io.atomic import write_text_atomic
@@ -36,12 +38,12 @@ from research.pair_fit_table import Pair, shard_pairs
 from research.pair_guard import fit_config
 
 
-# The fit's own private pieces (_Level, _fit_light, …) are used: the truth must be scored exactly as
-# the guard scores a relief.
+# The fit's own private pieces (_Level, _fit_light, …) are used: the truth must be scored on the same
+# masks, held-out pixels and model as the guard scores a relief.
 def residuals(pair: Pair, network: torch.Tensor, config: PairFitConfig) -> dict[str, float] | None:
     """Held-out residuals of flat, the truth and the network's normals (None: nothing usable)."""
     usable = usable_ratio_mask(pair.flash_only, pair.room, pair.valid, network, pair.frame, config)
-    log_ratio = pair.room.clamp_min(VALUE_FLOOR).log() - pair.flash_only.clamp_min(VALUE_FLOOR).log()
+    log_ratio = pair_log_ratio(pair.flash_only, pair.room)
     size = min(config.levels[-1], pair.flash_only.shape[-1])
     confounds = material_confounds(network, usable) if config.guard_with_maps else None
     fitted, held_out = _Level.of(log_ratio, usable, pair.frame, size, confounds).split()

@@ -211,6 +211,12 @@ def usable_ratio_mask(
     return usable.float()[None]
 
 
+def pair_log_ratio(flash_only: Tensor, room: Tensor) -> Tensor:
+    """``log R − log F``, the ratio the fit explains (module docstring), each photo floored at
+    :data:`VALUE_FLOOR`. Shape: ``(3, N, N)``, ``(3, N, N)`` → ``(3, N, N)``."""
+    return room.clamp_min(VALUE_FLOOR).log() - flash_only.clamp_min(VALUE_FLOOR).log()
+
+
 CONFOUNDS = 2  # material_confounds' channels
 # Adam steps of each guard refit (the room light and the material terms for one relief): as many as
 # the default's finest level, whatever the fit's own steps (a refit of a few steps moves a light
@@ -408,7 +414,7 @@ def fit_pair(
         t.detach().float() for t in (flash_only, room, valid, maps, frame)
     )
     usable = usable_ratio_mask(flash_only, room, valid, maps, frame, config)
-    log_ratio = room.clamp_min(VALUE_FLOOR).log() - flash_only.clamp_min(VALUE_FLOOR).log()
+    log_ratio = pair_log_ratio(flash_only, room)
     sizes = [min(level, size) for level in config.levels]
     total, done = sum(config.steps), 0
     height = torch.zeros(1, 1, sizes[0], sizes[0])  # pixel units of the working size
