@@ -22,13 +22,12 @@ import torch
 from brdfgan.core.svbrdf import NORMAL
 from brdfgan.inference.model.weights import load_model
 from brdfgan.inference.pair.relief_fit import (
-    CONFOUNDS,
     GUARD_STEPS,
     PairFitConfig,
-    _fit_light,
     _initial_light,
     _Level,
     _working_normals,
+    held_out_residuals,
     material_confounds,
     pair_log_ratio,
     usable_ratio_mask,
@@ -38,8 +37,8 @@ from research.pair_fit_table import Pair, shard_pairs
 from research.pair_guard import fit_config
 
 
-# The fit's own private pieces (_Level, _fit_light, …) are used: the truth must be scored on the same
-# masks, held-out pixels and model as the guard scores a relief.
+# The fit's own pieces (its private _Level among them) are used: the truth must be scored on the
+# same masks, held-out pixels and model, by the same function, as the guard scores a relief.
 def residuals(pair: Pair, network: torch.Tensor, config: PairFitConfig) -> dict[str, float] | None:
     """Held-out residuals of flat, the truth and the network's normals (None: nothing usable)."""
     usable = usable_ratio_mask(pair.flash_only, pair.room, pair.valid, network, pair.frame, config)
@@ -50,17 +49,14 @@ def residuals(pair: Pair, network: torch.Tensor, config: PairFitConfig) -> dict[
     if held_out.weight.sum() == 0:
         return None
     start = _initial_light(fitted, torch.zeros(1, 1, size, size))
-    if confounds is not None:
-        start = torch.cat([start, torch.zeros(3, CONFOUNDS)], 1)
     flat = torch.zeros(1, 3, size, size)
     flat[:, 2] = 1.0
-    out: dict[str, float] = {}
-    for name, normal in (("flat", flat), ("truth", _working_normals(pair.truth[NORMAL], size)),
-                         ("network", _working_normals(network[NORMAL], size))):  # fmt: skip
-        light = _fit_light(fitted, normal, start, 2 * GUARD_STEPS, config)
-        with torch.no_grad():
-            out[name] = float(held_out.residual_of_normals(normal, light))
-    return out
+    reliefs = {
+        "flat": (flat, start),
+        "truth": (_working_normals(pair.truth[NORMAL], size), start),
+        "network": (_working_normals(network[NORMAL], size), start),
+    }
+    return held_out_residuals(fitted, held_out, reliefs, 2 * GUARD_STEPS, config)
 
 
 def main() -> None:

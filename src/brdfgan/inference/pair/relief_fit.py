@@ -48,9 +48,9 @@ the maps' size.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 import torch
 import torch.nn.functional as F
@@ -67,6 +67,7 @@ from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, ROUGHNESS, check_ma
 from brdfgan.inference.refine import cosine_decay
 
 Kept = Literal["fit", "prediction", "flat"]
+ReliefName = TypeVar("ReliefName", bound=str)  # a relief's name in held_out_residuals
 
 # Real spherical harmonics to order 2, the constants of Ramamoorthi & Hanrahan 2001: irradiance
 # from any distant light is within a few per cent of its projection on these nine.
@@ -217,7 +218,6 @@ def pair_log_ratio(flash_only: Tensor, room: Tensor) -> Tensor:
     return room.clamp_min(VALUE_FLOOR).log() - flash_only.clamp_min(VALUE_FLOOR).log()
 
 
-CONFOUNDS = 2  # material_confounds' channels
 # Adam steps of each guard refit (the room light and the material terms for one relief): as many as
 # the default's finest level, whatever the fit's own steps (a refit of a few steps moves a light
 # that was already fitted away from it).
@@ -229,7 +229,7 @@ def material_confounds(maps: Tensor, usable: Tensor) -> Tensor:
     linear base colour's luminance, each standardised over the ``usable`` pixels (all where none
     is), so that their coefficients are on one scale and apart from the room light's constant.
 
-    Shape: maps ``(8, N, N)``, usable ``(1, N, N)`` → ``(CONFOUNDS, N, N)``.
+    Shape: maps ``(8, N, N)``, usable ``(1, N, N)`` → ``(2, N, N)``.
 
     Example:
         >>> maps = torch.zeros(8, 2, 2)
@@ -443,16 +443,9 @@ def fit_pair(
         # Every relief scored with the material's own share of the ratio refitted for it.
         confounds = material_confounds(maps, usable)
         fitted, held_out = _Level.of(log_ratio, usable, frame, sizes[-1], confounds).split()
-        terms = torch.zeros(3, CONFOUNDS)
-        candidates = {
-            name: (normal, _fit_light(fitted, normal, torch.cat([start, terms], 1), GUARD_STEPS, config))
-            for name, (normal, start) in candidates.items()
-        }
-    with torch.no_grad():
-        residuals: dict[Kept, float] = {
-            name: float(held_out.residual_of_normals(normal, guard_light))
-            for name, (normal, guard_light) in candidates.items()
-        }
+        residuals = held_out_residuals(fitted, held_out, candidates, GUARD_STEPS, config)
+    else:
+        residuals = held_out_residuals(fitted, held_out, candidates, 0, config)
     kept = choose_relief(residuals, config.min_improvement)
     if kept == "fit":
         result = with_relief(maps, height, frame)
@@ -473,6 +466,27 @@ def fit_pair(
         seconds=time.perf_counter() - started,
         settings=asdict(config),
     )
+
+
+def held_out_residuals(
+    fitted: _Level,
+    held_out: _Level,
+    reliefs: Mapping[ReliefName, tuple[Tensor, Tensor]],
+    steps: int,
+    config: PairFitConfig,
+) -> dict[ReliefName, float]:
+    """The guard's score of each relief (module docstring): its unit normals ``(1, 3, n, n)`` and
+    starting room light ``(3, SH_TERMS)``; the light — and the material terms from 0, where the
+    levels carry them — refitted on ``fitted`` for ``steps`` (0: as given), then the robust
+    residual on ``held_out``."""
+    out: dict[ReliefName, float] = {}
+    for name, (normal, start) in reliefs.items():
+        if fitted.confounds is not None:
+            start = torch.cat([start, torch.zeros(3, fitted.confounds.shape[1])], 1)
+        light = _fit_light(fitted, normal, start, steps, config)
+        with torch.no_grad():
+            out[name] = float(held_out.residual_of_normals(normal, light))
+    return out
 
 
 def choose_relief(residuals: dict[Kept, float], min_improvement: float) -> Kept:
