@@ -121,17 +121,26 @@ def test_large_and_float_maps_are_downscaled_and_encoded_for_the_page(tmp_path: 
 
 def _chromium(page: Path, work: Path, fragment: str = "") -> tuple[dict[str, str], np.ndarray, str]:
     """Open ``page`` from file:// in headless Chromium: the <html> element's attributes once the
-    scripts have run, the screenshot (RGB) and the log."""
+    scripts have run, the screenshot (RGB) and the log.
+
+    Virtual time does not wait for work off the page's thread (the textures' ``image.decode()``),
+    so on a busy machine the budget can run out with the page still ``loading`` (seen once in CI);
+    such a run is repeated with a longer budget. A page that reports ``error`` is returned at once.
+    """
     shot = work / "shot.png"
-    result = subprocess.run(
-        [CHROMIUM, *CHROMIUM_FLAGS, f"--user-data-dir={work / 'profile'}", "--window-size=1000,800",
-         "--virtual-time-budget=10000", f"--screenshot={shot}", "--dump-dom", page.as_uri() + fragment],
-        capture_output=True, text=True, timeout=300, check=False,
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr[-2000:]
-    tag = re.search(r"<html([^>]*)>", result.stdout)
-    assert tag is not None, result.stdout[:500]
-    attributes = dict(re.findall(r'([\w-]+)="([^"]*)"', tag[1]))
+    for budget_ms in (10_000, 40_000, 120_000):
+        result = subprocess.run(
+            [CHROMIUM, *CHROMIUM_FLAGS, f"--user-data-dir={work / 'profile'}", "--window-size=1000,800",
+             f"--virtual-time-budget={budget_ms}", f"--screenshot={shot}", "--dump-dom",
+             page.as_uri() + fragment],
+            capture_output=True, text=True, timeout=300, check=False,
+        )  # fmt: skip
+        assert result.returncode == 0, result.stderr[-2000:]
+        tag = re.search(r"<html([^>]*)>", result.stdout)
+        assert tag is not None, result.stdout[:500]
+        attributes = dict(re.findall(r'([\w-]+)="([^"]*)"', tag[1]))
+        if attributes.get("data-viewer") != "loading":
+            break
     image = cv2.cvtColor(cv2.imread(str(shot), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
     return attributes, image, result.stderr
 
