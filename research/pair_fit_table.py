@@ -14,10 +14,12 @@ Rows:
 - ``v4 flash``: the shipped network on the flash photo (today's predict);
 - ``v4 flash-only``: on the flash-only image (the room light subtracted, re-exposed);
 - ``de-lit flash-only``: the de-lit reference on the flash-only image;
-- ``pair fit``: :func:`~brdfgan.inference.pair.relief_fit.fit_pair` started from ``v4 flash-only``;
+- ``pair fit``: :func:`~brdfgan.inference.pair.relief_fit.fit_pair` read with ``v4 flash-only``
+  and written into ``v4 flash``, as ``brdfgan predict --no-flash`` runs it (before 2026-12-07,
+  later: written into ``v4 flash-only``);
 - ``v4 flash, as written`` and ``pair fit, as written``: the two as ``brdfgan predict`` writes them,
   through :func:`~brdfgan.core.clipped_fill.remove_flash` (what every prediction goes through)
-  with the photo the network saw (the flash photo; the flash-only image).
+  with the flash photo, whose reading they carry.
 
 ``--shards DIR`` scores a generated dataset's Mitsuba pairs instead (``dataset_spec.pairs``: each
 test sample's no-flash twin, undone with its ``meta["pair"]``), e.g. the OOD benchmark's:
@@ -216,10 +218,12 @@ def predictions(
         from_flash_only = v4(pair.flash_only[None], pair.frame)[0]
         yield "v4 flash-only", from_flash_only
         yield "de-lit flash-only", de_lit(pair.flash_only[None], pair.frame)[0]
-    fitted = fit_pair(pair.flash_only, pair.room, pair.valid, from_flash_only, pair.frame, config).maps
+    fitted = fit_pair(
+        pair.flash_only, pair.room, pair.valid, from_flash_only, pair.frame, config, written=single
+    ).maps
     yield "pair fit", fitted
     yield "v4 flash, as written", remove_flash(single, pair.flash, pair.frame)[0]
-    yield "pair fit, as written", remove_flash(fitted, pair.flash_only, pair.frame)[0]
+    yield "pair fit, as written", remove_flash(fitted, pair.flash, pair.frame)[0]
 
 
 FIGURE_COLUMNS = ("flash photo", "no-flash photo", "normal: truth", "v4, flash photo", "pair fit")

@@ -55,9 +55,10 @@ class PairRows:
     """The rows scored on flash + no-flash pairs (issue 59), beside each model's row on the flash
     photo: ``<name>@flash-only``, the model on the flash-only photo (the room light subtracted,
     auto-exposed as predict exposes it), for every name in ``flash_only``; ``<name>+pair-fit``,
-    that prediction followed by the pair fit (:func:`~brdfgan.inference.pair.relief_fit.fit_pair`:
-    what ``brdfgan predict --no-flash`` writes, with ``fit_config``), for every name in ``fit``.
-    Names are the evaluated models'."""
+    the pair fit (:func:`~brdfgan.inference.pair.relief_fit.fit_pair`, with ``fit_config``) read
+    with that prediction and written into the model's prediction from the flash photo, as
+    ``brdfgan predict --no-flash`` writes it, for every name in ``fit``. Names are the evaluated
+    models'."""
 
     flash_only: tuple[str, ...] = ()
     fit: tuple[str, ...] = ()
@@ -82,17 +83,19 @@ def pair_row_maps(
     rows: PairRows,
     flash: Tensor | None,
     recorded: Tensor,
+    on_photo: Mapping[str, Tensor],
 ) -> dict[str, Tensor]:
     """The maps of every :class:`PairRows` row for one batch of pairs (the twins and their
     ``exposure_ratio`` and ``white_balance``, :func:`~brdfgan.data.loading.datamodule
     .collate_samples`): the models are given the frames ``flash`` (as on the flash photo), the fit
-    the ``recorded`` ones.
+    the ``recorded`` ones; ``on_photo``: each model's maps from the flash photo, which the fit's
+    relief is written into.
 
     Raises:
         UserError: the batch holds no no-flash twins (the data was made without ``dataset_spec.pairs``).
 
     Shape:
-        - flash, recorded: ``(B, 3)``; output: each ``(B, 8, H, W)``
+        - flash, recorded: ``(B, 3)``; on_photo, output: each ``(B, 8, H, W)``
     """
     if NO_FLASH_PHOTO.batch_key not in batch:
         raise UserError(
@@ -120,6 +123,7 @@ def pair_row_maps(
                     from_flash_only[name][i],
                     recorded[i : i + 1],
                     rows.fit_config,
+                    written=on_photo[name][i],
                 )
             fitted.append(result.maps)
         out[f"{name}+pair-fit"] = torch.stack(fitted)
@@ -165,7 +169,7 @@ def evaluate_models(
         if pair_rows.names():
             if recorded is None:
                 raise ValueError("pair rows need the batches' recorded flash frames (batch['flash'])")
-            predictions |= pair_row_maps(models, batch, pair_rows, flash, recorded)
+            predictions |= pair_row_maps(models, batch, pair_rows, flash, recorded, predictions)
         for name, maps in predictions.items():
             metrics[name].update(maps, truth, hotspot=hotspot, flash=recorded, photo=photo)
     return {name: {k: float(v) for k, v in metric.compute().items()} for name, metric in metrics.items()}

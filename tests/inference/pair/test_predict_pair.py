@@ -16,17 +16,21 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import torch
+from torch import Tensor
 
 from brdfgan.capture import PAIR
 from brdfgan.cli import PARTIAL_FAILURE_EXIT_CODE, main
 from brdfgan.errors import USER_ERROR_EXIT_CODE, UserError
 from brdfgan.inference.dispatch import Capture, pair_by_name
+from brdfgan.inference.intake.photo import read_photo
+from brdfgan.inference.intake.preprocess import preprocess
 from brdfgan.inference.model.weights import load_model
 from brdfgan.inference.outputs import export
 from brdfgan.inference.pair import pipeline
 from brdfgan.inference.pair.pipeline import predict_pair
 from brdfgan.inference.pair.relief_fit import PairFitConfig, PairFitResult, fit_pair
-from brdfgan.inference.pipeline import PredictOptions, Predictor
+from brdfgan.inference.pipeline import PredictOptions, Predictor, ReferencePrediction, network_reference
 from tests.inference import test_predict
 from tests.inference.pair import scene
 
@@ -256,6 +260,33 @@ def test_an_unreadable_no_flash_photo_is_one_line_naming_it_and_writes_nothing(
     (error,) = [line for line in captured.err.splitlines() if line.startswith("error:")]
     assert error.startswith(f"error: {shots['flash']}: its no-flash photo {broken}: not an image file")
     assert not out.exists() or list(out.iterdir()) == []
+
+
+def test_the_fit_reads_the_flash_only_image_and_writes_into_the_flash_photos_maps(
+    weights: Path, shots: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    readings: list[tuple[Tensor, Tensor]] = []  # (the network's input, its maps), in call order
+
+    def recording_reference(*args: Any) -> ReferencePrediction:
+        reference = network_reference(*args)
+        readings.append((reference.prepared.photo, reference.maps))
+        return reference
+
+    calls: list[dict[str, Tensor]] = []
+
+    def recording_fit(*args: Any, written: Tensor | None = None, **kwargs: Any) -> PairFitResult:
+        assert written is not None
+        calls.append({"maps": args[3], "written": written})  # (flash_only, room, valid, maps, frame)
+        return QUICK_FIT(*args, written=written, **kwargs)
+
+    monkeypatch.setattr(pipeline, "network_reference", recording_reference)
+    predictor = Predictor.create(load_model(weights), PredictOptions(resolution=128, preview=False))
+    predict_pair([shots["flash"], shots["no_flash"]], tmp_path / "wood", predictor, fit=recording_fit)
+    flash_photo = preprocess(read_photo(shots["flash"]), 128).photo
+    (flash_only_input, flash_only_maps), (photo_input, photo_maps) = readings
+    assert torch.equal(photo_input, flash_photo) and not torch.allclose(flash_only_input, flash_photo)
+    (call,) = calls
+    assert call["maps"] is flash_only_maps and call["written"] is photo_maps
 
 
 def failing_fit(*_: Any, **__: Any) -> PairFitResult:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import pytest
 import torch
 import torch.nn.functional as F
 
@@ -18,6 +19,7 @@ from brdfgan.inference.pair.relief_fit import (
     normals_of_height,
     sh_basis,
     usable_ratio_mask,
+    with_relief,
 )
 
 SIZE = 64
@@ -91,6 +93,34 @@ def test_the_networks_relief_stays_where_the_photos_bear_it_out() -> None:
     result = fit_pair(flash_only, room, torch.ones(1, SIZE, SIZE), network, frame, quick)
     assert result.kept == "prediction" and torch.equal(result.maps, network)
     assert result.residual_prediction < 0.5 * min(result.residual_flat, result.residual_fit)
+
+
+def test_the_kept_relief_is_written_into_maps_the_fit_does_not_read() -> None:
+    # predict --no-flash reads the relief with the flash-only image's maps and writes it into the
+    # flash photo's: what is fitted and kept is the same; only the maps it goes into change.
+    flash_only, room, maps, frame, truth = pair_of(bumps(2.0))
+    valid = torch.ones(1, SIZE, SIZE)
+    written = maps.clone()
+    written[:3] = linear_to_srgb(torch.tensor([0.5, 0.3, 0.2]).view(3, 1, 1).expand(3, SIZE, SIZE))
+    written[3:6] = normals_of_height(bumps(-2.0))[0]  # never written: the fit's reading decides
+    written[6], written[7] = 0.35, 0.1
+    plain = fit_pair(flash_only, room, valid, maps, frame, FAST)
+    into = fit_pair(flash_only, room, valid, maps, frame, FAST, written=written)
+    assert plain.kept == into.kept == "fit" and torch.equal(into.height, plain.height)
+    assert torch.equal(into.maps[3:6], plain.maps[3:6])
+    assert torch.equal(into.maps, with_relief(written, into.height, frame))
+    assert torch.equal(into.maps[6:], written[6:])
+    # The network's normals, when they are what the photos bear out, are the fit's maps' normals.
+    network = maps.clone()
+    network[3:6] = truth
+    quick = PairFitConfig(levels=(32, 64), steps=(2, 2), flat_prior=0.02)
+    kept = fit_pair(flash_only, room, valid, network, frame, quick, written=written)
+    assert kept.kept == "prediction"
+    assert torch.equal(kept.maps[3:6], truth) and torch.equal(
+        kept.maps[[0, 1, 2, 6, 7]], written[[0, 1, 2, 6, 7]]
+    )
+    with pytest.raises(ValueError, match="written"):
+        fit_pair(flash_only, room, valid, maps, frame, quick, written=written[:, :32])
 
 
 def test_a_ratio_that_follows_the_material_is_no_relief() -> None:

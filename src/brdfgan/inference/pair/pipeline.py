@@ -9,8 +9,11 @@
       → in the crop at the output side: the registered no-flash photo, the white balance G, the room
         light's share r·G·no-flash, the flash-only image and its valid pixels; the flash strong
         enough against the room light
-      → the network on the flash-only crop, auto-exposed as preprocessing exposes a photo
-      → fit_pair: the relief from the two lights (pair.relief_fit)
+      → the network on the flash-only crop, auto-exposed as preprocessing exposes a photo, and on
+        the flash photo's crop
+      → fit_pair: the relief from the two lights (pair.relief_fit), read with the flash-only
+        image's maps and written into the flash photo's (their base colour, roughness and metallic
+        were the better on validation pairs; the fit's settings were chosen with the flash-only ones)
       → the single-photo write-out (pipeline.write_prediction: atomic, nothing half-written),
         material.json with ``pair`` (files, exposures, ratio, registration, gains, flash-to-room)
         and ``pair_fit``
@@ -70,6 +73,8 @@ class PairFit(Protocol):
         frame: Tensor,
         config: PairFitConfig | None = None,
         on_step: FitProgress | None = None,
+        *,
+        written: Tensor | None = None,
     ) -> PairFitResult: ...
 
 
@@ -143,15 +148,17 @@ def predict_pair(
             "output_clipped_fraction": float((ldr >= 1.0).any(dim=0).float().mean()),
         },
     )
-    reference = network_reference(flash, flash_only, fov_deg, fov_source, frame, predictor, clock)
+    read = network_reference(flash, flash_only, fov_deg, fov_source, frame, predictor, clock)
+    reference = network_reference(flash, prepared, fov_deg, fov_source, frame, predictor, clock)
     with clock("fit"):
         fitted = (fit or fit_pair)(
             outcome.flash_only.clamp(min=0.0),
             outcome.room,
             outcome.valid,
-            reference.maps,
+            read.maps,
             frame,
             on_step=on_fit_step,
+            written=reference.maps,
         )
     records = {"refinement": None, "pair": _json(record), "pair_fit": fitted.to_json()}
     return write_prediction(

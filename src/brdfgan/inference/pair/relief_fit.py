@@ -39,10 +39,15 @@ folded in) that explain the ratio, by Adam on a robust (Charbonnier) loss, coars
   what it explains beyond the material's maps. On the validation procedural pairs this turned
   away a fit that lowered the plain residual by 40 % on a surface 0.6° from flat (drawing 1.4°).
 
-The base colour is then the network's divided by the relief's shading ratio ``S_f(n)/S_f(flat)``
-(the de-lit flash-only image's shading taken out, as the fit found it), roughness and metallic the
-network's. The fit runs at the levels' sizes (at most the maps'), and its height is carried up to
-the maps' size.
+The kept relief is then written into a network's maps (``written``; by default the maps the fit
+read, those of the flash-only image): their normals replaced, their base colour divided by the
+relief's shading ratio ``S_f(n)/S_f(flat)`` when the fitted relief is kept (the flash shading taken
+out, as the fit found it), roughness and metallic as they are. ``brdfgan predict --no-flash``
+writes it into the network's reading of the flash photo, whose base colour, roughness and metallic
+were better on validation pairs than the flash-only image's, while the fit itself reads the
+flash-only image's maps (its masks, guard terms and the ``"prediction"`` candidate), with which
+validation chose the fit's settings. The fit runs at the levels' sizes (at most the maps'), and
+its height is carried up to the maps' size.
 """
 
 from __future__ import annotations
@@ -385,22 +390,27 @@ def fit_pair(
     frame: Tensor,
     config: PairFitConfig | None = None,
     on_step: Callable[[int, int], None] | None = None,
+    *,
+    written: Tensor | None = None,
 ) -> PairFitResult:
-    """The relief that explains a pair's ratio (module docstring), in the network's ``maps``.
+    """The relief that explains a pair's ratio (module docstring), written into ``written``.
 
     Args:
         flash_only: the flash photo less the room light, linear (any exposure).
         room: the room light's share of the flash photo (the registered no-flash photo times the
             exposure ratio and white-balance gains), linear, in ``flash_only``'s units.
         valid: 1 where both photos are usable (seen, unclipped).
-        maps: the network's maps from the flash-only image: roughness, metallic and the glint mask
-            come from them, and the result is them with the fitted normals.
+        maps: the network's maps from the flash-only image: the glint and metal masks, the
+            guard's material terms and its ``"prediction"`` candidate (their normals) come from them.
         frame: the flash frame of these pixels.
         config: the settings (default ``PairFitConfig()``).
         on_step: called with ``(step, of steps)`` over all levels.
+        written: the maps the kept relief is written into (default ``maps``), e.g. the network's
+            reading of the flash photo (module docstring).
 
     Shape:
-        - flash_only, room: ``(3, N, N)``; valid: ``(1, N, N)``; maps: ``(8, N, N)``; frame: ``(1, 3)``
+        - flash_only, room: ``(3, N, N)``; valid: ``(1, N, N)``; maps, written: ``(8, N, N)``
+          (or both larger); frame: ``(1, 3)``
         - output maps: ``(8, N, N)``
     """
     started = time.perf_counter()
@@ -409,10 +419,13 @@ def fit_pair(
     check_shape(room, "3 N N", name="room", dims={"N": size})
     check_shape(valid, "1 N N", name="valid", dims={"N": size})
     check_map_shape(maps)
+    if written is not None:
+        check_shape(written, "8 H W", name="written", dims={"H": maps.shape[-2], "W": maps.shape[-1]})
     check_flash_frame(frame, 1)
     flash_only, room, valid, maps, frame = (
         t.detach().float() for t in (flash_only, room, valid, maps, frame)
     )
+    written = maps if written is None else written.detach().float()
     usable = usable_ratio_mask(flash_only, room, valid, maps, frame, config)
     log_ratio = pair_log_ratio(flash_only, room)
     sizes = [min(level, size) for level in config.levels]
@@ -448,11 +461,10 @@ def fit_pair(
         residuals = held_out_residuals(fitted, held_out, candidates, 0, config)
     kept = choose_relief(residuals, config.min_improvement)
     if kept == "fit":
-        result = with_relief(maps, height, frame)
+        result = with_relief(written, height, frame)
     else:
-        result = maps.clone()
-        if kept == "flat":
-            result[NORMAL] = torch.tensor([0.0, 0.0, 1.0]).view(3, 1, 1)
+        result = written.clone()
+        result[NORMAL] = maps[NORMAL] if kept == "prediction" else torch.tensor([0.0, 0.0, 1.0]).view(3, 1, 1)
     return PairFitResult(
         maps=result,
         kept=kept,
