@@ -17,6 +17,7 @@ from brdfgan.core.lattice import (
     CellTiling,
     Lattice,
     Perspective,
+    central_lattice,
     choose_cells,
     cut_wrap,
     find_lattice,
@@ -196,6 +197,40 @@ def test_a_lattice_too_foreshortened_to_pass_is_found_once_rectified() -> None:
     perspective = find_perspective(maps, found)
     assert perspective is not None and perspective.keystone == pytest.approx((0.06, -0.045), abs=0.005)
     assert find_lattice(rectify(maps, perspective)).score > 4 * found.score
+
+
+def test_a_lattice_perspective_hides_from_the_whole_maps_is_seeded_from_their_centre() -> None:
+    # An 8 % keystone smears the far peaks past even the ambiguous band over the whole maps; in their
+    # central half the scale varies half as much and the lattice stands out. It seeds the perspective,
+    # and the rectified maps show the lattice on their own.
+    truth = (0.08, -0.06)
+    g = (truth[0] / (SIZE / 2), truth[1] / (SIZE / 2))
+    maps = lattice_maps(polar(24.0, 30.0), polar(30.0, 120.0), perspective=g, seed=1)
+    whole = find_lattice(maps)
+    assert not (whole.periodic or whole.ambiguous), whole
+    assert find_perspective(maps, whole) is None
+    centre = central_lattice(maps)
+    assert_same_lattice(centre, (polar(24.0, 30.0), polar(30.0, 120.0)), 0.03)
+    perspective = find_perspective(maps, centre)
+    assert perspective is not None
+    refined, _, straight = refine_perspective(maps, perspective)
+    assert refined.keystone == pytest.approx(truth, abs=0.003)
+    assert straight.periodic and straight.score > 4 * whole.score
+
+
+def test_one_window_of_other_tiles_does_not_hold_the_perspective_back() -> None:
+    # A corner of tiles 6 % larger (a patch of another batch): its window's lattice is off the
+    # keystone's trend, and with all nine windows the fit leaves more than half their spread. Fitted
+    # without that window, the keystone is the rest's.
+    truth = (0.02, -0.015)
+    g = (truth[0] / (SIZE / 2), truth[1] / (SIZE / 2))
+    maps = lattice_maps(polar(24.0, 30.0), polar(30.0, 120.0), perspective=g, seed=7)
+    larger = lattice_maps(polar(24.0 * 1.06, 30.0), polar(30.0 * 1.06, 120.0), perspective=g, seed=8)
+    maps[:, -64:, -64:] = larger[:, -64:, -64:]
+    lattice = find_lattice(maps)
+    perspective = find_perspective(maps, lattice)
+    assert perspective is not None and perspective.keystone == pytest.approx(truth, abs=0.002)
+    assert perspective.spread_after < 0.5 * perspective.spread_before
 
 
 def test_a_perspective_that_overshoots_is_measured_again_on_the_maps_it_rectifies() -> None:

@@ -81,6 +81,17 @@ def test_a_lattice_found_only_once_rectified_is_tiled_by_cells() -> None:
     assert record.lattice is not None and record.lattice.periodic and record.note is None
 
 
+def test_a_lattice_seen_only_in_the_maps_centre_is_rectified_and_tiled_by_cells() -> None:
+    g = (0.08 / (SIZE / 2), -0.06 / (SIZE / 2))  # no lattice over the whole maps, one in their centre
+    maps = lattice_maps(polar(24.0, 30.0), polar(30.0, 120.0), perspective=g, seed=1)
+    whole = find_lattice(maps)
+    assert not (whole.periodic or whole.ambiguous)
+    _, record = make_tileable(maps, HOTSPOT)
+    assert record.cells is not None and record.perspective is not None
+    assert record.perspective.keystone == pytest.approx((0.08, -0.06), abs=0.003)
+    assert record.lattice is not None and record.lattice.periodic and record.note is None
+
+
 def test_a_non_periodic_material_keeps_todays_cut_bit_for_bit() -> None:
     maps = noise_maps(1)
     tiled, record = make_tileable(maps, HOTSPOT)

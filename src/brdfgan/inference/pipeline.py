@@ -43,6 +43,7 @@ from brdfgan.core.lattice import (
     CellTiling,
     Lattice,
     Perspective,
+    central_lattice,
     choose_cells,
     find_lattice,
     find_perspective,
@@ -371,7 +372,10 @@ def make_tileable(
     cells = None
     if lattice.periodic and lattice.vectors is not None:
         cells = choose_cells(lattice.vectors, height, width, align=align_pattern)
-    perspective = find_perspective(repaired, lattice)
+    # Perspective can smear a lattice past finding over the whole maps; their centre, where the
+    # scale varies half as much, may still show it: a seed only, the rectified maps decide.
+    seed = lattice if lattice.periodic or lattice.ambiguous else central_lattice(repaired)
+    perspective = find_perspective(repaired, seed)
     if perspective is not None:
         # Mild perspective: the cells are taken from the rectified maps, where they all match
         # (kept only where whole cells fit there; the cut runs on the maps as they are).
