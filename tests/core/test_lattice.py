@@ -14,12 +14,15 @@ from torch import Tensor
 
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.lattice import (
+    WINDOW_SHARE,
     CellTiling,
     Lattice,
     Perspective,
+    _perspective_in_windows,
     central_lattice,
     choose_cells,
     cut_wrap,
+    detection_features,
     find_lattice,
     find_perspective,
     rectify,
@@ -231,6 +234,26 @@ def test_one_window_of_other_tiles_does_not_hold_the_perspective_back() -> None:
     perspective = find_perspective(maps, lattice)
     assert perspective is not None and perspective.keystone == pytest.approx(truth, abs=0.002)
     assert perspective.spread_after < 0.5 * perspective.spread_before
+
+
+def test_windows_too_small_to_agree_on_the_keystone_give_way_to_the_largest() -> None:
+    # Tiles of uneven shade (a blurred random field across them, as on a scanned floor): in windows
+    # of half the side (two and a half cells) each lattice is a pixel or so off, as much as the
+    # keystone moves it, and no perspective explains them; windows of three quarters agree.
+    truth = (0.02, -0.015)
+    g = (truth[0] / (SIZE / 2), truth[1] / (SIZE / 2))
+    maps = lattice_maps(polar(38.0, 15.0), polar(38.0, 105.0), perspective=g, seed=0)
+    field = torch.rand(1, 1, SIZE, SIZE, generator=torch.Generator().manual_seed(100), dtype=torch.float64)
+    field = gaussian_blur(field, 6.0, "reflect")[0]
+    maps[0:3] = (maps[0:3] * (1 + 0.25 * (field - field.mean()) / field.std())).clamp(0, 1)
+    lattice = find_lattice(maps)
+    assert lattice.periodic and lattice.vectors is not None
+    assert WINDOW_SHARE == (0.5, 0.75)
+    features, factor = detection_features(maps)
+    start = torch.tensor(lattice.vectors, dtype=torch.float64) / factor
+    assert _perspective_in_windows(features, factor, start, 0.5, (SIZE, SIZE)) is None
+    perspective = find_perspective(maps, lattice)
+    assert perspective is not None and perspective.keystone == pytest.approx(truth, abs=0.002)
 
 
 def test_a_perspective_that_overshoots_is_measured_again_on_the_maps_it_rectifies() -> None:
