@@ -33,9 +33,9 @@ synthesis of regular repeatable patterns"). The steps:
    ``m + (v dᵀ + d vᵀ) g`` (:func:`fit_perspective`). Where it explains the windows (their spread
    at most halved; else once more without the one window that holds it back most; else in the
    largest windows, of 3/4 of the side) with a keystone of 0.25-10 %, the maps are resampled
-   through it and the rest runs on the rectified maps. A lattice whose score falls just short (:attr:`Lattice.ambiguous`)
-   is tried too: perspective broadens the peaks of ρ (a 6 % keystone takes a clear lattice from
-   0.49 to 0.09), and the rectified maps, scored again, decide. Where the whole maps show no
+   through it and the rest runs on the rectified maps. A lattice whose score falls just short
+   (:attr:`Lattice.ambiguous`) is tried too: perspective broadens the peaks of ρ (a 6 % keystone
+   takes a clear lattice from 0.49 to 0.09), and the rectified maps, scored again, decide. Where the whole maps show no
    lattice at all, their central half is tried (:func:`central_lattice`): the scale varies half as
    much across it, so the far peaks perspective smears across the whole maps stay sharp there (a
    scanned tile grid turned 30° under a 2 % keystone scores −0.07 whole and 0.18 in its centre);
