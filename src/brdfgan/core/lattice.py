@@ -35,13 +35,13 @@ synthesis of regular repeatable patterns"). The steps:
    largest windows, of 3/4 of the side) with a keystone of 0.25-10 %, the maps are resampled
    through it and the rest runs on the rectified maps. A lattice whose score falls just short
    (:attr:`Lattice.ambiguous`) is tried too: perspective broadens the peaks of ρ (a 6 % keystone
-   takes a clear lattice from 0.49 to 0.09), and the rectified maps, scored again, decide. Where the whole maps show no
-   lattice at all, their central half is tried (:func:`central_lattice`): the scale varies half as
-   much across it, so the far peaks perspective smears across the whole maps stay sharp there (a
-   scanned tile grid turned 30° under a 2 % keystone scores −0.07 whole and 0.18 in its centre);
-   its lattice only seeds the perspective, and again the rectified maps decide. The perspective
-   is then measured once more on the rectified maps (:func:`refine_perspective`), and what is
-   left is added.
+   takes a clear lattice from 0.49 to 0.09), and the rectified maps, scored again, decide. Where
+   the whole maps show no lattice at all, their central half is tried (:func:`central_lattice`):
+   the scale varies half as much across it, so the far peaks perspective smears across the whole
+   maps stay sharp there (a scanned tile grid turned 30° under a 2 % keystone scores −0.07 whole
+   and 0.18 in its centre); its lattice only seeds the perspective, and again the rectified maps
+   decide. The perspective is then measured once more on the rectified maps
+   (:func:`refine_perspective`), and what is left is added.
 4. **Whole cells** (:func:`choose_cells`): integer combinations ``u = m₁a + n₁b`` (about
    horizontal) and ``v = m₂a + n₂b`` (about vertical) spanning a parallelogram that fits in the
    maps, the largest with the least stretch and turn; with ``align`` the frame is turned so that the
