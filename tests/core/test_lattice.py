@@ -12,6 +12,7 @@ import pytest
 import torch
 from torch import Tensor
 
+from brdfgan.core import lattice as lattice_module
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.lattice import (
     WINDOW_SHARE,
@@ -219,6 +220,21 @@ def test_a_lattice_perspective_hides_from_the_whole_maps_is_seeded_from_their_ce
     refined, _, straight = refine_perspective(maps, perspective)
     assert refined.keystone == pytest.approx(truth, abs=0.003)
     assert straight.periodic and straight.score > 4 * whole.score
+
+
+def test_the_central_lattice_is_sought_at_the_whole_maps_detection_scale(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Maps larger than the detection side: their centre is shrunk as the whole maps are for
+    # detection, and the vectors come back in the maps' pixels.
+    monkeypatch.setattr(lattice_module, "DETECT_SIDE", SIZE)
+    truth = (polar(24.0, 30.0), polar(30.0, 120.0))
+    maps = lattice_maps(*truth, seed=3)
+    doubled = torch.nn.functional.interpolate(maps[None], scale_factor=2, mode="bilinear")[0]
+    centre = central_lattice(doubled)
+    assert centre.periodic
+    (ax, ay), (bx, by) = truth
+    assert_same_lattice(centre, ((2 * ax, 2 * ay), (2 * bx, 2 * by)), 0.02)
 
 
 def test_one_window_of_other_tiles_does_not_hold_the_perspective_back() -> None:

@@ -765,7 +765,18 @@ def central_lattice(maps: Tensor) -> Lattice:
     height, width = maps.shape[-2:]
     side = round(CENTRAL_SHARE * min(height, width))
     top, left = (height - side) // 2, (width - side) // 2
-    return find_lattice(maps[:, top : top + side, left : left + side].contiguous())
+    centre = maps[:, top : top + side, left : left + side]
+    # At the whole maps' detection scale (:func:`detection_features`): finer would cost as much as
+    # the whole maps' detection and see only texture more.
+    small = min(side, round(side * DETECT_SIDE / max(height, width)))
+    if small == side:
+        return find_lattice(centre.contiguous())
+    found = find_lattice(F.interpolate(centre[None], size=(small, small), mode="area")[0])
+    if found.vectors is None:
+        return found
+    factor = side / small
+    a, b = (_vector([factor * value for value in vector]) for vector in found.vectors)
+    return replace(found, vectors=(a, b))
 
 
 def _fit_windows(centres: Tensor, vectors: Tensor) -> tuple[Tensor, float, float]:
