@@ -4,13 +4,13 @@
 
     read_photo both (the flash photo's failure, or the no-flash photo's, is the capture's one-line error)
       → preprocess the flash photo: its crop on the flash hotspot, the crop's field of view and flash frame
+      → the network on the flash photo's crop (the single-photo prediction, where the pair cannot serve)
       → the exposure ratio r (EXIF or --exposure-ratio); the no-flash photo not too dark nor blurred
       → the no-flash photo registered to the flash photo and checked: one surface (pair.intake)
       → in the crop at the output side: the registered no-flash photo, the white balance G, the room
         light's share r·G·no-flash, the flash-only image and its valid pixels; the flash strong
         enough against the room light
-      → the network on the flash-only crop, auto-exposed as preprocessing exposes a photo, and on
-        the flash photo's crop
+      → the network on the flash-only crop, auto-exposed as preprocessing exposes a photo
       → fit_pair: the relief from the two lights (pair.relief_fit), read with the flash-only
         image's maps and written into the flash photo's (their base colour, roughness and metallic
         were the better on validation pairs; the fit's settings were chosen with the flash-only ones)
@@ -109,12 +109,13 @@ def predict_pair(
     )
     frame = prepared.flash_frame(fov_deg)
     warnings = [f"{flash_path}: {warning}" for warning in flash.warnings + prepared.warnings]
+    # The flash photo's maps: the single-photo prediction, or what the pair fit writes its relief into.
+    reference = network_reference(flash, prepared, fov_deg, fov_source, frame, predictor, clock)
     if no_flash is None:
         warnings.append(
             f"{flash_path}: no no-flash photo ({flash_path.stem}{NO_FLASH_SUFFIX}.*) was found for it: "
             "the single-photo prediction"
         )
-        reference = network_reference(flash, prepared, fov_deg, fov_source, frame, predictor, clock)
         records: dict[str, Any] = {"refinement": None, "pair": None, "pair_fit": None}
         return write_prediction(
             reference, reference.maps, out_dir, predictor, clock, records=records, warnings=tuple(warnings)
@@ -129,7 +130,6 @@ def predict_pair(
             f"{flash_path}: its no-flash photo {no_flash.path} cannot serve ({outcome}): "
             "the single-photo prediction"
         )
-        reference = network_reference(flash, prepared, fov_deg, fov_source, frame, predictor, clock)
         records = {"refinement": None, "pair": _json(record), "pair_fit": None}
         return write_prediction(
             reference, reference.maps, out_dir, predictor, clock, records=records, warnings=tuple(warnings)
@@ -149,7 +149,6 @@ def predict_pair(
         },
     )
     read = network_reference(flash, flash_only, fov_deg, fov_source, frame, predictor, clock)
-    reference = network_reference(flash, prepared, fov_deg, fov_source, frame, predictor, clock)
     with clock("fit"):
         fitted = (fit or fit_pair)(
             outcome.flash_only.clamp(min=0.0),
