@@ -15,6 +15,7 @@ from torch import Tensor
 from brdfgan.core import lattice as lattice_module
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.lattice import (
+    RETRY_KEYSTONE,
     WINDOW_SHARE,
     CellTiling,
     Lattice,
@@ -267,9 +268,25 @@ def test_windows_too_small_to_agree_on_the_keystone_give_way_to_the_largest() ->
     assert WINDOW_SHARE == (0.5, 0.75)
     features, factor = detection_features(maps)
     start = torch.tensor(lattice.vectors, dtype=torch.float64) / factor
-    assert _perspective_in_windows(features, factor, start, 0.5, (SIZE, SIZE)) is None
+    small, seen = _perspective_in_windows(features, factor, start, 0.5, (SIZE, SIZE))
+    assert small is None and seen >= RETRY_KEYSTONE  # they see a keystone, and the larger are tried
     perspective = find_perspective(maps, lattice)
     assert perspective is not None and perspective.keystone == pytest.approx(truth, abs=0.002)
+
+
+def test_a_square_on_lattice_is_measured_in_one_grid_of_windows(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The smallest windows agree that there is no keystone: the largest are not tried (their nine
+    # autocorrelations were most of find_perspective's time at 2048²).
+    maps = lattice_maps(polar(24.0, 30.0), polar(30.0, 120.0), seed=7)
+    calls: list[float] = []
+
+    def counted(*args: object) -> tuple[Perspective | None, float]:
+        calls.append(args[3])  # type: ignore[arg-type]
+        return _perspective_in_windows(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(lattice_module, "_perspective_in_windows", counted)
+    assert find_perspective(maps, find_lattice(maps)) is None
+    assert calls == [WINDOW_SHARE[0]]
 
 
 def test_a_perspective_that_overshoots_is_measured_again_on_the_maps_it_rectifies() -> None:

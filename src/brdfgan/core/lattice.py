@@ -590,6 +590,11 @@ MIN_WINDOW_CELLS = 2.0
 MIN_KEYSTONE = 0.0025
 MAX_KEYSTONE = 0.1
 PERSPECTIVE_GAIN = 0.5
+# The largest windows are tried only where the smallest saw a keystone of at least this much (or a
+# window's lattice that was not the maps'): on square-on lattices their fits see 0.01-0.17 %, and
+# the retry there (nine windows of 3/4 of the side) cost 3.9 CPU s at 2048²; where the retry found
+# a perspective on the rendered regular materials, the small windows had seen 0.22-2.8 %.
+RETRY_KEYSTONE = 0.5 * MIN_KEYSTONE
 # Where the whole maps show no lattice, it is sought in their central square of this share of the
 # shorter side (half: a 2 % keystone's scale change across it is halved).
 CENTRAL_SHARE = 0.5
@@ -689,6 +694,8 @@ def find_perspective(maps: Tensor, lattice: Lattice) -> Perspective | None:
     (:data:`WINDOW_SHARE`) are tried: a window of two or three cells sees few of the lattice's
     peaks, and its lattice can be a pixel off, as much as a 2 % keystone moves it (a scanned tile
     grid at 15°: spread ratio 0.79 in windows of half the side, 0.16 in windows of three quarters).
+    They are tried only where the smallest saw a keystone of :data:`RETRY_KEYSTONE` or more, or a
+    lattice other than the maps': a square-on lattice is not measured twice.
 
     Shape: ``(8, H, W)``.
     """
@@ -705,21 +712,23 @@ def find_perspective(maps: Tensor, lattice: Lattice) -> Perspective | None:
     if share > WINDOW_SHARE[1]:
         return None  # too few cells to see the lattice change across the maps
     for tried in dict.fromkeys((share, WINDOW_SHARE[1])):
-        perspective = _perspective_in_windows(
+        perspective, seen = _perspective_in_windows(
             features, factor, start, tried, (maps.shape[-2], maps.shape[-1])
         )
-        if perspective is not None:
+        if perspective is not None or seen < RETRY_KEYSTONE:
             return perspective
     return None
 
 
 def _perspective_in_windows(
     features: Tensor, factor: Tensor, start: Tensor, share: float, size: tuple[int, int]
-) -> Perspective | None:
+) -> tuple[Perspective | None, float]:
     """:func:`find_perspective` in a grid of windows of ``share`` of the detection features'
     sides: each window's lattice refined from ``start`` (rows a, b, in the features' pixels), and
     the perspective fitted to them (:func:`_fit_windows`), or ``None`` (its conditions); in the
-    maps' pixels (``size`` ``(H, W)``, ``factor`` the maps' pixels per feature pixel)."""
+    maps' pixels (``size`` ``(H, W)``, ``factor`` the maps' pixels per feature pixel). With it, the
+    keystone's strength the fit saw, kept or not (infinite where a window's lattice was not the
+    maps': nothing was fitted)."""
     height, width = size
     small_h, small_w = features.shape[-2:]
     window_h, window_w = round(share * small_h), round(share * small_w)
@@ -734,7 +743,7 @@ def _perspective_in_windows(
             refined = refine_lattice(autocorrelation(window), *seed, (window_h, window_w))
             local = torch.tensor(refined, dtype=torch.float64)
             if float((local - start).norm(dim=-1).max()) > reach:
-                return None  # the window's lattice is not the maps' (a window of grout, a stain)
+                return None, math.inf  # the window's lattice is not the maps' (a window of grout, a stain)
             centres.append([(left + window_w / 2) * float(factor[0]) - width / 2,
                             (top + window_h / 2) * float(factor[1]) - height / 2])  # fmt: skip
             measured.append(local * factor)
@@ -744,14 +753,15 @@ def _perspective_in_windows(
     keystone = (float(g[0]) * width / 2, float(g[1]) * height / 2)
     strength = max(abs(keystone[0]), abs(keystone[1]))
     if not (MIN_KEYSTONE <= strength <= MAX_KEYSTONE) or spread_after > PERSPECTIVE_GAIN * spread_before:
-        return None
-    return Perspective(
+        return None, strength
+    perspective = Perspective(
         g=_vector(g.tolist()),
         centre=(width / 2, height / 2),
         keystone=keystone,
         spread_before=spread_before,
         spread_after=spread_after,
     )
+    return perspective, strength
 
 
 def central_lattice(maps: Tensor) -> Lattice:
