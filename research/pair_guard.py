@@ -26,7 +26,14 @@ import torch
 
 from brdfgan.core.svbrdf import NORMAL
 from brdfgan.inference.model.weights import load_model
-from brdfgan.inference.pair.relief_fit import Kept, PairFitConfig, choose_relief, fit_pair, with_relief
+from brdfgan.inference.pair.relief_fit import (
+    Kept,
+    PairFitConfig,
+    Scored,
+    choose_relief,
+    fit_pair,
+    with_relief,
+)
 from brdfgan.io.atomic import write_text_atomic
 from brdfgan.losses.parameter import angular_distance
 from research.pair_fit_table import shard_pairs
@@ -35,6 +42,8 @@ THRESHOLDS = (0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.5)
 # The fitted relief shrunk toward flat: the angle of a relief that is right in part (slope cosine c,
 # slope ratio r) is least at the scale c / r, kept in the rows for the study of a fixed shrink.
 RELIEF_SCALES = (0.25, 0.5, 0.75)
+# How much more of the held-out residual the fitted relief turned over must leave (choose_relief).
+SIGN_MARGINS = (0.0, 0.02, 0.05, 0.1, 0.15, 0.2)
 
 
 def mean_angle(normal: torch.Tensor, truth: torch.Tensor) -> float:
@@ -73,6 +82,7 @@ def measure(
             "residual_flat": fitted.residual_flat,
             "residual_fit": fitted.residual_fit,
             "residual_prediction": fitted.residual_prediction,
+            "residual_turned": fitted.residual_turned,
             "flat": mean_angle(flat, pair.truth[NORMAL]),
             "prediction": mean_angle(network[NORMAL], pair.truth[NORMAL]),
             "fit": mean_angle(relief[NORMAL], pair.truth[NORMAL]),
@@ -86,31 +96,48 @@ def measure(
     return rows
 
 
-def chosen(row: dict[str, float], threshold: float) -> Kept:
-    residuals: dict[Kept, float] = {
+def chosen(row: dict[str, float], threshold: float, margin: float) -> Kept:
+    residuals: dict[Scored, float] = {
         "flat": row["residual_flat"],
         "fit": row["residual_fit"],
         "prediction": row["residual_prediction"],
+        "turned": row.get("residual_turned", float("inf")),  # rows measured before the sign check
     }
-    return choose_relief(residuals, threshold)
+    return choose_relief(residuals, threshold, margin)
 
 
-def table(rows: list[dict[str, float]]) -> str:
+def table(rows: list[dict[str, float]], margin: float) -> str:
     flat = sum(r["flat"] for r in rows)
     lines = ["| min_improvement | fit / network / flat kept | angle / flat |", "|---|---|---|"]
     network = sum(r["prediction"] for r in rows) / flat
     lines.append(f"| (network only) | 0 / {len(rows)} / 0 | {network:.3f} |")
     for threshold in THRESHOLDS:
-        kept = [chosen(r, threshold) for r in rows]
-        angle = sum(r[k] for r, k in zip(rows, kept, strict=True)) / flat
-        counts = " / ".join(str(kept.count(name)) for name in ("fit", "prediction", "flat"))
-        lines.append(f"| {threshold} | {counts} | {angle:.3f} |")
+        lines.append(f"| {threshold} | {_kept_and_angle(rows, threshold, margin)} |")
     unseen = sum(r["residual_flat"] == 0 for r in rows)
     masked = sum(r["masked"] for r in rows) / len(rows)
+    lines += [
+        "",
+        f"At the shipped min_improvement ({PairFitConfig().min_improvement}), by the fit's sign margin:",
+        "",
+        "| min_sign_margin | fit / network / flat kept | angle / flat |",
+        "|---|---|---|",
+    ]
+    for sign_margin in SIGN_MARGINS:
+        lines.append(
+            f"| {sign_margin} | {_kept_and_angle(rows, PairFitConfig().min_improvement, sign_margin)} |"
+        )
     return "\n".join(lines) + (
         f"\n\nflat map's angle {flat / len(rows):.2f}°; masked {masked:.2f} of the pixels on average,"
         f" nothing held out on {unseen} of {len(rows)} pairs\n"
     )
+
+
+def _kept_and_angle(rows: list[dict[str, float]], threshold: float, margin: float) -> str:
+    """The reliefs kept (fit / network / flat) and their mean angle over a flat map's."""
+    kept = [chosen(r, threshold, margin) for r in rows]
+    angle = sum(r[k] for r, k in zip(rows, kept, strict=True)) / sum(r["flat"] for r in rows)
+    counts = " / ".join(str(kept.count(name)) for name in ("fit", "prediction", "flat"))
+    return f"{counts} | {angle:.3f}"
 
 
 def main() -> None:
@@ -137,7 +164,10 @@ def main() -> None:
         scanned = kind == "scans"
         rows = measure(args.shards, split, scanned, args.limit, config)
         name = f"{split} {kind}"
-        report += [f"**{name}** ({len(rows)} pairs, {time.time() - started:.0f} s)\n", table(rows)]
+        report += [
+            f"**{name}** ({len(rows)} pairs, {time.time() - started:.0f} s)\n",
+            table(rows, config.min_sign_margin),
+        ]
         write_text_atomic(args.out, "\n".join(report))
         write_text_atomic(args.out.with_suffix(f".{split}_{kind}.json"),
                           json.dumps(rows))  # fmt: skip

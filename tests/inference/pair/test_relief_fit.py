@@ -16,8 +16,10 @@ from brdfgan.inference.pair.relief_fit import (
     SH_TERMS,
     PairFitConfig,
     fit_pair,
+    flash_shading,
     normals_of_height,
     sh_basis,
+    turned_light,
     usable_ratio_mask,
     with_relief,
 )
@@ -159,3 +161,27 @@ def test_metal_glints_and_invalid_pixels_are_not_read() -> None:
     valid[:, :, : SIZE // 2] = 0
     usable = usable_ratio_mask(flash_only, room, valid, maps, frame, FAST)
     assert not usable[:, :, : SIZE // 2].any() and usable[:, :, SIZE // 2 :].all()
+
+
+def test_a_relief_turned_over_is_lit_alike_by_the_turned_light() -> None:
+    # The room light's harmonics cannot tell a relief from its mirror image under the light turned
+    # 180° about the normal: only the flash's shading can, which is why the guard scores both.
+    light = torch.randn(3, SH_TERMS, generator=torch.Generator().manual_seed(2))
+    height = bumps(2.0)
+    lit, turned = (
+        torch.einsum("ck,bkhw->bchw", light_, sh_basis(normals_of_height(height_)))
+        for light_, height_ in ((light, height), (turned_light(light), -height))
+    )
+    assert torch.allclose(lit, turned, atol=1e-5)
+    frame = centred_flash_frame(1, SIZE, SIZE, fov_deg=50.0)
+    assert not torch.allclose(*(flash_shading(normals_of_height(h), frame) for h in (height, -height)))
+
+
+def test_the_fit_is_kept_only_where_its_sign_is_read() -> None:
+    flash_only, room, maps, frame, truth = pair_of(bumps(2.0))
+    result = fit_pair(flash_only, room, torch.ones(1, SIZE, SIZE), maps, frame, FAST)
+    assert result.kept == "fit" and result.residual_turned > 1.2 * result.residual_fit
+    # A margin no relief here clears: the fit is not kept, though it lowers the residual most.
+    strict = replace(FAST, min_sign_margin=float(result.residual_turned / result.residual_fit))
+    refused = fit_pair(flash_only, room, torch.ones(1, SIZE, SIZE), maps, frame, strict)
+    assert refused.kept == "flat" and torch.equal(refused.maps[3:6], maps[3:6])

@@ -29,6 +29,13 @@ folded in) that explain the ratio, by Adam on a robust (Charbonnier) loss, coars
   could be held out (all masked). On the fitted pixels alone, a relief fitted to noise would
   pass; and the network's own normals are not a safe default: on the near-flat scan test set v4
   draws relief turned against the truth (slope cosine −0.6), which the pair's ratio refutes.
+- a check of the fit's sign: with one room-light direction dominant, a relief and its mirror image
+  (height negated) under the light turned 180° (:func:`turned_light`) have the same first-order
+  shading, and only the flash's oblique and second-order shading tells them apart. The guard
+  scores the fitted relief turned over too, and keeps the fit only where that leaves
+  :attr:`PairFitConfig.min_sign_margin` more of the held-out residual: a wood floor's grain was
+  fitted turned over (normals' slopes correlating with the truth's at −0.6) with its negation
+  explaining the held-out pixels within 0.5 %.
 - the material's own share of the ratio given to every relief the guard scores
   (:attr:`PairFitConfig.guard_with_maps`): the ratio also varies with what the diffuse model
   lacks, the room's reflections and the flash's residual specular, and those follow the material
@@ -72,6 +79,8 @@ from brdfgan.core.svbrdf import BASECOLOR, METALLIC, NORMAL, ROUGHNESS, check_ma
 from brdfgan.inference.refine import cosine_decay
 
 Kept = Literal["fit", "prediction", "flat"]
+# The reliefs the guard scores: the ones it may keep, and the fitted relief turned over.
+Scored = Literal["fit", "prediction", "flat", "turned"]
 ReliefName = TypeVar("ReliefName", bound=str)  # a relief's name in held_out_residuals
 
 # Real spherical harmonics to order 2, the constants of Ramamoorthi & Hanrahan 2001: irradiance
@@ -109,6 +118,11 @@ class PairFitConfig:
     # validation split's Mitsuba pairs with research/pair_guard.py (procedural 1.001×, scans 0.997×
     # a flat map's angle; at 0.02 the fits and the network's relief kept put them at 1.035×, 0.983×).
     min_improvement: float = 0.15
+    # The share of the held-out residual by which the fitted relief must beat itself turned over
+    # to be kept (choose_relief): the largest that keeps every fit the guard passes on the
+    # validation and training splits' Mitsuba pairs (research/pair_guard.py; their margins were
+    # 0.047-0.52; at 0.05 validation loses a good fit).
+    min_sign_margin: float = 0.02
     # Score the guard's reliefs with the material's own share of the ratio (module docstring).
     guard_with_maps: bool = True
 
@@ -129,6 +143,7 @@ class PairFitResult:
     residual_flat: float  # the ratio's robust residual of a flat surface on the held-out pixels
     residual_fit: float  # … of the fitted relief
     residual_prediction: float  # … of the network's normals
+    residual_turned: float  # … of the fitted relief turned over (its height negated)
     masked_fraction: float  # share of pixels the ratio could not use (invalid, glint, metal, dark)
     room_light: tuple[tuple[float, ...], ...]  # 3 × 9 harmonic coefficients (relative to the flash)
     levels: tuple[int, ...]
@@ -447,10 +462,11 @@ def fit_pair(
             on_step(done, total)
     network_normals = _working_normals(maps[NORMAL], sizes[-1])
     network_light = _fit_light(fitted, network_normals, flat_light, config.steps[-1], config)
-    candidates: dict[Kept, tuple[Tensor, Tensor]] = {
+    candidates: dict[Scored, tuple[Tensor, Tensor]] = {
         "flat": (normals_of_height(torch.zeros_like(height)), flat_light),
         "fit": (normals_of_height(height), light),
         "prediction": (network_normals, network_light),
+        "turned": (normals_of_height(-height), turned_light(light)),
     }
     if config.guard_with_maps:
         # Every relief scored with the material's own share of the ratio refitted for it.
@@ -459,7 +475,7 @@ def fit_pair(
         residuals = held_out_residuals(fitted, held_out, candidates, GUARD_STEPS, config)
     else:
         residuals = held_out_residuals(fitted, held_out, candidates, 0, config)
-    kept = choose_relief(residuals, config.min_improvement)
+    kept = choose_relief(residuals, config.min_improvement, config.min_sign_margin)
     if kept == "fit":
         result = with_relief(written, height, frame)
     else:
@@ -472,6 +488,7 @@ def fit_pair(
         residual_flat=residuals["flat"],
         residual_fit=residuals["fit"],
         residual_prediction=residuals["prediction"],
+        residual_turned=residuals["turned"],
         masked_fraction=float(1 - usable.mean()),
         room_light=tuple(tuple(round(float(v), 6) for v in row) for row in light),
         levels=tuple(dict.fromkeys(sizes)),
@@ -501,21 +518,47 @@ def held_out_residuals(
     return out
 
 
-def choose_relief(residuals: dict[Kept, float], min_improvement: float) -> Kept:
+def choose_relief(
+    residuals: Mapping[Scored, float], min_improvement: float, min_sign_margin: float = 0.0
+) -> Kept:
     """The relief the held-out residuals support (module docstring): the lowest of the fit's and
     the network's when it lowers the flat surface's by ``min_improvement``, else ``"flat"`` (also
-    when the flat residual is 0: nothing was held out).
+    when the flat residual is 0: nothing was held out). The fit is a candidate only where its
+    relief turned over (``"turned"``) leaves at least ``min_sign_margin`` more of the residual:
+    else the ratio does not tell the relief from its mirror image, and its sign is a guess.
 
     Example:
-        >>> choose_relief({"flat": 1.0, "fit": 0.5, "prediction": 0.9}, 0.02)
+        >>> choose_relief({"flat": 1.0, "fit": 0.5, "prediction": 0.9, "turned": 0.8}, 0.02, 0.05)
         'fit'
-        >>> choose_relief({"flat": 1.0, "fit": 1.2, "prediction": 0.99}, 0.02)
+        >>> choose_relief({"flat": 1.0, "fit": 0.5, "prediction": 0.9, "turned": 0.51}, 0.02, 0.05)
+        'prediction'
+        >>> choose_relief({"flat": 1.0, "fit": 1.2, "prediction": 0.99, "turned": 1.5}, 0.02)
         'flat'
     """
-    best: Kept = min(("fit", "prediction"), key=lambda name: residuals[name])
+    candidates: tuple[Kept, ...] = ("prediction",)
+    if residuals["turned"] >= (1 + min_sign_margin) * residuals["fit"]:
+        candidates = ("fit", "prediction")
+    best = min(candidates, key=lambda name: residuals[name])
     if residuals["flat"] > 0 and residuals[best] < (1 - min_improvement) * residuals["flat"]:
         return best
     return "flat"
+
+
+def turned_light(light: Tensor) -> Tensor:
+    """The room light that lights a relief turned over (height negated, slopes ``(x, y) → (−x, −y)``)
+    as ``light`` lights the relief: the light turned 180° about the normal's axis, i.e. the
+    harmonics odd in ``(x, y)`` (``y``, ``x``, ``yz``, ``xz``) negated. Its first-order shading is
+    the relief's; the flash's, second order and centred, is not, and tells the two apart.
+
+    Shape: ``(3, SH_TERMS + K)`` → same (material terms, if any, kept).
+
+    Example:
+        >>> turned_light(torch.arange(9.0).view(1, 9))[0].tolist()
+        [0.0, -1.0, 2.0, -3.0, 4.0, -5.0, 6.0, -7.0, 8.0]
+    """
+    out = light.clone()
+    out[:, [1, 3, 5, 7]] *= -1
+    return out
 
 
 def _enlarge(height: Tensor, size: int) -> Tensor:
