@@ -1,5 +1,6 @@
 """``--tileable``'s choice of path (``inference/pipeline.py``'s ``make_tileable``): a periodic
-material is tiled by whole lattice cells, anything else exactly as before; ``material.json``
+material is tiled by whole lattice cells, a 1-D pattern by whole periods across its stripes,
+anything else exactly as before; ``material.json``
 records the lattice, its cells and the method, round-trips, and a note says which path an
 ambiguous or unusable lattice took; ``--align-pattern`` turns the lattice onto the axes."""
 
@@ -22,6 +23,7 @@ from brdfgan.core.svbrdf import validate_maps
 from brdfgan.errors import USER_ERROR_EXIT_CODE
 from brdfgan.inference.pipeline import TileableRecord, make_tileable
 from tests.core.test_lattice import SIZE, lattice_maps, noise_maps, polar
+from tests.core.test_stripes import planks
 
 HOTSPOT = (SIZE / 2, SIZE / 2)
 
@@ -129,16 +131,48 @@ def test_an_ambiguous_lattice_is_still_tiled_by_cells_with_a_note(monkeypatch: p
 
 
 def test_a_lattice_whose_cells_do_not_fit_keeps_the_cut(monkeypatch: pytest.MonkeyPatch) -> None:
-    maps = tiles()
+    maps = noise_maps(5)  # no stripes to fall back on either
     coarse = Lattice(
         ((180.0, 0.0), (0.0, 185.0)), 0.3, True, notes="2-D lattice"
     )  # one cell: 96 % of the side
     monkeypatch.setattr(pipeline, "find_lattice", lambda _: coarse)
     tiled, record = make_tileable(maps, HOTSPOT)
     assert torch.equal(tiled, todays_tile(maps))
-    assert record.lattice == coarse and record.cells is None
+    assert record.lattice == coarse and record.cells is None and record.stripes is None
     assert record.note is not None and "no whole number of its cells fits" in record.note
     assert round_trip(record)["lattice"] is not None
+
+
+def test_stripes_are_tiled_by_whole_periods_across_them_and_recorded() -> None:
+    maps = planks(11.3, 30.0)
+    assert not find_lattice(maps).periodic
+    tiled, record = make_tileable(maps, HOTSPOT)
+    validate_maps(tiled)
+    assert record.stripes is not None and record.cells is not None and record.lattice is None
+    assert record.stripes.period == pytest.approx(11.3, rel=0.01) and record.note is None
+    document = round_trip(record)
+    stripes = document["stripes"]
+    assert isinstance(stripes, dict) and stripes["cells"]["cells"] == record.cells.cells
+    assert stripes["period_px"] == pytest.approx(11.3, rel=0.01)
+    assert "whole periods across its stripes" in str(document["method"])
+    assert max(max(pair) for pair in record.after.wrap_ratio.values()) <= 1.2
+    assert not torch.equal(tiled, todays_tile(maps))
+    # --align-pattern turns the stripes onto an axis.
+    _, aligned = make_tileable(maps, HOTSPOT, align_pattern=True)
+    assert aligned.cells is not None and aligned.cells.aligned and aligned.note is None
+    assert abs(aligned.cells.turn_deg) == pytest.approx(30.0, abs=1.0)
+
+
+def test_a_lattice_whose_cells_do_not_fit_falls_back_on_its_rows(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Tiles whose cells do not fit still have rows of grout: tiled by whole rows, with a note.
+    maps = tiles()
+    coarse = Lattice(((180.0, 0.0), (0.0, 185.0)), 0.3, True, notes="2-D lattice")
+    monkeypatch.setattr(pipeline, "find_lattice", lambda _: coarse)
+    _, record = make_tileable(maps, HOTSPOT)
+    assert record.stripes is not None and record.cells is not None and record.lattice == coarse
+    assert record.note is not None and "whole periods across its stripes" in record.note
+    document = round_trip(record)
+    assert document["lattice"]["cells"] is None and document["stripes"]["cells"] is not None  # type: ignore[index]
 
 
 def test_align_pattern_turns_a_lattice_onto_the_axes_and_says_when_there_is_none() -> None:

@@ -979,9 +979,9 @@ def _frame_angle(a: Vector, b: Vector) -> float:
 
 
 def _axis_candidates(
-    vectors: Tensor, counts: Tensor, axis: Tensor, extent: tuple[float, float]
+    vectors: Tensor, counts: Tensor, axis: Tensor, extent: tuple[float, float], max_turn_deg: float
 ) -> tuple[Tensor, Tensor]:
-    """The lattice vectors within :data:`MAX_TURN_DEG` of ``axis`` that fit ``extent`` (the maps'
+    """The lattice vectors within ``max_turn_deg`` of ``axis`` that fit ``extent`` (the maps'
     ``(W − 1, H − 1)`` less the smallest margin) on their own: of each length (bins of
     :data:`LENGTH_STEP` in the log) the one turned least, so that every size of tile is tried.
     Shape: ``(N, 2)``, ``(N, 2)``, ``(2,)`` → ``(K, 2)``, ``(K, 2)``."""
@@ -990,7 +990,7 @@ def _axis_candidates(
     turn = torch.atan2(across.abs(), along)
     keep = (
         (along > 0)
-        & (turn <= math.radians(MAX_TURN_DEG))
+        & (turn <= math.radians(max_turn_deg))
         & (vectors[:, 0].abs() <= extent[0])
         & (vectors[:, 1].abs() <= extent[1])
     )
@@ -1004,10 +1004,15 @@ def _axis_candidates(
 
 
 def choose_cells(
-    vectors: tuple[Vector, Vector], height: int, width: int, *, align: bool = False
+    vectors: tuple[Vector, Vector],
+    height: int,
+    width: int,
+    *,
+    align: bool = False,
+    max_turn_deg: float = MAX_TURN_DEG,
 ) -> CellTiling | None:
     """The whole-cell tile of an ``H × W`` map set with lattice ``vectors`` (module docstring,
-    step 4): among the integer combinations ``u`` within :data:`MAX_TURN_DEG` of the frame's x axis
+    step 4): among the integer combinations ``u`` within ``max_turn_deg`` of the frame's x axis
     and ``v`` of its y axis (the image's axes; with ``align`` turned onto the lattice's direction
     nearest an axis), the pair whose parallelogram, centred, fits in the maps with a margin
     (:data:`MIN_MARGIN` to :data:`MAX_MARGIN` of the side, :data:`MIN_BAND` pixels) and a stretch
@@ -1041,8 +1046,8 @@ def choose_cells(
     y_axis = torch.tensor([-math.sin(frame), math.cos(frame)], dtype=torch.float64)
     room = 1.0 + 2.0 * MIN_MARGIN
     extent = ((width - 1.0) / room, (height - 1.0) / room)
-    us, u_counts = _axis_candidates(combos, counts, x_axis, extent)
-    vs, v_counts = _axis_candidates(combos, counts, y_axis, extent)
+    us, u_counts = _axis_candidates(combos, counts, x_axis, extent, max_turn_deg)
+    vs, v_counts = _axis_candidates(combos, counts, y_axis, extent, max_turn_deg)
     if us.shape[0] == 0 or vs.shape[0] == 0:
         return None
     u, v = us.unsqueeze(1), vs.unsqueeze(0)  # (U, 1, 2), (1, V, 2): every pair at once

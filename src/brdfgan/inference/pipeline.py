@@ -59,6 +59,7 @@ from brdfgan.core.seamless import (
     tiling_measures,
     wrap_ratios,
 )
+from brdfgan.core.stripes import Stripes, choose_stripe_cells, find_stripes
 from brdfgan.core.svbrdf import NUM_CHANNELS
 from brdfgan.inference.intake.lens import FieldOfView, crop_field_of_view
 from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, Photo, read_photo
@@ -283,7 +284,9 @@ class TileableRecord:
     copied fractions are measured against the resampled maps. ``lattice`` is ``None`` unless one
     was found (kept with ``cells`` ``None`` where no whole number of its cells fits: the cut's path).
     ``note``: one line where the lattice was ambiguous or could not be used, saying which path was
-    taken."""
+    taken. A 1-D pattern (``stripes``, :func:`~brdfgan.core.stripes.find_stripes`: planks, courses,
+    rows) with no 2-D lattice to use is tiled by whole periods across its stripes (``cells`` on
+    :meth:`~brdfgan.core.stripes.Stripes.cell_vectors`)."""
 
     flash_mark: FlashMark
     shifts: tuple[tuple[int, int], ...]
@@ -293,6 +296,7 @@ class TileableRecord:
     cells: CellTiling | None = None
     note: str | None = None
     perspective: Perspective | None = None
+    stripes: Stripes | None = None
 
     def to_json(self) -> dict[str, Any]:
         measures = self.after.to_json()
@@ -300,19 +304,33 @@ class TileableRecord:
         if self.lattice is not None:
             lattice = {
                 **self.lattice.to_json(),
-                "cells": None if self.cells is None else self.cells.to_json(),
+                "cells": None if self.stripes is not None or self.cells is None else self.cells.to_json(),
                 "perspective": None if self.perspective is None else self.perspective.to_json(),
             }
-        return {
-            "method": (
+        stripes = None
+        if self.stripes is not None:
+            stripes = {
+                **self.stripes.to_json(),
+                "cells": None if self.cells is None else self.cells.to_json(),
+            }
+        if self.cells is None:
+            method = "flash mark repaired, then rolled and cut along minimum-error paths"
+        elif self.stripes is not None:
+            method = (
+                "flash mark repaired, then resampled to whole periods across its stripes and each wrap"
+                " cut along a minimum-error path between copies whole periods apart"
+            )
+        else:
+            method = (
                 "flash mark repaired, then resampled to whole lattice cells"
                 + (" (the perspective rectified first)" if self.perspective is not None else "")
                 + " and each wrap cut along a minimum-error path between copies one period apart"
-                if self.cells is not None
-                else "flash mark repaired, then rolled and cut along minimum-error paths"
-            ),
+            )
+        return {
+            "method": method,
             "flash_mark": self.flash_mark.to_json(),
             "lattice": lattice,
+            "stripes": stripes,
             "note": self.note,
             "shifts": [list(shift) for shift in self.shifts],
             "wrap_ratio_before": {name: list(pair) for name, pair in self.wrap_ratio_before.items()},
@@ -324,7 +342,8 @@ class TileableRecord:
     def from_json(cls, record: dict[str, Any]) -> TileableRecord:
         before = record["wrap_ratio_before"]
         lattice = record.get("lattice")
-        cells = None if lattice is None else lattice.get("cells")
+        stripes = record.get("stripes")
+        cells = (lattice or {}).get("cells") if stripes is None else stripes.get("cells")
         perspective = None if lattice is None else lattice.get("perspective")
         note = record.get("note")
         return cls(
@@ -338,6 +357,7 @@ class TileableRecord:
             cells=None if cells is None else CellTiling.from_json(cells),
             note=None if note is None else str(note),
             perspective=None if perspective is None else Perspective.from_json(perspective),
+            stripes=None if stripes is None else Stripes.from_json(stripes),
         )
 
 
@@ -388,11 +408,28 @@ def make_tileable(
         else:
             perspective = None
     note = _lattice_note(lattice, cells, align_pattern)
+    stripes = None
+    if cells is None:
+        # No 2-D lattice to tile by: a 1-D pattern still tiles by whole periods across its stripes.
+        found = find_stripes(repaired)
+        stripe_cells = None
+        if found is not None:
+            stripe_cells = choose_stripe_cells(found, height, width, align=align_pattern)
+        if found is not None and stripe_cells is not None:
+            stripes, cells, note = found, stripe_cells, _stripes_note(lattice, found)
     if cells is not None:
         whole = tile_whole_cells(repaired, cells)
         shifts = ((height, width), (height, 0), (0, width), (0, 0))
         record = TileableRecord(
-            mark, shifts, before, whole.measures, lattice, whole.tiling, note, perspective
+            mark,
+            shifts,
+            before,
+            whole.measures,
+            lattice if lattice.periodic or lattice.ambiguous else None,
+            whole.tiling,
+            note,
+            perspective,
+            stripes,
         )
         return whole.maps, record
     tile = make_seamless(repaired)
@@ -400,6 +437,20 @@ def make_tileable(
     return tile.maps, TileableRecord(
         mark, tile.shifts, before, after, lattice if lattice.periodic else None, None, note
     )
+
+
+def _stripes_note(lattice: Lattice, stripes: Stripes) -> str | None:
+    """The one line where a 1-D pattern was tiled by although the maps showed a lattice (one whose
+    cells do not fit, or an ambiguous one); ``None`` otherwise."""
+    score = f"score {lattice.score:.3f}, threshold {PROMINENCE_THRESHOLD}"
+    path = (
+        f"tiled by whole periods across its stripes ({stripes.period:.1f} px at {stripes.direction_deg:.1f}°)"
+    )
+    if lattice.periodic:
+        return f"a lattice was found ({score}) but no whole number of its cells fits: {path}"
+    if lattice.ambiguous:
+        return f"the pattern is ambiguously periodic ({score}): {path}"
+    return None
 
 
 def _lattice_note(lattice: Lattice, cells: CellTiling | None, align_pattern: bool) -> str | None:

@@ -181,6 +181,8 @@ def test_the_fit_is_kept_only_where_its_sign_is_read() -> None:
     flash_only, room, maps, frame, truth = pair_of(bumps(2.0))
     result = fit_pair(flash_only, room, torch.ones(1, SIZE, SIZE), maps, frame, FAST)
     assert result.kept == "fit" and result.residual_turned > 1.2 * result.residual_fit
+    turned = normals_of_height(-result.height)[0]  # the relief the flash tells apart: far from the truth
+    assert mean_angle(result.maps[3:6], truth) < 0.5 * mean_angle(turned, truth)
     # A margin no relief here clears: the fit is not kept, though it lowers the residual most.
     strict = replace(FAST, min_sign_margin=float(result.residual_turned / result.residual_fit))
     refused = fit_pair(flash_only, room, torch.ones(1, SIZE, SIZE), maps, frame, strict)

@@ -1,0 +1,255 @@
+"""1-D patterns for ``--tileable``: stripes, planks, courses of bricks and rows of setts repeat across
+one direction only, and a tile keeps them whole when its wraps shift them by whole periods.
+
+A 1-D pattern has no isolated peak in its autocorrelation ρ (:func:`~brdfgan.core.lattice.autocorrelation`),
+so :func:`~brdfgan.core.lattice.find_lattice` finds no 2-D lattice: ρ has a *ridge* through the
+origin along the stripes (the maps shifted along them still match themselves) and parallel ridges
+one period ``p`` apart across them. :func:`find_stripes` reads both from ρ of the detection features
+(:func:`~brdfgan.core.lattice.detection_features`):
+
+1. **Direction**: the mean of ρ along each line through the origin (lags from
+   :data:`~brdfgan.core.lattice.MIN_PERIOD` to :data:`RIDGE_REACH` of the shorter side, every
+   :data:`RIDGE_STEP_DEG`); the stripes run along the highest, which must reach
+   :data:`RIDGE_LEVEL` (the rendered 1-D materials 0.19-0.77; non-periodic ones at most 0.13).
+2. **Period**: the *across profile*, ρ along the normal ``n`` averaged over a band of lags along the
+   stripes; its local maxima are the periods' multiples. The period is the shortest maximum that
+   reaches :data:`RELATIVE_PEAK` of the highest and stands :data:`ACROSS_PROMINENCE` above the
+   lowest point before it (planks' grooves a few pixels apart with a deeper gap every fifth take
+   the grooves' period when the two are close in height, the planks' when the gaps dominate); it is
+   refined by a parabola through each multiple's peak that reaches half its height and a least
+   squares fit through the origin, which averages a photo's drift.
+
+The maps then tile as a 2-D lattice would (:func:`~brdfgan.core.lattice.choose_cells`,
+:func:`~brdfgan.core.lattice.tile_whole_cells`) on the vectors ``p·n`` and ``p·d``
+(:meth:`Stripes.cell_vectors`, ``d`` along the stripes): any shift along the stripes keeps them
+whole, so ``p·d`` only sets the step in which the tile's edges are chosen (a step of a quarter
+period gave wood planks turned 30° a tile stretched by 7.1 % where whole periods gave 0.3 %: the
+finer choice traded stretch for area), and the residual seam
+of each wrap (:func:`~brdfgan.core.lattice.cut_wrap`) runs where the texture along the stripes (grain,
+joints) agrees.
+
+Vectors are ``(dx, dy)`` in pixels of the maps, ``x`` to the right, ``y`` down (rows).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+from torch import Tensor
+
+from brdfgan.core.lattice import (
+    MIN_PERIOD,
+    CellTiling,
+    Vector,
+    autocorrelation,
+    check_single_maps,
+    choose_cells,
+    detection_features,
+    sample_rho,
+)
+
+RIDGE_STEP_DEG = 0.25
+RIDGE_REACH = 0.35
+RIDGE_LEVEL = 0.15
+RELATIVE_PEAK = 0.5
+ACROSS_PROMINENCE = 0.1
+# The across profile's band: lags along the stripes up to this share of RIDGE_REACH either way.
+BAND_SHARE = 0.5
+# With --align-pattern, the tile's edges turn at most this far from the stripes and their normal.
+ALIGNED_TURN_DEG = 1.0
+# Each period holds at least this many times across the maps' shorter side (else there is nothing
+# to tile by).
+MIN_PERIODS = 3.0
+
+
+@dataclass(frozen=True)
+class Stripes:
+    """What :func:`find_stripes` found: ``across``, one period across the stripes (``p·n``, pointing
+    down or right), ``along``, the stripes' unit direction (``d``, ``a × d > 0``), both in the maps'
+    pixels; ``ridge``, the mean of ρ along the stripes; ``peak``, the across profile at the period."""
+
+    across: Vector
+    along: Vector
+    ridge: float
+    peak: float
+
+    @property
+    def period(self) -> float:
+        return math.hypot(*self.across)
+
+    @property
+    def direction_deg(self) -> float:
+        """The stripes' direction, clockwise on screen from +x, in ``[0, 180)``."""
+        return math.degrees(math.atan2(self.along[1], self.along[0])) % 180.0
+
+    def cell_vectors(self) -> tuple[Vector, Vector]:
+        """The pseudo-lattice the maps tile on (module docstring): ``p·n`` and ``p·d``."""
+        p = self.period
+        return self.across, (p * self.along[0], p * self.along[1])
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "across": list(self.across),
+            "along": list(self.along),
+            "period_px": self.period,
+            "direction_deg": self.direction_deg,
+            "ridge": self.ridge,
+            "peak": self.peak,
+            "ridge_threshold": RIDGE_LEVEL,
+        }
+
+    @classmethod
+    def from_json(cls, record: dict[str, Any]) -> Stripes:
+        across, along = record["across"], record["along"]
+        return cls(
+            across=(float(across[0]), float(across[1])),
+            along=(float(along[0]), float(along[1])),
+            ridge=float(record["ridge"]),
+            peak=float(record["peak"]),
+        )
+
+
+def choose_stripe_cells(
+    stripes: Stripes, height: int, width: int, *, align: bool = False
+) -> CellTiling | None:
+    """The whole-period tile of an ``H × W`` map set with ``stripes``
+    (:func:`~brdfgan.core.lattice.choose_cells` on :meth:`Stripes.cell_vectors`). With ``align``
+    (``--align-pattern``) the tile's edges keep within :data:`ALIGNED_TURN_DEG` of the stripes and
+    their normal: the stripes come out along an axis, where the lattice's wider choice (up to
+    :data:`~brdfgan.core.lattice.MAX_TURN_DEG` off) left planks at 30° turned by 20.5° only.
+
+    Shape: sizes → :class:`~brdfgan.core.lattice.CellTiling` or ``None``.
+    """
+    if align:
+        return choose_cells(stripes.cell_vectors(), height, width, align=True, max_turn_deg=ALIGNED_TURN_DEG)
+    return choose_cells(stripes.cell_vectors(), height, width)
+
+
+def ridge_means(rho: Tensor, reach: float) -> tuple[Tensor, Tensor]:
+    """The mean of ρ along each line through the origin, lags ``MIN_PERIOD..reach`` pixels, every
+    :data:`RIDGE_STEP_DEG` from 0 (along +x) to 180° (clockwise on screen).
+
+    Shape: ``(2H, 2W)`` → ``(A,)`` angles in degrees, ``(A,)`` means.
+    """
+    angles = torch.arange(0.0, 180.0, RIDGE_STEP_DEG, dtype=rho.dtype)
+    radians = torch.deg2rad(angles)
+    directions = torch.stack([torch.cos(radians), torch.sin(radians)], dim=-1)
+    distances = torch.arange(MIN_PERIOD, max(reach, MIN_PERIOD + 1.0), 1.0, dtype=rho.dtype)
+    return angles, sample_rho(rho, directions[:, None, :] * distances[None, :, None]).mean(dim=-1)
+
+
+def across_profile(
+    rho: Tensor, direction_deg: float, reach: float, step: float = 0.5
+) -> tuple[Tensor, Tensor]:
+    """ρ across the stripes: at offsets ``s`` along the normal ``n`` (``0..reach`` every ``step``),
+    averaged over lags along the stripes within ``BAND_SHARE · reach`` either way.
+
+    Shape: ``(2H, 2W)`` → ``(S,)`` offsets, ``(S,)`` values.
+    """
+    radians = math.radians(direction_deg)
+    along = torch.tensor([math.cos(radians), math.sin(radians)], dtype=rho.dtype)
+    normal = torch.tensor([-math.sin(radians), math.cos(radians)], dtype=rho.dtype)
+    offsets = torch.arange(0.0, reach, step, dtype=rho.dtype)
+    band = BAND_SHARE * reach
+    shifts = torch.arange(-band, band + 0.5, 1.0, dtype=rho.dtype)
+    lags = offsets[:, None, None] * normal + shifts[None, :, None] * along
+    return offsets, sample_rho(rho, lags).mean(dim=-1)
+
+
+def _local_maxima(values: Tensor) -> list[int]:
+    return [
+        k for k in range(1, values.shape[0] - 1) if values[k] >= values[k - 1] and values[k] > values[k + 1]
+    ]
+
+
+def _parabola_peak(offsets: Tensor, values: Tensor, k: int) -> float:
+    """The offset of a maximum at index ``k`` refined by a parabola through it and its neighbours."""
+    before, centre, after = (float(values[i]) for i in (k - 1, k, k + 1))
+    curvature = before - 2.0 * centre + after
+    shift = 0.0 if curvature >= 0 else max(-0.5, min(0.5, 0.5 * (before - after) / curvature))
+    return float(offsets[k]) + shift * float(offsets[1] - offsets[0])
+
+
+def stripe_period(offsets: Tensor, values: Tensor) -> tuple[float, float] | None:
+    """The period of an across profile (module docstring, step 2) and the profile's value there, or
+    ``None`` where no maximum qualifies.
+
+    Shape: ``(S,)``, ``(S,)`` → period in the offsets' units, value.
+
+    Example:
+        A profile with a maximum every 10 offsets:
+
+        >>> s = torch.arange(0.0, 60.0, 0.5)
+        >>> period, value = stripe_period(s, torch.cos(2 * math.pi * s / 10.0))
+        >>> round(period, 3), round(value, 3)
+        (10.0, 1.0)
+    """
+    maxima = [k for k in _local_maxima(values) if float(offsets[k]) >= MIN_PERIOD]
+    if not maxima:
+        return None
+    highest = max(float(values[k]) for k in maxima)
+    chosen = None
+    for k in maxima:
+        height = float(values[k])
+        lowest = float(values[: k + 1].min())
+        if height >= RELATIVE_PEAK * highest and height - lowest >= ACROSS_PROMINENCE:
+            chosen = k
+            break
+    if chosen is None:
+        return None
+    period, value = _parabola_peak(offsets, values, chosen), float(values[chosen])
+    # Each further multiple whose peak reaches half the period's height refines it: s_m ≈ m·p.
+    multiples, positions = [1.0], [period]
+    reach = float(offsets[-1])
+    for m in range(2, int(reach / period) + 1):
+        near = [k for k in _local_maxima(values) if abs(float(offsets[k]) - m * period) <= 0.25 * period]
+        if not near:
+            continue
+        best = max(near, key=lambda k: float(values[k]))
+        if float(values[best]) >= 0.5 * value:
+            multiples.append(float(m))
+            positions.append(_parabola_peak(offsets, values, best))
+    m_values = torch.tensor(multiples, dtype=torch.float64)
+    s_values = torch.tensor(positions, dtype=torch.float64)
+    return float((m_values * s_values).sum() / m_values.square().sum()), value
+
+
+def find_stripes(maps: Tensor) -> Stripes | None:
+    """The maps' 1-D pattern (module docstring), or ``None``: no ridge of :data:`RIDGE_LEVEL`, no
+    period across it, or fewer than :data:`MIN_PERIODS` periods across the maps.
+
+    Shape: ``(8, H, W)`` → :class:`Stripes` or ``None``.
+    """
+    check_single_maps(maps)
+    features, factor = detection_features(maps)
+    small_h, small_w = features.shape[-2:]
+    rho = autocorrelation(features)
+    reach = RIDGE_REACH * min(small_h, small_w)
+    angles, means = ridge_means(rho, reach)
+    best = int(torch.argmax(means))
+    ridge = float(means[best])
+    if not ridge >= RIDGE_LEVEL:
+        return None
+    direction = float(angles[best])
+    found = stripe_period(*across_profile(rho, direction, reach))
+    if found is None:
+        return None
+    period, peak = found
+    radians = math.radians(direction)
+    # In the maps' pixels (the features may be shrunk, by factor per axis).
+    fx, fy = float(factor[0]), float(factor[1])
+    across = (-math.sin(radians) * period * fx, math.cos(radians) * period * fy)
+    along_x, along_y = math.cos(radians) * fx, math.sin(radians) * fy
+    length = math.hypot(along_x, along_y)
+    if across[1] < 0 or (across[1] == 0 and across[0] < 0):
+        across = (-across[0], -across[1])
+    along = (along_x / length, along_y / length)
+    if across[0] * along[1] - across[1] * along[0] < 0:
+        along = (-along[0], -along[1])
+    height, width = maps.shape[-2:]
+    if MIN_PERIODS * math.hypot(*across) > min(height, width):
+        return None
+    return Stripes(across=across, along=along, ridge=ridge, peak=peak)
