@@ -11,12 +11,14 @@ for the before/after. Per map: the wrap ratio (:func:`~brdfgan.core.seamless.wra
 worse of columns and rows; ≤ 1.2 is the goal) and the copied fraction
 (:func:`~brdfgan.core.seamless.copied_fraction`: pixels within two 8-bit levels of one of the
 tile's copies; ≥ 0.85 is the goal). Last, the time of ``make_tileable`` at ``--large``² (2048²: a
-phone photo's maps) on two inputs, in the same run: the first photo that took today's cut, and a
-periodic one that takes the whole-cell path (``core.lattice``: detection, resampling, residual
+phone photo's maps) on up to three inputs, in the same run: the first photo that took today's cut,
+a periodic one that takes the whole-cell path (``core.lattice``: detection, resampling, residual
 seams), the first such photo (the ceramic tiles among the samples), else a synthetic 45° grid of
-tiles. Each is the photo's maps enlarged (bilinear), so the path at that size is said beside it,
+tiles, and the first photo tiled by whole stripes (``core.stripes``; the wood planks among the
+samples). Each is the photo's maps enlarged (bilinear), so the path at that size is said beside it,
 with the CPU seconds of its steps timed again one by one: the flash-mark repair, the lattice
-detection and the tile on that path.
+detection, the stripes' detection (which runs wherever no lattice cells are used) and the tile on
+that path.
 
     python -m benchmarks.bench_tiling [SOURCE] [--split test] [--weights W] [--large 2048]
         [--threads N] [--json out.json]
@@ -125,12 +127,21 @@ def measure(name: str, maps: Tensor, hotspot: tuple[float, float]) -> dict[str, 
         "seconds": seconds,
         "cpu_seconds": cpu,
         "whole_cells": record.cells is not None,
+        "kind": "stripes"
+        if record.stripes is not None
+        else "periodic"
+        if record.cells is not None
+        else "non-periodic",
         "repaired": {map_name: record.flash_mark.scores[map_name] for map_name in record.flash_mark.repaired},
         "leak_scores": record.flash_mark.scores,
         "wrap_before": _worst(record.wrap_ratio_before),
         "cut": {"wrap": _worst(record.after.wrap_ratio), "copied": record.after.copied_fraction},
         "blend": {"wrap": _worst(blend.wrap_ratio), "copied": blend.copied_fraction},
     }
+
+
+# The paths timed at --large: the first photo on each (a synthetic grid where no photo is periodic).
+LARGE_KINDS = ("non-periodic", "periodic", "stripes")
 
 
 def _large(maps: Tensor, frame: Tensor, photo: Tensor | None, side: int) -> dict[str, Any]:
@@ -146,6 +157,7 @@ def _large(maps: Tensor, frame: Tensor, photo: Tensor | None, side: int) -> dict
     from brdfgan.core.flash_mark import repair_flash_mark
     from brdfgan.core.lattice import find_lattice, tile_whole_cells
     from brdfgan.core.seamless import make_seamless
+    from brdfgan.core.stripes import find_stripes
     from brdfgan.core.svbrdf import resize_maps
     from brdfgan.inference.pipeline import make_tileable
 
@@ -157,12 +169,17 @@ def _large(maps: Tensor, frame: Tensor, photo: Tensor | None, side: int) -> dict
     _, record = make_tileable(large, centre)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     path = f"whole cells ({record.cells.cells})" if record.cells is not None else "cut"
+    if record.stripes is not None and record.cells is not None:
+        path = f"whole stripes ({record.stripes.period:.1f} px, {record.cells.cells} cells)"
     step = time.process_time()
     repaired, _ = repair_flash_mark(large, centre)
     repair = time.process_time() - step
     step = time.process_time()
     find_lattice(repaired)
     detection = time.process_time() - step
+    step = time.process_time()
+    find_stripes(repaired)  # run wherever no lattice cells are used
+    stripes_detection = time.process_time() - step
     step = time.process_time()
     if record.cells is not None:
         tile_whole_cells(repaired, replace(record.cells, roll=(0, 0)))
@@ -182,6 +199,7 @@ def _large(maps: Tensor, frame: Tensor, photo: Tensor | None, side: int) -> dict
         "path": path,
         "repair_cpu_seconds": repair,
         "detection_cpu_seconds": detection,
+        "stripes_detection_cpu_seconds": stripes_detection,
         "tile_cpu_seconds": tile,
         "flash_removal_cpu_seconds": flash_removal,
     }
@@ -221,7 +239,8 @@ def print_large(kind: str, side: int, timing: dict[str, Any]) -> None:
         f"make_tileable at {side}², {kind} ({timing['photo']}, {timing['path']}): "
         f"{timing['seconds']:.1f} s (CPU {timing['cpu_seconds']:.1f} s: flash-mark repair "
         f"{timing['repair_cpu_seconds']:.1f}, lattice detection "
-        f"{timing['detection_cpu_seconds']:.1f}, tile {timing['tile_cpu_seconds']:.1f}, "
+        f"{timing['detection_cpu_seconds']:.1f}, stripes detection "
+        f"{timing['stripes_detection_cpu_seconds']:.1f}, tile {timing['tile_cpu_seconds']:.1f}, "
         "each on its own)"
     )
     if timing["flash_removal_cpu_seconds"] is not None:
@@ -274,7 +293,7 @@ def main() -> None:
         name, maps, frame, _ = item
         row = measure(name, maps, (float(frame[0, 0]), float(frame[0, 1])))
         rows.append(row)
-        large_inputs.setdefault("periodic" if row["whole_cells"] else "non-periodic", item)
+        large_inputs.setdefault(row["kind"], item)
         repaired = ", ".join(f"{key} {score:.2f}" for key, score in row["repaired"].items()) or "—"
         print(
             f"| {name} | {row['size']} | {row['seconds']:.2f} ({row['cpu_seconds']:.2f}) "
@@ -302,7 +321,7 @@ def main() -> None:
     if args.large:
         if "periodic" not in large_inputs:
             large_inputs["periodic"] = ("synthetic 45° grid", *synthetic_grid())
-        for kind in ("non-periodic", "periodic"):
+        for kind in LARGE_KINDS:
             if kind in large_inputs:
                 name, maps, frame, photo = large_inputs[kind]
                 summary[f"{kind}_at_{args.large}"] = {"photo": name, **_large(maps, frame, photo, args.large)}
@@ -315,7 +334,7 @@ def main() -> None:
         f"{summary['cpu_seconds'][0]:.2f}-{summary['cpu_seconds'][1]:.2f} s), "
         f"flash mark repaired in {summary['photos_repaired']}"
     )
-    for kind in ("non-periodic", "periodic"):
+    for kind in LARGE_KINDS:
         timing = summary.get(f"{kind}_at_{args.large}")
         if timing is not None:
             print_large(kind, args.large, timing)

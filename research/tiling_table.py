@@ -16,8 +16,9 @@ material's centre, the normals turned with the frame; and a flat 0° crop as the
 :func:`~brdfgan.core.lattice.find_lattice` on it unturned and snapped onto the material's own period
 where whole numbers of the vectors make it (every family tiles on its square: exact there). Groups:
 *periodic families* and *periodic scans* (a 2-D lattice on the flat material), *1-D regular* (planks
-and rows of setts: regular to an artist, with no 2-D lattice; ``core.lattice`` classes them
-non-periodic on purpose and they keep the cut) and *non-periodic*.
+and rows of setts: regular to an artist, with no 2-D lattice; ``core.stripes`` finds them, and their
+truth (:func:`true_stripes`) is the flat material's stripes, the period snapped onto its side) and
+*non-periodic*.
 
 **Tilings.** ``new``: :func:`brdfgan.inference.pipeline.make_tileable` with the flash-mark repair
 held off (there is no flash in true maps; where the shipped repair fires on them anyway, a second
@@ -42,14 +43,18 @@ table says so and what it costs); ``today``: :func:`brdfgan.core.seamless.make_s
   pixel) of a lattice vector. So a seam that joins copies a whole period apart does not break a
   cell, one that shifts the pattern by more than a pixel breaks every cell it crosses (from about
   half a cell beyond), and different stains or grain on either side of a well-placed seam do not
-  count. Only for materials with a true 2-D lattice;
+  count. For materials with a true 2-D lattice, and for the 1-D ones with squares of one period as
+  the cells and phases compared modulo a period across the stripes and any shift along them (whole
+  *stripes*: a seam may join different planks' ends, not shift the rows);
 - ``period err`` (:func:`lattice_period_error`): :func:`~brdfgan.core.lattice.find_lattice` on the
   tile repeated 2 × 2, each found vector against the nearest vector of the true lattice as the tile
   shows it (``A·a``, ``A·b``: ``A`` the tiling's affine map, the identity for the cut; the lattice
   at the crop's centre): the larger relative length error and the larger angle. The sheet repeats
   every tile exactly, and ``find_lattice`` there sometimes reports a coarser lattice (whole
   combinations of the true vectors: ``×2``, ``×3`` in the table, "coarser" in the summary), which
-  still repeats with the material's period; "not found" where it reports none;
+  still repeats with the material's period; "not found" where it reports none. For 1-D materials
+  :func:`~brdfgan.core.stripes.find_stripes` on the sheet against the true stripes as the tile
+  shows them (:func:`stripes_period_error`: the period across and the direction);
 - ``found err`` (:func:`period_error`): ``find_lattice`` on the untiled crop against the true vectors
   (reduced bases, strict), where it found a lattice: the detection alone; ``score`` its score;
 - ``stretch``: the whole-cell tiling's stretch (log of its singular values' ratio, in %);
@@ -84,6 +89,7 @@ from torch import Tensor
 
 from brdfgan.core.lattice import PROMINENCE_THRESHOLD, find_lattice, pattern_features, rectify, reduce_basis
 from brdfgan.core.seamless import file_units
+from brdfgan.core.stripes import Stripes, find_stripes
 from brdfgan.core.svbrdf import check_single_maps, join_maps, normalize_normal, split_maps
 from brdfgan.data.spec.determinism import derive_seed
 
@@ -280,6 +286,32 @@ def lattice_period_error(found: Basis | None, truth: Basis) -> tuple[float, floa
         worst_angle = max(worst_angle, math.degrees(math.acos(max(-1.0, min(1.0, cosine)))))
     index = round(abs(float(torch.det(torch.stack(rows)))))
     return round(worst_length, 12), round(worst_angle, 9), index
+
+
+def stripes_period_error(found: Stripes | None, cells: Basis) -> tuple[float, float]:
+    """How far found stripes are from the true ones whose square cells (one period across and
+    along, as a tile shows them: a parallelogram after its affine map) are ``cells``: the relative
+    error of the period across, and the angle (degrees) between the directions; ``(inf, inf)``
+    without stripes. The true period across is the cells' area over their side along the stripes
+    (the one nearer the found direction; either side where none was found).
+
+    Shape: two ``(dx, dy)`` → two numbers.
+
+    Example:
+        >>> found = Stripes(across=(0.0, 10.1), along=(1.0, 0.0), ridge=0.5, peak=0.5)
+        >>> stripes_period_error(found, ((0.0, 10.0), (10.0, 0.0)))
+        (0.01, 0.0)
+    """
+    if found is None:
+        return math.inf, math.inf
+    sides = [torch.tensor(side, dtype=torch.float64) for side in cells]
+    direction = torch.tensor(found.along, dtype=torch.float64)
+    along = max(sides, key=lambda side: abs(float(side @ direction)) / float(side.norm()))
+    area = abs(float(sides[0][0] * sides[1][1] - sides[0][1] * sides[1][0]))
+    period = area / float(along.norm())
+    cosine = abs(float(along @ direction)) / float(along.norm())
+    angle = math.degrees(math.acos(max(-1.0, min(1.0, cosine))))
+    return round(abs(found.period / period - 1.0), 12), round(angle, 9)
 
 
 def feature_image(maps: Tensor) -> Tensor:
@@ -594,6 +626,8 @@ ANGLES = (0.0, 15.0, 30.0, 45.0)
 PERSPECTIVE = (0.02, 0.015)
 GROUPS = ("periodic families", "periodic scans", "1-D regular", "non-periodic")
 PERIODIC_GROUPS = GROUPS[:2]
+# The groups whose cells are checked: the periodic ones and the 1-D (whole stripes).
+MEASURED_GROUPS = GROUPS[:3]
 
 
 @dataclass(frozen=True)
@@ -672,6 +706,34 @@ def true_lattice(maps: Tensor) -> tuple[Basis, str]:
     return (snapped, "snapped") if snapped is not None else (found.vectors, "measured")
 
 
+# A 1-D material's phases are compared modulo one period across its stripes and any shift along
+# them: its "lattice" for the cell check has a second vector this short (px) along the stripes.
+ALONG_EPSILON = 1e-3
+
+
+def true_stripes(maps: Tensor) -> tuple[Basis, Basis, str]:
+    """A flat 1-D material's stripes (:func:`~brdfgan.core.stripes.find_stripes`), the period
+    snapped onto the material's side where a whole number of periods makes it: the cells checked
+    (squares of one period, across and along) and the lattice phases are compared modulo (one
+    period across, :data:`ALONG_EPSILON` along), and how it was had.
+    Shape: ``(8, S, S)`` → two bases, a word."""
+    found = find_stripes(maps)
+    if found is None:
+        raise ValueError("the flat material shows no stripes")
+    along = found.along
+    normal = (-along[1], along[0])
+    period, how = found.period, "measured"
+    # Whole periods across the material's side (along whichever axis the stripes cross more).
+    side = maps.shape[-1] * max(abs(normal[0]), abs(normal[1]))
+    count = round(side / period)
+    if count > 0 and abs(side / period - count) <= 0.05:
+        period, how = side / count, "snapped"
+    across = (normal[0] * period, normal[1] * period)
+    cells = (across, (along[0] * period, along[1] * period))
+    material = (across, (along[0] * ALONG_EPSILON, along[1] * ALONG_EPSILON))
+    return cells, material, how
+
+
 @contextmanager
 def repair_held_off() -> Iterator[list[Any]]:
     """``make_tileable`` with the flash-mark repair held off: the maps go on unrepaired, and what
@@ -737,15 +799,19 @@ def measure_tile(
     to_material: PointMap,
     tile_lattice: Basis | None,
     material_lattice: Basis | None,
+    stripes: bool = False,
 ) -> None:
     """The lattice measures of one tile into ``row``: cells whole and the period error (periodic
-    materials only)."""
+    and 1-D materials only; ``stripes``: a 1-D one, :func:`true_stripes`)."""
     if tile_lattice is None or material_lattice is None:
         return
     check = check_cells(tile, reference, valid, tile_lattice, to_material, material_lattice)
     row.cells = check.share()
     row.worst_jump = float(check.jumps.max()) if check.jumps.numel() else math.nan
     row.extra["unexplained"] = float(check.unexplained.max()) if check.unexplained.numel() else math.nan
+    if stripes:
+        row.period_error = stripes_period_error(find_stripes(tile.detach().repeat(1, 2, 2)), tile_lattice)
+        return
     try:
         found = find_lattice(tile.detach().repeat(1, 2, 2))
     except RuntimeError as error:  # core.lattice's refinement can fail (the note's failing cases)
@@ -756,15 +822,25 @@ def measure_tile(
     row.period_error, row.period_index = (length, angle), index
 
 
-def run_case(material: Material, maps: Tensor, truth: Basis | None, frame: Frame) -> list[Row]:
+def run_case(
+    material: Material,
+    maps: Tensor,
+    truth: Basis | None,
+    frame: Frame,
+    cells: Basis | None = None,
+) -> list[Row]:
     """The new and today's tiling of one framed material, measured; and, where the shipped
-    flash-mark repair fires on the true maps, the new tiling as shipped."""
+    flash-mark repair fires on the true maps, the new tiling as shipped. ``truth``: the material's
+    lattice; ``cells``: the cells checked where they are not its cells (a 1-D material's,
+    :func:`true_stripes`; the material is then taken as 1-D)."""
     from brdfgan.core.seamless import make_seamless, tiling_measures
     from brdfgan.inference.pipeline import make_tileable
 
     crop = photo_frame(maps, frame).float()  # the pipeline's maps are float32
     size = (maps.shape[-2], maps.shape[-1])
-    crop_truth = frame.crop_vectors(truth) if truth is not None else None
+    stripes = cells is not None
+    cells = cells if cells is not None else truth
+    crop_truth = frame.crop_vectors(cells) if cells is not None else None
     base: dict[str, Any] = {"material": material.name, "group": material.group, "angle": frame.degrees}
     base["perspective"] = frame.perspective != (0.0, 0.0)
     identity = torch.ones(frame.size, frame.size, dtype=torch.bool)
@@ -774,14 +850,14 @@ def run_case(material: Material, maps: Tensor, truth: Basis | None, frame: Frame
 
     rows = []
     new = Row(**base, path="new")
-    _detect(new, crop, crop_truth)
+    _detect(new, crop, None if stripes else crop_truth)
     start = time.process_time()
     try:
         with repair_held_off() as records:
             tiled, record = make_tileable(crop, (frame.size / 2, frame.size / 2))
         new.seconds = time.process_time() - start
         new.repair = repair_fired(records[0])
-        _fill_new(new, record, crop, tiled, crop_truth, truth, crop_to_material, identity)
+        _fill_new(new, record, crop, tiled, crop_truth, truth, crop_to_material, identity, stripes)
     except Exception as error:  # a crash is a row of the table, not the end of it
         new.error = f"{type(error).__name__}: {str(error).splitlines()[0][:120]}"
     rows.append(new)
@@ -792,11 +868,11 @@ def run_case(material: Material, maps: Tensor, truth: Basis | None, frame: Frame
     today.seconds = time.process_time() - start
     measures = tiling_measures(tile.maps, crop, tile.shifts)
     today.wrap, today.copied = _worst_wrap(measures), _least_copied(measures)
-    measure_tile(today, tile.maps, crop.double(), identity, crop_to_material, crop_truth, truth)
+    measure_tile(today, tile.maps, crop.double(), identity, crop_to_material, crop_truth, truth, stripes)
     rows.append(today)
 
     if new.repair and not new.error:
-        rows.append(_shipped_row(base, new, crop, crop_truth, truth, crop_to_material, identity))
+        rows.append(_shipped_row(base, new, crop, crop_truth, truth, crop_to_material, identity, stripes))
     return rows
 
 
@@ -822,6 +898,7 @@ def _shipped_row(
     truth: Basis | None,
     crop_to_material: PointMap,
     identity: Tensor,
+    stripes: bool = False,
 ) -> Row:
     """The new tiling with the flash-mark repair as it stands (where it fires on the true maps):
     what it repaired or levelled, how far its patch's shift is from a lattice vector, the cells."""
@@ -830,7 +907,7 @@ def _shipped_row(
     shipped = Row(**base, path="shipped", score=new.score, found_error=new.found_error)
     try:
         tiled, record = make_tileable(crop, (crop.shape[-1] / 2, crop.shape[-2] / 2))
-        _fill_new(shipped, record, crop, tiled, crop_truth, truth, crop_to_material, identity)
+        _fill_new(shipped, record, crop, tiled, crop_truth, truth, crop_to_material, identity, stripes)
         offset = record.flash_mark.patch_offset  # (dy, dx)
         if offset is not None and crop_truth is not None:
             shift = torch.tensor([[float(offset[1]), float(offset[0])]])
@@ -859,13 +936,15 @@ def _fill_new(
     truth: Basis | None,
     crop_to_material: PointMap,
     identity: Tensor,
+    stripes: bool = False,
 ) -> None:
     """The new tiling's row: its lattice decision, measures and lattice measures."""
     row.whole_cells = record.cells is not None
     row.note = record.note or ""
     row.wrap, row.copied = _worst_wrap(record.after), _least_copied(record.after)
+    row.extra["stripes"] = None if record.stripes is None else round(record.stripes.period, 3)
     if record.cells is None:
-        measure_tile(row, tiled, crop.double(), identity, crop_to_material, crop_truth, truth)
+        measure_tile(row, tiled, crop.double(), identity, crop_to_material, crop_truth, truth, stripes)
         return
     affine = record.cells.affine()
     row.stretch = record.cells.stretch
@@ -882,7 +961,7 @@ def _fill_new(
         positions = to_source(points)
         return crop_to_material(positions if perspective is None else perspective.to_image(positions))
 
-    measure_tile(row, tiled, reference, valid, to_material, tile_lattice, truth)
+    measure_tile(row, tiled, reference, valid, to_material, tile_lattice, truth, stripes)
 
 
 def _finite(values: list[float]) -> list[float]:
@@ -1037,7 +1116,7 @@ def report(rows: list[Row], command: str, seconds: float) -> str:
                 chosen = [r for r in rows if (r.group, r.perspective, r.path) == (group, perspective, path)]
                 if chosen:
                     labels = [group, "perspective" if perspective else "flat", path]
-                    cells = _group_cells(summarise(chosen), group in PERIODIC_GROUPS, path)
+                    cells = _group_cells(summarise(chosen), group in MEASURED_GROUPS, path)
                     lines.append("| " + " | ".join(labels + cells) + " |")
     lines += ["", "Every case (new / today):", "", CASE_HEADER, _rule(CASE_HEADER)]
     lines += [_case_line(row) for row in rows if row.path != "shipped"]
@@ -1106,9 +1185,13 @@ def main() -> None:
     ]
     for material in chosen:
         maps = material.paint(side)
-        truth, how = true_lattice(maps) if material.group in PERIODIC_GROUPS else (None, "")
+        truth, how, cells = None, "", None
+        if material.group in PERIODIC_GROUPS:
+            truth, how = true_lattice(maps)
+        elif material.group == GROUPS[2]:
+            cells, truth, how = true_stripes(maps)
         for frame in frames:
-            rows.extend(run_case(material, maps, truth, frame))
+            rows.extend(run_case(material, maps, truth, frame, cells))
         # Every material's rows as soon as they are measured: a long run keeps what it has.
         json_path.parent.mkdir(parents=True, exist_ok=True)
         json_path.write_text(json.dumps([asdict(row) for row in rows], indent=1))

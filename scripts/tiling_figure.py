@@ -10,8 +10,8 @@ makes them (:func:`~brdfgan.inference.pipeline.predict_reference`). Columns, eac
 mark repaired where its detail leaked, then rolled and cut along minimum-error paths:
 :func:`~brdfgan.core.seamless.make_seamless`), base colour and metallic; today's
 (:func:`~brdfgan.inference.pipeline.finish_maps`: the flash taken out of the maps, then whole
-lattice cells for a periodic material, else the cut), base colour and metallic. Takes seconds on
-a CPU.
+lattice cells for a periodic material, whole periods across the stripes for a 1-D one, else the
+cut), base colour and metallic. Takes seconds on a CPU.
 """
 
 from __future__ import annotations

@@ -9,12 +9,14 @@ import math
 
 import pytest
 import torch
+from tests.core.test_stripes import whole_period_tile
 from torch import Tensor
 
 import research.tiling_table as table
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.lattice import choose_cells, find_lattice, tile_whole_cells
 from brdfgan.core.seamless import make_seamless
+from brdfgan.core.stripes import find_stripes
 from brdfgan.core.svbrdf import join_maps, normalize_normal
 from research.tiling_table import (
     Frame,
@@ -203,3 +205,56 @@ def test_perspective_is_part_of_the_truth(material: Tensor) -> None:
 def test_doctests() -> None:
     result = doctest.testmod(table, optionflags=doctest.NORMALIZE_WHITESPACE | doctest.ELLIPSIS)
     assert result.failed == 0 and result.attempted >= 2
+
+
+def stripe_material(seed: int = 0) -> Tensor:
+    """Planks along x, one every 16 px (8 a side), periodic on the material's side: a dark gap
+    between them, each plank its own shade and grain that runs along it. Shape: ``(8, SIDE, SIDE)``."""
+    generator = torch.Generator().manual_seed(seed)
+    axis = torch.arange(SIDE, dtype=torch.float64) + 0.5
+    yy = axis.view(-1, 1).expand(SIDE, SIDE)
+    width = 16.0
+    gap = torch.exp(-(((yy - width * torch.round(yy / width)) / 1.2) ** 2))
+    shade = 0.2 * torch.rand(int(SIDE / width), generator=generator, dtype=torch.float64)
+    noise = torch.rand(1, 1, SIDE, SIDE, generator=generator, dtype=torch.float64)
+    padded = torch.nn.functional.pad(noise, (8, 8, 8, 8), mode="circular")
+    grain = gaussian_blur(padded, 1.5)[0, 0, 8:-8, 8:-8] - 0.5
+    luminance = 0.55 + shade[torch.floor(yy / width).long() % len(shade)] - 0.4 * gap + 0.2 * grain
+    basecolor = luminance.clamp(0, 1) * torch.tensor([1.0, 0.8, 0.6], dtype=torch.float64).view(3, 1, 1)
+    gy, gx = torch.gradient(-gap)
+    normal = normalize_normal(torch.stack([-0.5 * gx, 0.5 * gy, torch.ones_like(gx)]))
+    roughness = (0.5 + 0.3 * gap)[None]
+    return join_maps(basecolor, normal, roughness, torch.zeros_like(roughness))
+
+
+def test_stripes_tiled_by_whole_periods_stay_whole_where_the_cut_shifts_them() -> None:
+    material = stripe_material()
+    cells, material_lattice, how = table.true_stripes(material)
+    assert how == "snapped" and math.hypot(*cells[0]) == pytest.approx(16.0)
+    frame = Frame(CROP, 30.0)
+    crop = photo_frame(material, frame)
+    _, tiled = whole_period_tile(crop)
+    tile, tiling = tiled.maps, tiled.tiling  # closed on the maps: its edges as the tile was cut
+    reference, valid, to_crop = tile_frame_reference(crop, tiling.affine(), tiling.origin)
+    tile_cells = transform_vectors(tiling.affine(), frame.crop_vectors(cells))
+
+    def to_material(points: Tensor) -> Tensor:
+        return frame.to_material(to_crop(points), (SIDE, SIDE))
+
+    whole = check_cells(tile, reference, valid, tile_cells, to_material, material_lattice)
+    assert whole.jumps.numel() >= 10 and whole.share() == 1.0, whole
+    length, angle = table.stripes_period_error(find_stripes(tile.repeat(1, 2, 2)), tile_cells)
+    assert length < 0.01 and angle < 0.5
+    # Today's cut joins copies that are not whole periods apart across the planks.
+    cut = make_seamless(crop).maps
+    identity = torch.ones(CROP, CROP, dtype=torch.bool)
+    crop_cells = frame.crop_vectors(cells)
+    shifted = check_cells(
+        cut,
+        crop.double(),
+        identity,
+        crop_cells,
+        lambda p: frame.to_material(p, (SIDE, SIDE)),
+        material_lattice,
+    )
+    assert shifted.share() < 1.0 and float(shifted.jumps.max()) > 3.0, shifted
