@@ -13,7 +13,7 @@ from torch import Tensor
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.lattice import CellTile, tile_whole_cells
 from brdfgan.core.seamless import make_seamless
-from brdfgan.core.stripes import Stripes, choose_stripe_cells, find_stripes
+from brdfgan.core.stripes import Stripes, choose_stripe_cells, find_stripe_perspective, find_stripes
 from brdfgan.core.svbrdf import BASECOLOR, join_maps, normalize_normal
 from tests.core.test_lattice import SIZE, noise_maps
 
@@ -25,12 +25,25 @@ def stripe_phase(points: Tensor, period: float, degrees: float) -> Tensor:
     return 2 * math.pi * across / period
 
 
-def planks(period: float, degrees: float, *, seed: int = 0, size: int = SIZE) -> Tensor:
+def planks(
+    period: float,
+    degrees: float,
+    *,
+    seed: int = 0,
+    size: int = SIZE,
+    keystone: tuple[float, float] = (0.0, 0.0),
+) -> Tensor:
     """Stripes of ``period`` px at ``degrees`` in the base colour (a cosine: its value is known at
     every point), grooves in the normals, and grain along the stripes in the roughness (so that
-    copies one period apart agree in the stripes, not in everything)."""
+    copies one period apart agree in the stripes, not in everything). ``keystone``: the plane seen
+    in mild perspective, its scale changing by that much from the centre to the right and bottom
+    edges (``q = c + d / (1 + g·d)``, ``g = keystone / half side``, as ``tests/core/test_lattice``'s
+    lattices)."""
     axis = torch.arange(size, dtype=torch.float64) + 0.5
     yy, xx = torch.meshgrid(axis, axis, indexing="ij")
+    dx, dy = xx - size / 2, yy - size / 2
+    depth = 1.0 + (keystone[0] * dx + keystone[1] * dy) / (size / 2)
+    xx, yy = size / 2 + dx / depth, size / 2 + dy / depth
     phase = stripe_phase(torch.stack([xx, yy], dim=-1), period, degrees)
     luminance = 0.5 + 0.3 * torch.cos(phase)
     basecolor = luminance * torch.tensor([1.0, 0.8, 0.6], dtype=torch.float64).view(3, 1, 1)
@@ -126,3 +139,24 @@ def along_step(image: Tensor, direction: Tensor, distance: float = 4.0) -> float
 def test_stripes_round_trip_through_json() -> None:
     found = find_stripes(planks(11.3, 30.0))
     assert found is not None and Stripes.from_json(found.to_json()) == found
+
+
+@pytest.mark.parametrize("degrees", [15.0, 30.0, 45.0, 60.0])
+def test_stripes_in_mild_perspective_give_its_keystone(degrees: float) -> None:
+    keystone = (0.02, -0.015)
+    maps = planks(11.3, degrees, keystone=keystone, size=256)
+    found = find_stripes(maps)
+    assert found is not None
+    perspective = find_stripe_perspective(maps, found)
+    assert perspective is not None and perspective.keystone == pytest.approx(keystone, abs=0.004)
+    assert perspective.spread_after < 0.5 * perspective.spread_before
+    # Square-on stripes have none to take out.
+    assert find_stripe_perspective(planks(11.3, degrees, size=256), found) is None
+
+
+def test_a_keystone_along_axis_aligned_stripes_is_not_guessed() -> None:
+    # Along horizontal stripes the scale change shows only in their slight convergence: the fit
+    # does not explain the windows well enough, and the maps are tiled as they are.
+    maps = planks(11.3, 0.0, keystone=(0.02, -0.015), size=256)
+    found = find_stripes(maps)
+    assert found is not None and find_stripe_perspective(maps, found) is None

@@ -163,6 +163,18 @@ def test_stripes_are_tiled_by_whole_periods_across_them_and_recorded() -> None:
     assert abs(aligned.cells.turn_deg) == pytest.approx(30.0, abs=1.0)
 
 
+def test_stripes_in_mild_perspective_are_rectified_before_they_are_tiled() -> None:
+    maps = planks(11.3, 30.0, keystone=(0.02, 0.015))
+    tiled, record = make_tileable(maps, HOTSPOT)
+    validate_maps(tiled)
+    assert record.stripes is not None and record.perspective is not None
+    assert record.perspective.keystone == pytest.approx((0.02, 0.015), abs=0.005)
+    document = round_trip(record)
+    assert "perspective rectified" in str(document["method"]) and document["lattice"] is None
+    assert document["stripes"]["perspective"]["keystone"] == pytest.approx([0.02, 0.015], abs=0.005)  # type: ignore[index]
+    assert make_tileable(planks(11.3, 30.0), HOTSPOT)[1].perspective is None
+
+
 def test_a_lattice_whose_cells_do_not_fit_falls_back_on_its_rows(monkeypatch: pytest.MonkeyPatch) -> None:
     # Tiles whose cells do not fit still have rows of grout: tiled by whole rows, with a note.
     maps = tiles()

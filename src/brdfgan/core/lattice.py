@@ -730,23 +730,16 @@ def _perspective_in_windows(
     keystone's strength the fit saw, kept or not (infinite where a window's lattice was not the
     maps': nothing was fitted)."""
     height, width = size
-    small_h, small_w = features.shape[-2:]
-    window_h, window_w = round(share * small_h), round(share * small_w)
     seed = (_vector(start[0].tolist()), _vector(start[1].tolist()))
     reach = SEARCH_FRACTION * float(start.norm(dim=-1).min())
     centres, measured = [], []
-    for row in range(PERSPECTIVE_WINDOWS):
-        for column in range(PERSPECTIVE_WINDOWS):
-            top = round(row * (small_h - window_h) / (PERSPECTIVE_WINDOWS - 1))
-            left = round(column * (small_w - window_w) / (PERSPECTIVE_WINDOWS - 1))
-            window = features[:, top : top + window_h, left : left + window_w]
-            refined = refine_lattice(autocorrelation(window), *seed, (window_h, window_w))
-            local = torch.tensor(refined, dtype=torch.float64)
-            if float((local - start).norm(dim=-1).max()) > reach:
-                return None, math.inf  # the window's lattice is not the maps' (a window of grout, a stain)
-            centres.append([(left + window_w / 2) * float(factor[0]) - width / 2,
-                            (top + window_h / 2) * float(factor[1]) - height / 2])  # fmt: skip
-            measured.append(local * factor)
+    for window, centre in perspective_windows(features, factor, share, size):
+        refined = refine_lattice(autocorrelation(window), *seed, (window.shape[-2], window.shape[-1]))
+        local = torch.tensor(refined, dtype=torch.float64)
+        if float((local - start).norm(dim=-1).max()) > reach:
+            return None, math.inf  # the window's lattice is not the maps' (a window of grout, a stain)
+        centres.append(centre)
+        measured.append(local * factor)
     g, spread_before, spread_after = _fit_windows(
         torch.tensor(centres, dtype=torch.float64), torch.stack(measured)
     )
@@ -762,6 +755,30 @@ def _perspective_in_windows(
         spread_after=spread_after,
     )
     return perspective, strength
+
+
+def perspective_windows(
+    features: Tensor, factor: Tensor, share: float, size: tuple[int, int]
+) -> list[tuple[Tensor, list[float]]]:
+    """The :data:`PERSPECTIVE_WINDOWS` × :data:`PERSPECTIVE_WINDOWS` grid of overlapping windows of
+    ``share`` of the detection features' sides, corner to corner (module docstring, step 3b), each
+    with its centre as an offset from the maps' centre in the maps' pixels (``size`` ``(H, W)``,
+    ``factor`` the maps' pixels per feature pixel).
+
+    Shape: ``(C, h, w)`` → windows ``(C, share·h, share·w)`` and ``[dx, dy]``.
+    """
+    height, width = size
+    small_h, small_w = features.shape[-2:]
+    window_h, window_w = round(share * small_h), round(share * small_w)
+    windows = []
+    for row in range(PERSPECTIVE_WINDOWS):
+        for column in range(PERSPECTIVE_WINDOWS):
+            top = round(row * (small_h - window_h) / (PERSPECTIVE_WINDOWS - 1))
+            left = round(column * (small_w - window_w) / (PERSPECTIVE_WINDOWS - 1))
+            centre = [(left + window_w / 2) * float(factor[0]) - width / 2,
+                      (top + window_h / 2) * float(factor[1]) - height / 2]  # fmt: skip
+            windows.append((features[:, top : top + window_h, left : left + window_w], centre))
+    return windows
 
 
 def central_lattice(maps: Tensor) -> Lattice:

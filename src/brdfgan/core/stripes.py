@@ -19,6 +19,14 @@ one period ``p`` apart across them. :func:`find_stripes` reads both from ρ of t
    refined by a parabola through each multiple's peak that reaches half its height and a least
    squares fit through the origin, which averages a photo's drift.
 
+3. **Mild perspective** (:func:`find_stripe_perspective`): as for a lattice
+   (:func:`~brdfgan.core.lattice.find_perspective`), the stripes are measured again in a 3 × 3 grid
+   of overlapping windows, each holding :data:`WINDOW_PERIODS` periods, and a homography about the
+   centre is fitted to how their frequency ``n / p`` changes (:func:`fit_stripe_perspective`); the
+   maps are rectified through it where it explains the windows. Along axis-aligned stripes a
+   keystone shows only in their slight convergence, and is not fitted (the windows' spread is not
+   halved).
+
 The maps then tile as a 2-D lattice would (:func:`~brdfgan.core.lattice.choose_cells`,
 :func:`~brdfgan.core.lattice.tile_whole_cells`) on the vectors ``p·n`` and ``p·d``
 (:meth:`Stripes.cell_vectors`, ``d`` along the stripes): any shift along the stripes keeps them
@@ -41,13 +49,18 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.lattice import (
+    MAX_KEYSTONE,
+    MIN_KEYSTONE,
     MIN_PERIOD,
+    PERSPECTIVE_GAIN,
     CellTiling,
+    Perspective,
     Vector,
     autocorrelation,
     check_single_maps,
     choose_cells,
     detection_features,
+    perspective_windows,
     sample_rho,
 )
 
@@ -58,6 +71,14 @@ RELATIVE_PEAK = 0.5
 ACROSS_PROMINENCE = 0.1
 # The across profile's band: lags along the stripes up to this share of RIDGE_REACH either way.
 BAND_SHARE = 0.5
+# Mild perspective (find_stripe_perspective): windows of at least WINDOW_PERIODS periods (a share of
+# the side from 1/2 to 3/4), each window's direction read within DIRECTION_REACH_DEG of the stripes'
+# every DIRECTION_STEP_DEG and its period within PERIOD_REACH of theirs.
+WINDOW_PERIODS = 2.5
+WINDOW_SHARE = (0.5, 0.75)
+DIRECTION_REACH_DEG = 3.0
+DIRECTION_STEP_DEG = 0.1
+PERIOD_REACH = 0.2
 # With --align-pattern, the tile's edges turn at most this far from the stripes and their normal.
 ALIGNED_TURN_DEG = 1.0
 # Each period holds at least this many times across the maps' shorter side (else there is nothing
@@ -253,3 +274,125 @@ def find_stripes(maps: Tensor) -> Stripes | None:
     if MIN_PERIODS * math.hypot(*across) > min(height, width):
         return None
     return Stripes(across=across, along=along, ridge=ridge, peak=peak)
+
+
+def window_frequency(window: Tensor, direction_deg: float, period: float) -> Tensor | None:
+    """The stripes' spatial frequency ``n / p`` (cycles per pixel, ``n`` their unit normal) in one
+    window of detection features, read near the maps' ``direction_deg`` and ``period`` (module
+    docstring of :func:`find_stripe_perspective`); ``None`` where the window shows no peak near the
+    period.
+
+    Shape: ``(C, h, w)`` → ``(2,)`` float64 or ``None``.
+    """
+    rho = autocorrelation(window)
+    height, width = window.shape[-2:]
+    reach = RIDGE_REACH * min(height, width)
+    angles = torch.arange(
+        direction_deg - DIRECTION_REACH_DEG,
+        direction_deg + DIRECTION_REACH_DEG + 0.5 * DIRECTION_STEP_DEG,
+        DIRECTION_STEP_DEG,
+        dtype=rho.dtype,
+    )
+    radians = torch.deg2rad(angles)
+    directions = torch.stack([torch.cos(radians), torch.sin(radians)], dim=-1)
+    distances = torch.arange(MIN_PERIOD, max(reach, MIN_PERIOD + 1.0), 1.0, dtype=rho.dtype)
+    means = sample_rho(rho, directions[:, None, :] * distances[None, :, None]).mean(dim=-1)
+    best = min(max(int(torch.argmax(means)), 1), angles.shape[0] - 2)
+    direction = _parabola_peak(angles, means, best)
+    offsets, values = across_profile(
+        rho, direction, min(0.5 * min(height, width), (1 + 3 * PERIOD_REACH) * period)
+    )
+    near = [k for k in _local_maxima(values) if abs(float(offsets[k]) - period) <= PERIOD_REACH * period]
+    if not near:
+        return None
+    found = _parabola_peak(offsets, values, max(near, key=lambda k: float(values[k])))
+    radians_found = math.radians(direction)
+    return torch.tensor([-math.sin(radians_found), math.cos(radians_found)], dtype=torch.float64) / found
+
+
+def fit_stripe_perspective(centres: Tensor, frequencies: Tensor) -> tuple[Tensor, Tensor, float, float]:
+    """The perspective ``g`` and the rectified frequency ``k`` that explain the stripes' frequency
+    measured around the maps. A phase ``k·r`` on the rectified plane, seen through
+    ``r = d / (1 + g·d)``, has the image gradient ``Jᵀ k``, to first order in ``g``
+    ``k − (k dᵀ + (d·k) I) g`` at offset ``d`` (a frequency is a covector: it shrinks where the
+    lattice's vectors grow, :func:`~brdfgan.core.lattice.fit_perspective`); solved by least squares
+    with the measured frequencies in the bracket; with the spreads of the frequencies about one
+    (``g = 0``) and about the model.
+
+    Shape: centres ``(K, 2)``, frequencies ``(K, 2)`` → ``g`` ``(2,)``, ``k`` ``(2,)``, two floats.
+
+    Example:
+        Stripes across x every 10 px whose period grows by 2 % towards the right (±100 px):
+
+        >>> f64 = torch.float64
+        >>> centres = 100.0 * torch.tensor([[-1.0, 0], [1, 0], [0, -1], [0, 1], [0, 0]], dtype=f64)
+        >>> g_true = torch.tensor([2e-4, 0.0], dtype=f64)
+        >>> k = torch.tensor([0.1, 0.0], dtype=f64)
+        >>> def seen_at(d):  # the gradient of k·r(d), r = d / (1 + g·d)
+        ...     w = 1 + g_true @ d
+        ...     jacobian = (torch.eye(2, dtype=f64) * w - torch.outer(d, g_true)) / w**2
+        ...     return jacobian.T @ k
+        >>> seen = torch.stack([seen_at(d) for d in centres])
+        >>> g, _, before, after = fit_stripe_perspective(centres, seen)
+        >>> [round(v * 1e4, 2) + 0.0 for v in g.tolist()], after < 0.05 * before
+        ([2.0, 0.0], True)
+    """
+    eye = torch.eye(2, dtype=frequencies.dtype)
+    rows = []
+    for d, k in zip(centres, frequencies, strict=True):
+        block = torch.zeros(2, 4, dtype=frequencies.dtype)
+        block[:, :2] = -(torch.outer(k, d) + (d @ k) * eye)
+        block[:, 2:] = eye
+        rows.append(block)
+    design, target = torch.cat(rows), frequencies.reshape(-1)
+    solution = torch.linalg.lstsq(design, target[:, None]).solution[:, 0]
+    spread_before = float((frequencies - frequencies.mean(dim=0)).square().sum(dim=-1).mean().sqrt())
+    spread_after = float((design @ solution - target).view(-1, 2).square().sum(dim=-1).mean().sqrt())
+    return solution[:2], solution[2:], spread_before, spread_after
+
+
+def find_stripe_perspective(maps: Tensor, stripes: Stripes) -> Perspective | None:
+    """The maps' mild perspective from how their stripes' frequency changes across them, as
+    :func:`~brdfgan.core.lattice.find_perspective` finds it from a lattice: in a 3 × 3 grid of
+    windows holding :data:`WINDOW_PERIODS` periods, each window's direction and period
+    (:func:`window_frequency`), a homography about the centre fitted to them
+    (:func:`fit_stripe_perspective`); ``None`` where a window shows no period, where the windows
+    cannot hold enough periods, or where the keystone or the fit's gain are outside the lattice's
+    limits (:data:`~brdfgan.core.lattice.MIN_KEYSTONE`, :data:`~brdfgan.core.lattice.MAX_KEYSTONE`,
+    :data:`~brdfgan.core.lattice.PERSPECTIVE_GAIN`). The spreads are converted to pixels of the
+    period (``δp ≈ p² δk``).
+
+    Shape: ``(8, H, W)`` → :class:`~brdfgan.core.lattice.Perspective` or ``None``.
+    """
+    check_single_maps(maps)
+    features, factor = detection_features(maps)
+    small_h, small_w = features.shape[-2:]
+    fx, fy = float(factor[0]), float(factor[1])
+    period = stripes.period / math.sqrt(fx * fy)
+    share = max(WINDOW_SHARE[0], WINDOW_PERIODS * period / min(small_h, small_w))
+    if share > WINDOW_SHARE[1]:
+        return None
+    height, width = maps.shape[-2:]
+    centres, frequencies = [], []
+    for window, centre in perspective_windows(features, factor, share, (height, width)):
+        frequency = window_frequency(window, stripes.direction_deg, period)
+        if frequency is None:
+            return None
+        # Feature pixels to the maps' (a frequency scales inversely).
+        frequencies.append(frequency / torch.tensor([fx, fy], dtype=torch.float64))
+        centres.append(centre)
+    g, _, before, after = fit_stripe_perspective(
+        torch.tensor(centres, dtype=torch.float64), torch.stack(frequencies)
+    )
+    keystone = (float(g[0]) * width / 2, float(g[1]) * height / 2)
+    strength = max(abs(keystone[0]), abs(keystone[1]))
+    if not (MIN_KEYSTONE <= strength <= MAX_KEYSTONE) or after > PERSPECTIVE_GAIN * before:
+        return None
+    to_px = stripes.period**2
+    return Perspective(
+        g=(float(g[0]), float(g[1])),
+        centre=(width / 2, height / 2),
+        keystone=keystone,
+        spread_before=before * to_px,
+        spread_after=after * to_px,
+    )

@@ -47,6 +47,7 @@ from brdfgan.core.lattice import (
     choose_cells,
     find_lattice,
     find_perspective,
+    rectify,
     refine_perspective,
     tile_whole_cells,
 )
@@ -59,7 +60,7 @@ from brdfgan.core.seamless import (
     tiling_measures,
     wrap_ratios,
 )
-from brdfgan.core.stripes import Stripes, choose_stripe_cells, find_stripes
+from brdfgan.core.stripes import Stripes, choose_stripe_cells, find_stripe_perspective, find_stripes
 from brdfgan.core.svbrdf import NUM_CHANNELS
 from brdfgan.inference.intake.lens import FieldOfView, crop_field_of_view
 from brdfgan.inference.intake.photo import PHOTO_EXTENSIONS, Colorspace, Photo, read_photo
@@ -305,20 +306,24 @@ class TileableRecord:
             lattice = {
                 **self.lattice.to_json(),
                 "cells": None if self.stripes is not None or self.cells is None else self.cells.to_json(),
-                "perspective": None if self.perspective is None else self.perspective.to_json(),
+                "perspective": None
+                if self.perspective is None or self.stripes is not None
+                else self.perspective.to_json(),
             }
         stripes = None
         if self.stripes is not None:
             stripes = {
                 **self.stripes.to_json(),
                 "cells": None if self.cells is None else self.cells.to_json(),
+                "perspective": None if self.perspective is None else self.perspective.to_json(),
             }
         if self.cells is None:
             method = "flash mark repaired, then rolled and cut along minimum-error paths"
         elif self.stripes is not None:
             method = (
-                "flash mark repaired, then resampled to whole periods across its stripes and each wrap"
-                " cut along a minimum-error path between copies whole periods apart"
+                "flash mark repaired, then resampled to whole periods across its stripes"
+                + (" (the perspective rectified first)" if self.perspective is not None else "")
+                + " and each wrap cut along a minimum-error path between copies whole periods apart"
             )
         else:
             method = (
@@ -344,7 +349,7 @@ class TileableRecord:
         lattice = record.get("lattice")
         stripes = record.get("stripes")
         cells = (lattice or {}).get("cells") if stripes is None else stripes.get("cells")
-        perspective = None if lattice is None else lattice.get("perspective")
+        perspective = (lattice or {}).get("perspective") if stripes is None else stripes.get("perspective")
         note = record.get("note")
         return cls(
             flash_mark=FlashMark.from_json(record["flash_mark"]),
@@ -411,12 +416,10 @@ def make_tileable(
     stripes = None
     if cells is None:
         # No 2-D lattice to tile by: a 1-D pattern still tiles by whole periods across its stripes.
-        found = find_stripes(repaired)
-        stripe_cells = None
-        if found is not None:
-            stripe_cells = choose_stripe_cells(found, height, width, align=align_pattern)
-        if found is not None and stripe_cells is not None:
-            stripes, cells, note = found, stripe_cells, _stripes_note(lattice, found)
+        stripe_tiling = _stripe_tiling(repaired, align_pattern)
+        if stripe_tiling is not None:
+            repaired, stripes, cells, perspective = stripe_tiling
+            note = _stripes_note(lattice, stripes)
     if cells is not None:
         whole = tile_whole_cells(repaired, cells)
         shifts = ((height, width), (height, 0), (0, width), (0, 0))
@@ -437,6 +440,32 @@ def make_tileable(
     return tile.maps, TileableRecord(
         mark, tile.shifts, before, after, lattice if lattice.periodic else None, None, note
     )
+
+
+def _stripe_tiling(
+    maps: Tensor, align_pattern: bool
+) -> tuple[Tensor, Stripes, CellTiling, Perspective | None] | None:
+    """``make_tileable``'s stripes path (:mod:`brdfgan.core.stripes`): the maps' stripes and their
+    whole-period cells, after taking out a mild perspective where the rectified maps show stripes
+    whose cells fit (else on the maps as they are), with the maps the cells are cut from and the
+    perspective; ``None`` where there are no stripes or no cells fit.
+
+    Shape: ``(8, H, W)`` → ``(8, H, W)`` and the rest.
+    """
+    height, width = maps.shape[-2:]
+    found = find_stripes(maps)
+    if found is None:
+        return None
+    perspective = find_stripe_perspective(maps, found)
+    if perspective is not None:
+        rectified = rectify(maps, perspective)
+        straight = find_stripes(rectified)
+        if straight is not None:
+            cells = choose_stripe_cells(straight, height, width, align=align_pattern)
+            if cells is not None:
+                return rectified, straight, cells, perspective
+    cells = choose_stripe_cells(found, height, width, align=align_pattern)
+    return None if cells is None else (maps, found, cells, None)
 
 
 def _stripes_note(lattice: Lattice, stripes: Stripes) -> str | None:
