@@ -18,7 +18,6 @@ one period ``p`` apart across them. :func:`find_stripes` reads both from ρ of t
    the grooves' period when the two are close in height, the planks' when the gaps dominate); it is
    refined by a parabola through each multiple's peak that reaches half its height and a least
    squares fit through the origin, which averages a photo's drift.
-
 3. **Mild perspective** (:func:`find_stripe_perspective`): as for a lattice
    (:func:`~brdfgan.core.lattice.find_perspective`), the stripes are measured again in a 3 × 3 grid
    of overlapping windows, each holding :data:`WINDOW_PERIODS` periods, and a homography about the
@@ -32,9 +31,9 @@ The maps then tile as a 2-D lattice would (:func:`~brdfgan.core.lattice.choose_c
 (:meth:`Stripes.cell_vectors`, ``d`` along the stripes): any shift along the stripes keeps them
 whole, so ``p·d`` only sets the step in which the tile's edges are chosen (a step of a quarter
 period gave wood planks turned 30° a tile stretched by 7.1 % where whole periods gave 0.3 %: the
-finer choice traded stretch for area), and the residual seam
-of each wrap (:func:`~brdfgan.core.lattice.cut_wrap`) runs where the texture along the stripes (grain,
-joints) agrees.
+finer choice traded stretch for area), and the residual seam of each wrap
+(:func:`~brdfgan.core.lattice.cut_wrap`) runs where the texture along the stripes (grain, joints)
+agrees.
 
 Vectors are ``(dx, dy)`` in pixels of the maps, ``x`` to the right, ``y`` down (rows).
 """
@@ -89,7 +88,7 @@ MIN_PERIODS = 3.0
 @dataclass(frozen=True)
 class Stripes:
     """What :func:`find_stripes` found: ``across``, one period across the stripes (``p·n``, pointing
-    down or right), ``along``, the stripes' unit direction (``d``, ``a × d > 0``), both in the maps'
+    down or right), ``along``, the stripes' unit direction (``d``, ``across × along > 0``), both in the maps'
     pixels; ``ridge``, the mean of ρ along the stripes; ``peak``, the across profile at the period."""
 
     across: Vector
