@@ -175,6 +175,18 @@ def test_stripes_in_mild_perspective_are_rectified_before_they_are_tiled() -> No
     assert make_tileable(planks(11.3, 30.0), HOTSPOT)[1].perspective is None
 
 
+def test_stripes_with_an_ambiguous_lattice_say_which_path_was_taken(monkeypatch: pytest.MonkeyPatch) -> None:
+    maps = planks(11.3, 30.0)
+    weak = Lattice(((11.3, 0.0), (0.0, 40.0)), 0.08, False, notes="lattice peaks too weak")
+    assert weak.ambiguous
+    monkeypatch.setattr(pipeline, "find_lattice", lambda _: weak)
+    monkeypatch.setattr(pipeline, "find_perspective", lambda *_: None)
+    _, record = make_tileable(maps, HOTSPOT)
+    assert record.stripes is not None and record.lattice == weak
+    assert record.note is not None and record.note.startswith("the pattern is ambiguously periodic")
+    assert "whole periods across its stripes" in record.note and "\n" not in record.note
+
+
 def test_a_lattice_whose_cells_do_not_fit_falls_back_on_its_rows(monkeypatch: pytest.MonkeyPatch) -> None:
     # Tiles whose cells do not fit still have rows of grout: tiled by whole rows, with a note.
     maps = tiles()
