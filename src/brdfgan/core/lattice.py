@@ -394,6 +394,18 @@ def reduce_basis(a: Vector, b: Vector) -> tuple[Vector, Vector]:
     return (ax, ay), (bx, by)
 
 
+def parabola_vertex(below: float, centre: float, above: float) -> float:
+    """The offset in (−½, ½) of the vertex of the parabola through three equally spaced values
+    whose middle one is the largest (0 where they do not curve down).
+
+    Example:
+        >>> parabola_vertex(0.0, 1.0, 0.5)
+        0.16666666666666666
+    """
+    curvature = below - 2.0 * centre + above
+    return 0.0 if curvature >= 0 else max(-0.5, min(0.5, 0.5 * (below - above) / curvature))
+
+
 def _peak_near(rho: Tensor, lag: Tensor, radius: float) -> tuple[Tensor, float, bool]:
     """The highest point of ρ within ``radius`` of ``lag``, refined to sub-pixel by a parabola
     through it and its neighbours along each axis; with its height and whether it is a local
@@ -416,12 +428,10 @@ def _peak_near(rho: Tensor, lag: Tensor, radius: float) -> tuple[Tensor, float, 
     iy, ix = y0 + index // (x1 - x0), x0 + index % (x1 - x0)
     centre = float(rho[iy, ix])
     local = centre >= float(rho[iy - 1 : iy + 2, ix - 1 : ix + 2].max())
-    offsets = []
-    for before, after in ((rho[iy, ix - 1], rho[iy, ix + 1]), (rho[iy - 1, ix], rho[iy + 1, ix])):
-        curvature = float(before) - 2.0 * centre + float(after)
-        offsets.append(
-            0.0 if curvature >= 0 else max(-0.5, min(0.5, 0.5 * float(before - after) / curvature))
-        )
+    offsets = [
+        parabola_vertex(float(before), centre, float(after))
+        for before, after in ((rho[iy, ix - 1], rho[iy, ix + 1]), (rho[iy - 1, ix], rho[iy + 1, ix]))
+    ]
     position = torch.tensor([ix - width + offsets[0], iy - height + offsets[1]], dtype=rho.dtype)
     return position, centre, local
 
@@ -1111,13 +1121,6 @@ def _shift_match(features: Tensor, dx: int, dy: int) -> float:
     return float((here * there).sum() / (here.norm() * there.norm()).clamp_min(1e-12))
 
 
-def _parabola_vertex(below: float, centre: float, above: float) -> float:
-    """The offset in (−½, ½) of the vertex of the parabola through three equally spaced values
-    whose middle one is the largest."""
-    curvature = below - 2.0 * centre + above
-    return 0.0 if curvature >= 0 else max(-0.5, min(0.5, 0.5 * (below - above) / curvature))
-
-
 def closing_shift(features: Tensor, shift: Vector, reach: int) -> tuple[Vector, float] | None:
     """The sub-pixel shift within ``reach`` whole pixels of ``shift`` at which ``features`` best
     match themselves (:func:`_shift_match` on a grid of whole shifts, then a parabola through the
@@ -1132,8 +1135,8 @@ def closing_shift(features: Tensor, shift: Vector, reach: int) -> tuple[Vector, 
     row, column = divmod(int(torch.argmax(grid)), len(span))
     if not (0 < row < len(span) - 1 and 0 < column < len(span) - 1):
         return None
-    dx = _parabola_vertex(*grid[row, column - 1 : column + 2].tolist())
-    dy = _parabola_vertex(*grid[row - 1 : row + 2, column].tolist())
+    dx = parabola_vertex(*grid[row, column - 1 : column + 2].tolist())
+    dy = parabola_vertex(*grid[row - 1 : row + 2, column].tolist())
     return (cx + span[column] + dx, cy + span[row] + dy), float(grid[row, column])
 
 

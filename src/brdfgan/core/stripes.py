@@ -59,6 +59,7 @@ from brdfgan.core.lattice import (
     check_single_maps,
     choose_cells,
     detection_features,
+    parabola_vertex,
     perspective_windows,
     sample_rho,
 )
@@ -186,10 +187,9 @@ def _local_maxima(values: Tensor) -> list[int]:
 
 
 def _parabola_peak(offsets: Tensor, values: Tensor, k: int) -> float:
-    """The offset of a maximum at index ``k`` refined by a parabola through it and its neighbours."""
-    before, centre, after = (float(values[i]) for i in (k - 1, k, k + 1))
-    curvature = before - 2.0 * centre + after
-    shift = 0.0 if curvature >= 0 else max(-0.5, min(0.5, 0.5 * (before - after) / curvature))
+    """The offset of a maximum at index ``k`` of evenly spaced ``offsets``, refined by a parabola
+    through it and its neighbours (:func:`~brdfgan.core.lattice.parabola_vertex`)."""
+    shift = parabola_vertex(*(float(values[i]) for i in (k - 1, k, k + 1)))
     return float(offsets[k]) + shift * float(offsets[1] - offsets[0])
 
 
