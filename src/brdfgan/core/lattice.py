@@ -739,7 +739,6 @@ def _perspective_in_windows(
     maps' pixels (``size`` ``(H, W)``, ``factor`` the maps' pixels per feature pixel). With it, the
     keystone's strength the fit saw, kept or not (infinite where a window's lattice was not the
     maps': nothing was fitted)."""
-    height, width = size
     seed = (_vector(start[0].tolist()), _vector(start[1].tolist()))
     reach = SEARCH_FRACTION * float(start.norm(dim=-1).min())
     centres, measured = [], []
@@ -753,6 +752,20 @@ def _perspective_in_windows(
     g, spread_before, spread_after = _fit_windows(
         torch.tensor(centres, dtype=torch.float64), torch.stack(measured)
     )
+    return perspective_of_fit(g, size, spread_before, spread_after)
+
+
+def perspective_of_fit(
+    g: Tensor, size: tuple[int, int], spread_before: float, spread_after: float
+) -> tuple[Perspective | None, float]:
+    """The :class:`Perspective` of a homography ``g`` fitted to windows of maps of ``size``
+    ``(H, W)``, about their centre, with the keystone's strength (its larger component); ``None``
+    with it where the keystone is below :data:`MIN_KEYSTONE` or above :data:`MAX_KEYSTONE`, or
+    the fit leaves more than :data:`PERSPECTIVE_GAIN` of the windows' spread.
+
+    Shape: ``(2,)`` → :class:`Perspective` or ``None``, a float.
+    """
+    height, width = size
     keystone = (float(g[0]) * width / 2, float(g[1]) * height / 2)
     strength = max(abs(keystone[0]), abs(keystone[1]))
     if not (MIN_KEYSTONE <= strength <= MAX_KEYSTONE) or spread_after > PERSPECTIVE_GAIN * spread_before:

@@ -48,10 +48,7 @@ import torch
 from torch import Tensor
 
 from brdfgan.core.lattice import (
-    MAX_KEYSTONE,
-    MIN_KEYSTONE,
     MIN_PERIOD,
-    PERSPECTIVE_GAIN,
     CellTiling,
     Perspective,
     Vector,
@@ -60,6 +57,7 @@ from brdfgan.core.lattice import (
     choose_cells,
     detection_features,
     parabola_vertex,
+    perspective_of_fit,
     perspective_windows,
     sample_rho,
 )
@@ -149,13 +147,15 @@ def choose_stripe_cells(
     return choose_cells(stripes.cell_vectors(), height, width)
 
 
-def ridge_means(rho: Tensor, reach: float) -> tuple[Tensor, Tensor]:
-    """The mean of ρ along each line through the origin, lags ``MIN_PERIOD..reach`` pixels, every
-    :data:`RIDGE_STEP_DEG` from 0 (along +x) to 180° (clockwise on screen).
+def ridge_means(rho: Tensor, reach: float, angles: Tensor | None = None) -> tuple[Tensor, Tensor]:
+    """The mean of ρ along lines through the origin, lags ``MIN_PERIOD..reach`` pixels, at
+    ``angles`` (degrees clockwise on screen from +x; default every :data:`RIDGE_STEP_DEG` from 0 to
+    180°).
 
-    Shape: ``(2H, 2W)`` → ``(A,)`` angles in degrees, ``(A,)`` means.
+    Shape: ``(2H, 2W)``, ``(A,)`` → ``(A,)`` angles in degrees, ``(A,)`` means.
     """
-    angles = torch.arange(0.0, 180.0, RIDGE_STEP_DEG, dtype=rho.dtype)
+    if angles is None:
+        angles = torch.arange(0.0, 180.0, RIDGE_STEP_DEG, dtype=rho.dtype)
     radians = torch.deg2rad(angles)
     directions = torch.stack([torch.cos(radians), torch.sin(radians)], dim=-1)
     distances = torch.arange(MIN_PERIOD, max(reach, MIN_PERIOD + 1.0), 1.0, dtype=rho.dtype)
@@ -207,7 +207,8 @@ def stripe_period(offsets: Tensor, values: Tensor) -> tuple[float, float] | None
         >>> round(period, 3), round(value, 3)
         (10.0, 1.0)
     """
-    maxima = [k for k in _local_maxima(values) if float(offsets[k]) >= MIN_PERIOD]
+    peaks = _local_maxima(values)
+    maxima = [k for k in peaks if float(offsets[k]) >= MIN_PERIOD]
     if not maxima:
         return None
     highest = max(float(values[k]) for k in maxima)
@@ -225,7 +226,7 @@ def stripe_period(offsets: Tensor, values: Tensor) -> tuple[float, float] | None
     multiples, positions = [1.0], [period]
     reach = float(offsets[-1])
     for m in range(2, int(reach / period) + 1):
-        near = [k for k in _local_maxima(values) if abs(float(offsets[k]) - m * period) <= 0.25 * period]
+        near = [k for k in peaks if abs(float(offsets[k]) - m * period) <= 0.25 * period]
         if not near:
             continue
         best = max(near, key=lambda k: float(values[k]))
@@ -286,16 +287,16 @@ def window_frequency(window: Tensor, direction_deg: float, period: float) -> Ten
     rho = autocorrelation(window)
     height, width = window.shape[-2:]
     reach = RIDGE_REACH * min(height, width)
-    angles = torch.arange(
-        direction_deg - DIRECTION_REACH_DEG,
-        direction_deg + DIRECTION_REACH_DEG + 0.5 * DIRECTION_STEP_DEG,
-        DIRECTION_STEP_DEG,
-        dtype=rho.dtype,
+    angles, means = ridge_means(
+        rho,
+        reach,
+        torch.arange(
+            direction_deg - DIRECTION_REACH_DEG,
+            direction_deg + DIRECTION_REACH_DEG + 0.5 * DIRECTION_STEP_DEG,
+            DIRECTION_STEP_DEG,
+            dtype=rho.dtype,
+        ),
     )
-    radians = torch.deg2rad(angles)
-    directions = torch.stack([torch.cos(radians), torch.sin(radians)], dim=-1)
-    distances = torch.arange(MIN_PERIOD, max(reach, MIN_PERIOD + 1.0), 1.0, dtype=rho.dtype)
-    means = sample_rho(rho, directions[:, None, :] * distances[None, :, None]).mean(dim=-1)
     best = min(max(int(torch.argmax(means)), 1), angles.shape[0] - 2)
     direction = _parabola_peak(angles, means, best)
     offsets, values = across_profile(
@@ -357,9 +358,8 @@ def find_stripe_perspective(maps: Tensor, stripes: Stripes) -> Perspective | Non
     (:func:`window_frequency`), a homography about the centre fitted to them
     (:func:`fit_stripe_perspective`); ``None`` where a window shows no period, where the windows
     cannot hold enough periods, or where the keystone or the fit's gain are outside the lattice's
-    limits (:data:`~brdfgan.core.lattice.MIN_KEYSTONE`, :data:`~brdfgan.core.lattice.MAX_KEYSTONE`,
-    :data:`~brdfgan.core.lattice.PERSPECTIVE_GAIN`). The spreads are converted to pixels of the
-    period (``δp ≈ p² δk``).
+    limits (:func:`~brdfgan.core.lattice.perspective_of_fit`). The spreads are converted to pixels
+    of the period (``δp ≈ p² δk``).
 
     Shape: ``(8, H, W)`` → :class:`~brdfgan.core.lattice.Perspective` or ``None``.
     """
@@ -383,15 +383,5 @@ def find_stripe_perspective(maps: Tensor, stripes: Stripes) -> Perspective | Non
     g, _, before, after = fit_stripe_perspective(
         torch.tensor(centres, dtype=torch.float64), torch.stack(frequencies)
     )
-    keystone = (float(g[0]) * width / 2, float(g[1]) * height / 2)
-    strength = max(abs(keystone[0]), abs(keystone[1]))
-    if not (MIN_KEYSTONE <= strength <= MAX_KEYSTONE) or after > PERSPECTIVE_GAIN * before:
-        return None
     to_px = stripes.period**2
-    return Perspective(
-        g=(float(g[0]), float(g[1])),
-        centre=(width / 2, height / 2),
-        keystone=keystone,
-        spread_before=before * to_px,
-        spread_after=after * to_px,
-    )
+    return perspective_of_fit(g, (height, width), before * to_px, after * to_px)[0]
