@@ -21,7 +21,8 @@ the no-flash photo's log as three more channels, ``ratio`` the flash photo with 
 the room light's share to the flash photo as three more channels. The extra channels join the
 encoder's input (:class:`PairInputUNet`). ``--ood DIR`` also scores a generated dataset's test
 pairs (the OOD benchmark's, ``data/ood``); the validation rows are split into procedural
-materials and scans.
+materials and scans. ``--init WEIGHTS`` starts from a weights file (the shipped v4) instead of at
+random: a pair model fine-tuned from v4 (issue 59, item 5), the extra channels' weights at zero.
 
     python -m research.relief_learnability --out outputs/learnability/base
     python -m research.relief_learnability --out outputs/learnability/bumps \\
@@ -51,6 +52,7 @@ from brdfgan.data.loading.rendered import RenderedDataModule
 from brdfgan.data.phone.conditions import sample_as_photographed
 from brdfgan.data.phone.pairs import flash_only_photos
 from brdfgan.data.storage.shards import Sample, iter_shard, list_shards
+from brdfgan.inference.model.weights import load_model
 from brdfgan.io.atomic import write_text_atomic
 from brdfgan.losses.parameter import angular_distance
 from brdfgan.metrics import SlopeAgreement
@@ -128,6 +130,19 @@ class PairInputUNet(AnchoredUNet):
             return self(photo, flash)
         finally:
             self._extra = None
+
+
+def warm_started(generator: nn.Module, state: Mapping[str, Tensor]) -> nn.Module:
+    """``generator`` with a shipped generator's weights (``state``); a :class:`PairInputUNet`'s
+    extra input channels start at zero weight, so it starts as the shipped network exactly."""
+    first = "encoder.0.0.weight"
+    own = generator.state_dict()[first]
+    widened = dict(state)
+    if own.shape[1] > state[first].shape[1]:
+        extra = own.new_zeros(own.shape[0], own.shape[1] - state[first].shape[1], *own.shape[2:])
+        widened[first] = torch.cat([state[first], extra], dim=1)
+    generator.load_state_dict(widened)
+    return generator
 
 
 def network_inputs(batch: Mapping[str, Any], kind: str) -> tuple[Tensor, Tensor | None]:
@@ -228,6 +243,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--input", choices=INPUTS, default="flash", help="what the network sees of a pair")
     parser.add_argument(
+        "--init", type=Path, default=None,
+        help="start from a weights file (.safetensors, e.g. the shipped v4) instead of at random",
+    )
+    parser.add_argument(
         "--ood", type=Path, default=None, help="a generated dataset whose test split is scored too"
     )
     args = parser.parse_args(argv)
@@ -246,11 +265,17 @@ def main(argv: Sequence[str] | None = None) -> None:
     sets = {"val": list(module.val_dataloader())}
     if args.ood is not None:
         sets["ood"] = shard_batches(args.ood)
-    if args.input in ("pair", "ratio"):
-        node = cast(dict[str, Any], OmegaConf.to_container(cfg.model.generator, resolve=True))
-        generator: nn.Module = PairInputUNet(3, **{k: v for k, v in node.items() if k != "_target_"})
+    # A warm start takes the weights file's own architecture (its config), not the experiment's.
+    shipped = load_model(args.init) if args.init is not None else None
+    if shipped is not None:
+        stored = AnchoredUNet.upgrade_stored_config(shipped.config)
+        config = {k: v for k, v in stored.items() if k not in AnchoredUNet.RETIRED_OPTIONS}
     else:
-        generator = hydra.utils.instantiate(cfg.model.generator, _convert_="all")
+        node = cast(dict[str, Any], OmegaConf.to_container(cfg.model.generator, resolve=True))
+        config = {k: v for k, v in node.items() if k != "_target_"}
+    generator: nn.Module = PairInputUNet(3, **config) if args.input in ("pair", "ratio") else AnchoredUNet(**config)
+    if shipped is not None:
+        generator = warm_started(generator, shipped.generator.state_dict())
     optimizer = torch.optim.Adam(
         generator.parameters(), lr=cfg.model.optimizer.lr, betas=tuple(cfg.model.optimizer.betas)
     )
@@ -276,7 +301,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     module.teardown("fit")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     result = {"overrides": list(args.overrides), "input": args.input, "steps": args.steps, "seed": args.seed,
-              "curve": curve, "final": curve[-1]}  # fmt: skip
+              "init": None if args.init is None else str(args.init), "curve": curve, "final": curve[-1]}  # fmt: skip
     write_text_atomic(args.out.with_suffix(".json"), json.dumps(result, indent=1))
 
 

@@ -6,7 +6,7 @@ import torch
 
 from brdfgan.core.flash_geometry import centred_flash_frame
 from brdfgan.models.anchored import AnchoredUNet
-from research.relief_learnability import PairInputUNet, network_inputs
+from research.relief_learnability import PairInputUNet, network_inputs, warm_started
 
 
 def pair_batch() -> dict[str, torch.Tensor]:
@@ -51,11 +51,7 @@ def test_the_widened_network_is_v4_when_its_extra_weights_are_zero() -> None:
     with torch.no_grad():  # the heads start at zero: random weights make every input count
         for parameter in base.parameters():
             parameter.normal_(0.0, 0.1)
-    widened = PairInputUNet(3, width=4, depth=2).eval()
-    state = base.state_dict()
-    first = "encoder.0.0.weight"
-    extra = torch.zeros(state[first].shape[0], 3, 3, 3)
-    widened.load_state_dict({**state, first: torch.cat([state[first], extra], dim=1)})
+    widened = warm_started(PairInputUNet(3, width=4, depth=2), base.state_dict()).eval()
     batch = pair_batch()
     photo, channels = network_inputs(batch, "ratio")
     assert channels is not None
