@@ -243,7 +243,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--input", choices=INPUTS, default="flash", help="what the network sees of a pair")
     parser.add_argument(
-        "--init", type=Path, default=None,
+        "--init",
+        type=Path,
+        default=None,
         help="start from a weights file (.safetensors, e.g. the shipped v4) instead of at random",
     )
     parser.add_argument(
@@ -273,7 +275,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     else:
         node = cast(dict[str, Any], OmegaConf.to_container(cfg.model.generator, resolve=True))
         config = {k: v for k, v in node.items() if k != "_target_"}
-    generator: nn.Module = PairInputUNet(3, **config) if args.input in ("pair", "ratio") else AnchoredUNet(**config)
+    pair_input = args.input in ("pair", "ratio")
+    generator: nn.Module = PairInputUNet(3, **config) if pair_input else AnchoredUNet(**config)
     if shipped is not None:
         generator = warm_started(generator, shipped.generator.state_dict())
     optimizer = torch.optim.Adam(
@@ -301,7 +304,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     module.teardown("fit")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     result = {"overrides": list(args.overrides), "input": args.input, "steps": args.steps, "seed": args.seed,
-              "init": None if args.init is None else str(args.init), "curve": curve, "final": curve[-1]}  # fmt: skip
+              "init": None if args.init is None else str(args.init),
+              "curve": curve, "final": curve[-1]}  # fmt: skip
     write_text_atomic(args.out.with_suffix(".json"), json.dumps(result, indent=1))
 
 
