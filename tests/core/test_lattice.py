@@ -15,6 +15,7 @@ from torch import Tensor
 from brdfgan.core import lattice as lattice_module
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.lattice import (
+    MIN_BAND,
     RETRY_KEYSTONE,
     WINDOW_SHARE,
     CellTiling,
@@ -27,6 +28,7 @@ from brdfgan.core.lattice import (
     detection_features,
     find_lattice,
     find_perspective,
+    fold_inside,
     rectify,
     reduce_basis,
     refine_lattice,
@@ -535,9 +537,62 @@ def test_a_45_degree_grid_tiles_with_exact_diagonal_combinations() -> None:
 
 
 def test_no_cell_fits_a_lattice_coarser_than_the_maps() -> None:
-    assert choose_cells(((155.0, 0.0), (0.0, 155.0)), 160, 160) is None  # no room for the seam band
-    with pytest.raises(ValueError, match="parallel"):
-        choose_cells(((3.0, 1.0), (6.0, 2.0)), 64, 64)
+    assert choose_cells(((165.0, 0.0), (0.0, 165.0)), 160, 160) is None
+    # One cell that fits only without room for the seam band would fetch its margin from itself.
+    assert choose_cells(((155.0, 0.0), (0.0, 155.0)), 160, 160) is None
+    tiling = choose_cells(((78.0, 0.0), (0.0, 155.0)), 160, 160)
+    assert tiling is not None and tiling.margin_fetched and tiling.cells == 2
+
+
+def test_bricks_two_to_the_maps_tile_the_whole_maps_with_their_margin_fetched() -> None:
+    # Bricks 96 × 32 in 192²: whole cells span two bricks (192) and three pairs of courses (192),
+    # the whole maps, with no room for the seam's margin; one brick and a few courses would be
+    # stretched by a third or more. The margin is fetched from the next cell in.
+    lattice = ((96.0, 0.0), (48.0, 32.0))
+    maps = brick_maps(96.0, 32.0, 0.0)
+    tiling = choose_cells(lattice, SIZE, SIZE)
+    assert tiling is not None and tiling.margin_fetched
+    assert tiling.u == pytest.approx((192.0, 0.0)) and tiling.v == pytest.approx((0.0, 192.0))
+    assert tiling.cells == 12 and tiling.stretch < 1e-9 and min(tiling.margin) >= MIN_BAND
+    assert CellTiling.from_json(json.loads(json.dumps(tiling.to_json()))) == tiling
+    # The margin beyond the right edge is the same place in the nearest cell inside, half a brick
+    # back and a course down (in the last course, up), not the maps' last column stretched out.
+    mx, my = tiling.margin
+    beyond = sample_cells(maps, tiling)[:, my : my + SIZE, mx + SIZE :]
+    columns = slice(144, 144 + mx)
+    fetched = torch.cat([maps[:, 32:SIZE, columns], maps[:, SIZE - 64 : SIZE - 32, columns]], dim=1)
+    assert float((beyond - fetched).abs().max()) < 1e-6
+    tile = tile_whole_cells(maps, tiling)
+    validate_maps(tile.maps)
+    # The tile is the maps, rolled, but for the residual seams' bands: every brick whole.
+    unrolled = torch.roll(tile.maps, tile.tiling.roll, dims=(-2, -1))
+    inner = slice(2 * tiling.margin[0], SIZE - 2 * tiling.margin[0])
+    assert float((unrolled - maps.float())[:, inner, inner].abs().max()) < 1e-4
+    # Across the wrap, too: the sheet of 2 × 2 tiles is one wall whose mortar lies where the
+    # maps' does (rows of bed joints every 32 px, head joints every 96 px), and it wraps.
+    level = 0.5 * float(maps[0:3].mean(dim=0).max())
+    sheet = tile.maps.repeat(1, 2, 2)
+    truth = torch.roll(maps, [-shift for shift in tile.tiling.roll], dims=(-2, -1)).repeat(1, 2, 2)
+    agreement = ((sheet[0:3].mean(dim=0) < level) == (truth[0:3].mean(dim=0) < level)).double().mean()
+    assert float(agreement) > 0.995
+    for image in file_units(tile.maps):
+        assert max(wrap_ratios(image)) <= 1.2
+    # The test can fail: with room for a margin demanded, there is no whole-cell tile.
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(lattice_module, "FETCH_EXTENT", 0.5)
+        assert choose_cells(lattice, SIZE, SIZE) is None
+
+
+def test_a_sample_outside_the_maps_is_fetched_from_the_nearest_cell_inside() -> None:
+    # Bricks 96 × 32: the shortest lattice vectors are the four (±48, ±32), then (±96, 0).
+    basis = torch.tensor([[96.0, 0.0], [48.0, 32.0]], dtype=torch.float64)
+    px = torch.tensor([-3.0, 195.0, 170.0, 100.0, 0.5], dtype=torch.float64)
+    py = torch.tensor([10.0, 180.0, 194.0, 100.0, 191.5], dtype=torch.float64)
+    x, y = fold_inside(px, py, basis, SIZE, SIZE)
+    # Each moved by the one short vector that brings it in; those inside (on the outer pixel
+    # centres, too) stay.
+    assert x.tolist() == [45.0, 147.0, 122.0, 100.0, 0.5]
+    assert y.tolist() == [42.0, 148.0, 162.0, 100.0, 191.5]
 
 
 def test_the_wrap_closes_on_the_maps_whatever_the_lattices_precision() -> None:

@@ -45,7 +45,9 @@ synthesis of regular repeatable patterns"). The steps:
 4. **Whole cells** (:func:`choose_cells`): integer combinations ``u = m₁a + n₁b`` (about
    horizontal) and ``v = m₂a + n₂b`` (about vertical) spanning a parallelogram that fits in the
    maps, the largest with the least stretch and turn; with ``align`` the frame is turned so that the
-   lattice's own direction nearest an axis becomes that axis (the pattern is rectified).
+   lattice's own direction nearest an axis becomes that axis (the pattern is rectified). A coarse
+   lattice (bricks two to a crop) may have no such tile with room for the seam's margin around
+   it; it then takes the largest that fits without one, and its margin is fetched (step 5).
 4b. **Closure** (:func:`close_cells`): the lattice is measured to a fraction of a per cent, but a
    tile spans many cells, so 0.5 % becomes a step of a pixel or more where the wrap joins the
    tile's last cell to its first (a checkerboard of two periods a crop: 2.7-4.9 px). ``u`` and
@@ -59,7 +61,10 @@ synthesis of regular repeatable patterns"). The steps:
 5. **Resample** (:func:`sample_cells`): the affine map taking ``u`` to ``(W, 0)`` and ``v`` to
    ``(0, H)`` samples the maps (bilinear, ``grid_sample``; normals renormalised), a margin of whole
    pixels beyond each edge included. The result repeats by whole periods: its wrap joins a cell to
-   the same cell one period on.
+   the same cell one period on. A sample that falls outside the maps (a fetched margin) is taken
+   from the same place in the nearest cell inside them: moved by the shortest lattice vector
+   ``i·a + j·b`` that brings it in, a neighbouring cell rather than the tile's own opposite edge,
+   so that the residual seam still has two copies to choose between.
 6. **Residual seam** (:func:`cut_wrap`): where the photo is not perfectly periodic (stains, grain,
    shading, perspective) the wrap still shows a step. Across it the tile may take either the pixel
    or the pixel one period ``u`` (``v``) on, sampled from the photo in the margin: the two agree
@@ -73,9 +78,9 @@ synthesis of regular repeatable patterns"). The steps:
    the residual seams move inside.
 
 **1-D patterns are not periodic here.** Stripes, planks and wood grain repeat along one direction
-only: ρ has a ridge, no isolated peak, and :func:`find_lattice` reports no lattice. Such maps keep
-the minimum-error cut, whose rolls already prefer shifts where the copies agree (a whole number of
-stripes across them), and whose cut runs along the stripes.
+only: ρ has a ridge, no isolated peak, and :func:`find_lattice` reports no lattice. Such maps are
+tiled by whole periods across their stripes (:mod:`brdfgan.core.stripes`, with this module's
+cells, closure, seam and roll).
 
 Lattice vectors are ``(dx, dy)`` in pixels of the maps, ``x`` to the right, ``y`` down (rows).
 """
@@ -173,6 +178,10 @@ MAX_STRETCH = 0.15
 MAX_MARGIN = 1.0 / 16.0
 MIN_MARGIN = 1.0 / 32.0
 MIN_BAND = 4
+# Cells whose margin is fetched (choose_cells' second pass) span at most this many maps' sides:
+# a larger tile would hold the same photographed cell twice (tried at 1.5: bricks at 0° then
+# took a stretched tile and lost whole cells, 100 → 81-95 %).
+FETCH_EXTENT = 1.0
 # Closure (close_cells): the tile's edges are searched this many pixels (at most a quarter of the
 # shorter lattice vector) around the lattice's combinations, on features of at most DETECT_SIDE,
 # and moved where the maps match themselves with at least this correlation.
@@ -943,12 +952,20 @@ class CellTiling:
     roll: tuple[int, int] = (0, 0)
     # How far close_cells moved u and v (pixels of the maps; 0 where it kept the lattice's).
     closure: tuple[float, float] = (0.0, 0.0)
+    # The cells fill the maps with no room for the margin, which sample_cells fetches a cell in.
+    margin_fetched: bool = False
 
     @property
     def cells(self) -> int:
         """How many lattice cells the tile holds: ``|m₁n₂ − n₁m₂|``."""
         (m1, n1), (m2, n2) = self.counts
         return abs(m1 * n2 - n1 * m2)
+
+    def basis(self) -> Tensor:
+        """The lattice vectors ``a``, ``b`` as ``u``, ``v`` and the counts give them (after
+        :func:`close_cells`, the closed lattice). Shape: ``(2, 2)`` float64, rows ``a``, ``b``."""
+        edges = torch.tensor([self.u, self.v], dtype=torch.float64)
+        return torch.linalg.solve(torch.tensor(self.counts, dtype=torch.float64), edges)
 
     def affine(self) -> Tensor:
         """The linear part of the map from source offsets to output offsets: ``A·u = (W, 0)``,
@@ -987,6 +1004,7 @@ class CellTiling:
             "aligned": self.aligned,
             "roll": list(self.roll),
             "closure_px": list(self.closure),
+            "margin_fetched": self.margin_fetched,
             "stretch": self.stretch,
             "turn_deg": self.turn_deg,
         }
@@ -1004,6 +1022,7 @@ class CellTiling:
             aligned=bool(record["aligned"]),
             roll=(int(record["roll"][0]), int(record["roll"][1])),
             closure=_vector(record.get("closure_px", (0.0, 0.0))),
+            margin_fetched=bool(record.get("margin_fetched", False)),
         )
 
 
@@ -1084,22 +1103,41 @@ def choose_cells(
     frame = _frame_angle(vectors[0], vectors[1]) if align else 0.0
     x_axis = torch.tensor([math.cos(frame), math.sin(frame)], dtype=torch.float64)
     y_axis = torch.tensor([-math.sin(frame), math.cos(frame)], dtype=torch.float64)
-    room = 1.0 + 2.0 * MIN_MARGIN
-    extent = ((width - 1.0) / room, (height - 1.0) / room)
-    us, u_counts = _axis_candidates(combos, counts, x_axis, extent, max_turn_deg)
-    vs, v_counts = _axis_candidates(combos, counts, y_axis, extent, max_turn_deg)
-    if us.shape[0] == 0 or vs.shape[0] == 0:
-        return None
-    u, v = us.unsqueeze(1), vs.unsqueeze(0)  # (U, 1, 2), (1, V, 2): every pair at once
-    margin = _margins(u, v, height, width)
-    cross = (u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]).clamp_min(1e-12)
-    stretch, turn = _distortion(u, v, height, width)
-    score = (
-        torch.log(cross / (height * width)) - STRETCH_WEIGHT * stretch - TURN_WEIGHT * (turn + frame).abs()
-    )
-    usable = (margin >= MIN_MARGIN) & (stretch <= MAX_STRETCH)
-    usable &= (torch.floor(margin * min(height, width)) >= MIN_BAND) & (cross > 1e-9)
-    if not bool(usable.any()):
+    # First with room for the seam's margin; a coarse lattice then without (the margin fetched):
+    # cells up to the maps' own size, whose samples (pixel centres) are the maps' or folded in.
+    for fetched in (False, True):
+        room = 1.0 + 2.0 * MIN_MARGIN
+        extent = (
+            (FETCH_EXTENT * width, FETCH_EXTENT * height)
+            if fetched
+            else ((width - 1.0) / room, (height - 1.0) / room)
+        )
+        us, u_counts = _axis_candidates(combos, counts, x_axis, extent, max_turn_deg)
+        vs, v_counts = _axis_candidates(combos, counts, y_axis, extent, max_turn_deg)
+        if us.shape[0] == 0 or vs.shape[0] == 0:
+            continue
+        u, v = us.unsqueeze(1), vs.unsqueeze(0)  # (U, 1, 2), (1, V, 2): every pair at once
+        margin = _margins(u, v, height, width)
+        cross = (u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]).clamp_min(1e-12)
+        stretch, turn = _distortion(u, v, height, width)
+        score = (
+            torch.log(cross / (height * width))
+            - STRETCH_WEIGHT * stretch
+            - TURN_WEIGHT * (turn + frame).abs()
+        )
+        if fetched:
+            # A parallelogram of the maps' size has margin −½ pixel by _margins' count; a tile of
+            # one cell would fetch its margin from its own opposite edge, leaving the seam no choice.
+            side = min(height, width)
+            fits = margin >= 0.5 * ((side - 1.0) / (FETCH_EXTENT * side) - 1.0) - 1e-9
+            uc, vc = u_counts.unsqueeze(1), v_counts.unsqueeze(0)
+            fits &= (uc[..., 0] * vc[..., 1] - uc[..., 1] * vc[..., 0]).abs() >= 2
+            margin = torch.where(fits, torch.full_like(margin, MIN_MARGIN), torch.full_like(margin, -1.0))
+        usable = (margin >= MIN_MARGIN) & (stretch <= MAX_STRETCH)
+        usable &= (torch.floor(margin * min(height, width)) >= MIN_BAND) & (cross > 1e-9)
+        if bool(usable.any()):
+            break
+    else:
         return None
     best = int(torch.argmax(torch.where(usable, score, torch.tensor(-math.inf, dtype=score.dtype))))
     i, j = divmod(best, vs.shape[0])
@@ -1116,6 +1154,7 @@ def choose_cells(
         size=(height, width),
         margin=(math.floor(fraction * width), math.floor(fraction * height)),
         aligned=align,
+        margin_fetched=fetched,
     )
 
 
@@ -1170,7 +1209,7 @@ def close_cells(maps: Tensor, tiling: CellTiling) -> CellTiling:
     features = _detrend(features)
     features = features / features.flatten(1).std(dim=1).clamp_min(FEATURE_FLOOR).view(-1, 1, 1)
     edges = torch.tensor([tiling.u, tiling.v], dtype=torch.float64) / factor  # detection pixels
-    lattice = torch.linalg.solve(torch.tensor(tiling.counts, dtype=torch.float64), edges)  # rows a, b
+    lattice = tiling.basis() / factor
     reach = min(CLOSURE_REACH, math.floor(0.25 * float(lattice.norm(dim=1).min())))
     if reach < 1:
         return tiling
@@ -1189,7 +1228,10 @@ def close_cells(maps: Tensor, tiling: CellTiling) -> CellTiling:
     room = float(
         _margins(torch.tensor(u, dtype=torch.float64), torch.tensor(v, dtype=torch.float64), height, width)
     )
-    if room * width < tiling.margin[0] or room * height < tiling.margin[1]:
+    if tiling.margin_fetched:
+        if room < 0.0:  # the closed cells no longer fit the maps at all
+            return tiling
+    elif room * width < tiling.margin[0] or room * height < tiling.margin[1]:
         return tiling
     moved = (math.dist(u, tiling.u), math.dist(v, tiling.v))
     origin = (0.5 * (width - u[0] - v[0]), 0.5 * (height - u[1] - v[1]))
@@ -1218,10 +1260,48 @@ def _margins(u: Tensor, v: Tensor, height: int, width: int) -> Tensor:
     return (0.5 * (room - 1.0)).clamp_max(MAX_MARGIN)
 
 
+# Lattice shifts i·a + j·b tried for a sample outside the maps: |i|, |j| up to this.
+FOLD_REACH = 3
+
+
+def fold_inside(px: Tensor, py: Tensor, basis: Tensor, height: int, width: int) -> tuple[Tensor, Tensor]:
+    """Sample positions (pixel edges, as :func:`sample_cells` computes them) outside an ``H × W``
+    map's pixel centres moved by the shortest lattice vector ``i·a + j·b`` (``|i|, |j| ≤``
+    :data:`FOLD_REACH`) that brings them between them: the same place in the nearest cell inside.
+    Positions inside, and those no such shift brings in, are kept.
+
+    Shape: ``(*)``, ``(*)`` float64, ``(2, 2)`` rows ``a``, ``b`` → ``(*)``, ``(*)``.
+    """
+
+    def inside(x: Tensor, y: Tensor) -> Tensor:
+        return (x >= 0.5) & (x <= width - 0.5) & (y >= 0.5) & (y <= height - 0.5)
+
+    outside = ~inside(px, py)
+    if not bool(outside.any()):
+        return px, py
+    steps = torch.arange(-FOLD_REACH, FOLD_REACH + 1, dtype=torch.float64)
+    ii, jj = torch.meshgrid(steps, steps, indexing="ij")
+    shifts = torch.stack([ii.flatten(), jj.flatten()], dim=-1) @ basis.to(torch.float64)
+    shifts = shifts[torch.argsort(shifts.norm(dim=-1), stable=True)][1:]  # shortest first, not zero
+    x, y = px[outside], py[outside]
+    new_x, new_y = x.clone(), y.clone()
+    moved = torch.zeros_like(x, dtype=torch.bool)
+    for dx, dy in shifts.tolist():
+        take = ~moved & inside(x + dx, y + dy)
+        new_x = torch.where(take, x + dx, new_x)
+        new_y = torch.where(take, y + dy, new_y)
+        moved |= take
+        if bool(moved.all()):
+            break
+    px, py = px.clone(), py.clone()
+    px[outside], py[outside] = new_x, new_y
+    return px, py
+
+
 def sample_cells(maps: Tensor, tiling: CellTiling) -> Tensor:
     """The maps resampled so that the tiling's cells fill the output (module docstring, step 5):
     bilinear (``grid_sample``), normals renormalised, with ``margin`` pixels beyond each edge, the
-    photo's continuation one period on.
+    photo's continuation one period on (where the margin is fetched, :func:`fold_inside`).
 
     Shape: ``(8, H, W)`` → ``(8, H + 2·my, W + 2·mx)`` in the maps' dtype; output
     ``[my + i, mx + j]`` is tile pixel ``(i, j)``.
@@ -1237,6 +1317,8 @@ def sample_cells(maps: Tensor, tiling: CellTiling) -> Tensor:
     sy = (torch.arange(-my, height + my, dtype=torch.float64, device=maps.device) + 0.5) / height
     px = tiling.origin[0] + sx.view(1, -1) * tiling.u[0] + sy.view(-1, 1) * tiling.v[0]
     py = tiling.origin[1] + sx.view(1, -1) * tiling.u[1] + sy.view(-1, 1) * tiling.v[1]
+    if tiling.margin_fetched:
+        px, py = fold_inside(px, py, tiling.basis(), source_h, source_w)
     # align_corners=False: normalised −1 and 1 are the outer edges of the border pixels.
     grid = torch.stack([2.0 * px / source_w - 1.0, 2.0 * py / source_h - 1.0], dim=-1)
     grid = grid.to(work.dtype)  # positions computed in float64, sampled at the maps' precision
