@@ -22,7 +22,7 @@ from brdfgan.core.seamless import make_seamless
 from brdfgan.core.svbrdf import validate_maps
 from brdfgan.errors import USER_ERROR_EXIT_CODE
 from brdfgan.inference.pipeline import TileableRecord, make_tileable
-from tests.core.test_lattice import SIZE, lattice_maps, noise_maps, polar
+from tests.core.test_lattice import SIZE, brick_maps, lattice_maps, noise_maps, polar
 from tests.core.test_stripes import planks
 
 HOTSPOT = (SIZE / 2, SIZE / 2)
@@ -197,6 +197,20 @@ def test_a_lattice_whose_cells_do_not_fit_falls_back_on_its_rows(monkeypatch: py
     assert record.note is not None and "whole periods across its stripes" in record.note
     document = round_trip(record)
     assert document["lattice"]["cells"] is None and document["stripes"]["cells"] is not None  # type: ignore[index]
+
+
+def test_bricks_two_to_the_maps_fill_the_tile_by_whole_cells_and_say_so() -> None:
+    # Whole cells fill the maps (two bricks, six courses): no room for the seam's margin, which is
+    # fetched a cell in; recorded, and said in the method.
+    maps = brick_maps(96.0, 32.0, 0.0)
+    tiled, record = make_tileable(maps, HOTSPOT)
+    validate_maps(tiled)
+    assert record.lattice is not None and record.cells is not None and record.stripes is None
+    assert record.cells.margin_fetched and record.cells.cells == 12 and record.note is None
+    document = round_trip(record)
+    assert document["lattice"]["cells"]["margin_fetched"] is True  # type: ignore[index]
+    assert "fetched a cell in" in str(document["method"])
+    assert max(max(pair) for pair in record.after.wrap_ratio.values()) <= 1.2
 
 
 def test_align_pattern_turns_a_lattice_onto_the_axes_and_says_when_there_is_none() -> None:

@@ -317,19 +317,21 @@ class TileableRecord:
                 "cells": None if self.cells is None else self.cells.to_json(),
                 "perspective": None if self.perspective is None else self.perspective.to_json(),
             }
+        rectified = " (the perspective rectified first)" if self.perspective is not None else ""
+        # Cells that fill the maps take the seam's margin from the nearest cells inside them.
+        fills = self.cells is not None and self.cells.margin_fetched
+        fetched = " (its margin fetched a cell in)" if fills else ""
         if self.cells is None:
             method = "flash mark repaired, then rolled and cut along minimum-error paths"
         elif self.stripes is not None:
             method = (
-                "flash mark repaired, then resampled to whole periods across its stripes"
-                + (" (the perspective rectified first)" if self.perspective is not None else "")
-                + " and each wrap cut along a minimum-error path between copies whole periods apart"
+                f"flash mark repaired, then resampled to whole periods across its stripes{rectified}"
+                f" and each wrap cut along a minimum-error path between copies whole periods apart{fetched}"
             )
         else:
             method = (
-                "flash mark repaired, then resampled to whole lattice cells"
-                + (" (the perspective rectified first)" if self.perspective is not None else "")
-                + " and each wrap cut along a minimum-error path between copies one period apart"
+                f"flash mark repaired, then resampled to whole lattice cells{rectified}"
+                f" and each wrap cut along a minimum-error path between copies one period apart{fetched}"
             )
         return {
             "method": method,
