@@ -38,7 +38,7 @@ import json
 import time
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, TypeVar, cast
 
 import hydra
 import torch
@@ -104,6 +104,7 @@ def summarize(sums: Mapping[str, float]) -> dict[str, float]:
 
 
 INPUTS = ("flash", "flash_only", "pair", "ratio")
+NetworkT = TypeVar("NetworkT", bound=nn.Module)
 LOG_FLOOR = 1e-3  # log of a linear value below ~one 8-bit step of a photo exposed for white
 OOD_BATCH = 8
 
@@ -132,7 +133,7 @@ class PairInputUNet(AnchoredUNet):
             self._extra = None
 
 
-def warm_started(generator: nn.Module, state: Mapping[str, Tensor]) -> nn.Module:
+def warm_started(generator: NetworkT, state: Mapping[str, Tensor]) -> NetworkT:
     """``generator`` with a shipped generator's weights (``state``); a :class:`PairInputUNet`'s
     extra input channels start at zero weight, so it starts as the shipped network exactly."""
     first = "encoder.0.0.weight"
