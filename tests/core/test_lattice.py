@@ -22,6 +22,7 @@ from brdfgan.core.lattice import (
     Lattice,
     Perspective,
     _perspective_in_windows,
+    cell_match,
     central_lattice,
     choose_cells,
     cut_wrap,
@@ -337,6 +338,23 @@ def brick_maps(width: float, height: float, degrees: float, *, size: int = SIZE,
     return join_maps(basecolor, normal, roughness, torch.zeros_like(roughness))
 
 
+def setts_maps(seed: int = 3) -> Tensor:
+    """Setts: courses 16 px high of stones 32 px long, each its own grey, whose head joints wander
+    (a random shift per course): the bed joints make a ridge, the stones only echo a lattice."""
+    generator = torch.Generator().manual_seed(seed)
+    axis = torch.arange(SIZE, dtype=torch.float64) + 0.5
+    yy, xx = torch.meshgrid(axis, axis, indexing="ij")
+    course = torch.floor(yy / 16.0).long()
+    shifted = xx + 32.0 * torch.rand(int(course.max()) + 1, generator=generator, dtype=torch.float64)[course]
+    stone = torch.rand(int(course.max()) + 1, SIZE // 32 + 2, generator=generator, dtype=torch.float64)
+    along, across = shifted % 32.0, yy % 16.0
+    joint = torch.minimum(torch.minimum(along, 32.0 - along), torch.minimum(across, 16.0 - across))
+    grey = 0.25 + 0.5 * stone[course, torch.floor(shifted / 32.0).long()]
+    setts = flat_maps(SIZE, SIZE)
+    setts[0:3] = 0.1 + (grey - 0.1) * (1.0 - torch.exp(-((joint / 1.5) ** 2)))
+    return setts
+
+
 def test_running_bond_bricks_are_a_lattice_of_half_offset_courses() -> None:
     # Bricks 40 × 15 turned 20°: the lattice is (40, 0) and (20, 15) in the wall, turned; the
     # through-running bed joints are a ridge that the head joints' peaks stand out from.
@@ -581,6 +599,13 @@ def test_bricks_two_to_the_maps_tile_the_whole_maps_with_their_margin_fetched() 
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(lattice_module, "FETCH_EXTENT", 0.5)
         assert choose_cells(lattice, SIZE, SIZE) is None
+
+
+def test_cells_that_repeat_match_each_other_and_wandering_joints_do_not() -> None:
+    truth = (polar(24.0, 30.0), polar(30.0, 120.0))
+    assert cell_match(lattice_maps(*truth, seed=7), truth) > 0.9
+    assert cell_match(brick_maps(40.0, 15.0, 0.0), ((40.0, 0.0), (20.0, 15.0))) > 0.8
+    assert cell_match(setts_maps(), ((32.0, 0.0), (16.0, 16.0))) < 0.4
 
 
 def test_a_sample_outside_the_maps_is_fetched_from_the_nearest_cell_inside() -> None:

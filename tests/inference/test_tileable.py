@@ -22,7 +22,7 @@ from brdfgan.core.seamless import make_seamless
 from brdfgan.core.svbrdf import validate_maps
 from brdfgan.errors import USER_ERROR_EXIT_CODE
 from brdfgan.inference.pipeline import TileableRecord, make_tileable
-from tests.core.test_lattice import SIZE, brick_maps, lattice_maps, noise_maps, polar
+from tests.core.test_lattice import SIZE, brick_maps, lattice_maps, noise_maps, polar, setts_maps
 from tests.core.test_stripes import planks
 
 HOTSPOT = (SIZE / 2, SIZE / 2)
@@ -211,6 +211,24 @@ def test_bricks_two_to_the_maps_fill_the_tile_by_whole_cells_and_say_so() -> Non
     assert document["lattice"]["cells"]["margin_fetched"] is True  # type: ignore[index]
     assert "fetched a cell in" in str(document["method"])
     assert max(max(pair) for pair in record.after.wrap_ratio.values()) <= 1.2
+
+
+def test_a_lattice_whose_cells_do_not_match_each_other_is_tiled_by_its_rows(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Cells that match each other keep the lattice, stripes or not (the bricks' bed joints).
+    _, kept = make_tileable(brick_maps(40.0, 15.0, 0.0), HOTSPOT)
+    assert kept.lattice is not None and kept.stripes is None and kept.cells is not None
+    # Setts whose joints wander along the rows, read as a weak lattice (the autocorrelation of a
+    # real set, PavingStones010, shows one): its cells differ, its rows repeat.
+    maps = setts_maps()
+    echo = Lattice(((32.0, 0.0), (16.0, 16.0)), 0.15, True, notes="2-D lattice")
+    monkeypatch.setattr(pipeline, "find_lattice", lambda _: echo)
+    _, record = make_tileable(maps, HOTSPOT)
+    assert record.stripes is not None and record.cells is not None and record.lattice == echo
+    assert record.stripes.period == pytest.approx(16.0, rel=0.01)
+    assert record.note is not None and "its cells match each other at only" in record.note
+    assert "\n" not in record.note and round_trip(record)["lattice"]["cells"] is None  # type: ignore[index]
 
 
 def test_align_pattern_turns_a_lattice_onto_the_axes_and_says_when_there_is_none() -> None:

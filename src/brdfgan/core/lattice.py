@@ -187,6 +187,9 @@ FETCH_EXTENT = 1.0
 # and moved where the maps match themselves with at least this correlation.
 CLOSURE_REACH = 3
 CLOSURE_MIN_CORRELATION = 0.5
+# Cells that match each other less than this one lattice vector on (cell_match) are no pattern to
+# keep whole: where the maps have stripes, make_tileable tiles by them instead.
+MIN_CELL_MATCH = 0.4
 # … and moved only where the match lies at least this far (pixels) from them: the lattice's own
 # refinement, over many peaks, is more precise than one correlation peak (measured: a closure of
 # every tile took exact lattices' wrap steps from ~0.1 px to up to 0.9 px).
@@ -1158,6 +1161,30 @@ def choose_cells(
     )
 
 
+def _match_features(maps: Tensor) -> tuple[Tensor, Tensor]:
+    """The detrended pattern features the maps are matched against themselves on (at most
+    :data:`DETECT_SIDE` a side), each channel at unit spread, and the detection's pixel size.
+    Shape: ``(8, H, W)`` → ``(C, h, w)``, ``(2,)``."""
+    features, factor = detection_features(maps)
+    features = _detrend(features)
+    return features / features.flatten(1).std(dim=1).clamp_min(FEATURE_FLOOR).view(-1, 1, 1), factor
+
+
+def cell_match(maps: Tensor, vectors: tuple[Vector, Vector]) -> float:
+    """How well the maps' cells match each other: the lesser of their normalised self-correlations
+    (:func:`_shift_match`, the pattern features) one lattice vector on, ``a`` and ``b`` rounded to
+    whole detection pixels. A tiled floor or a brick wall repeats its cells (0.45-0.99 on the
+    rendered families and regular scans, square-on or in mild perspective); rows of setts whose
+    joints wander do not (0.30-0.36), though their autocorrelation shows a weak lattice.
+
+    Shape: ``(8, H, W)``, two ``(dx, dy)`` → a number in [−1, 1].
+    """
+    check_single_maps(maps)
+    features, factor = _match_features(maps)
+    step_x, step_y = float(factor[0]), float(factor[1])
+    return min(_shift_match(features, round(dx / step_x), round(dy / step_y)) for dx, dy in vectors)
+
+
 def _shift_match(features: Tensor, dx: int, dy: int) -> float:
     """The normalised correlation of ``features`` with themselves shifted by ``(dx, dy)`` whole
     pixels (each pixel ``p`` against ``p + (dx, dy)``) over the pixels that have a partner.
@@ -1205,9 +1232,7 @@ def close_cells(maps: Tensor, tiling: CellTiling) -> CellTiling:
     """
     check_single_maps(maps)
     height, width = tiling.size
-    features, factor = detection_features(maps)
-    features = _detrend(features)
-    features = features / features.flatten(1).std(dim=1).clamp_min(FEATURE_FLOOR).view(-1, 1, 1)
+    features, factor = _match_features(maps)
     edges = torch.tensor([tiling.u, tiling.v], dtype=torch.float64) / factor  # detection pixels
     lattice = tiling.basis() / factor
     reach = min(CLOSURE_REACH, math.floor(0.25 * float(lattice.norm(dim=1).min())))

@@ -39,10 +39,12 @@ from brdfgan.core.flash_geometry import centred_flash_frame, resize_flash_frame
 from brdfgan.core.flash_mark import FlashMark, repair_flash_mark
 from brdfgan.core.lattice import (
     MAX_STRETCH,
+    MIN_CELL_MATCH,
     PROMINENCE_THRESHOLD,
     CellTiling,
     Lattice,
     Perspective,
+    cell_match,
     central_lattice,
     choose_cells,
     find_lattice,
@@ -402,6 +404,7 @@ def make_tileable(
     # Perspective can smear a lattice past finding over the whole maps; their centre, where the
     # scale varies half as much, may still show it: a seed only, the rectified maps decide.
     seed = lattice if lattice.periodic or lattice.ambiguous else central_lattice(repaired)
+    unrectified = repaired
     perspective = find_perspective(repaired, seed)
     if perspective is not None:
         # Mild perspective: the cells are taken from the rectified maps, where they all match
@@ -416,12 +419,15 @@ def make_tileable(
             perspective = None
     note = _lattice_note(lattice, cells, align_pattern)
     stripes = None
-    if cells is None:
+    # Cells that do not match each other (setts whose joints wander along their rows) keep nothing
+    # whole; where the maps have stripes, their rows are the pattern to keep.
+    match = None if cells is None or lattice.vectors is None else cell_match(repaired, lattice.vectors)
+    if cells is None or (match is not None and match < MIN_CELL_MATCH):
         # No 2-D lattice to tile by: a 1-D pattern still tiles by whole periods across its stripes.
-        stripe_tiling = _stripe_tiling(repaired, align_pattern)
+        stripe_tiling = _stripe_tiling(unrectified, align_pattern)
         if stripe_tiling is not None:
             repaired, stripes, cells, perspective = stripe_tiling
-            note = _stripes_note(lattice, stripes)
+            note = _stripes_note(lattice, stripes, match)
     if cells is not None:
         whole = tile_whole_cells(repaired, cells)
         shifts = ((height, width), (height, 0), (0, width), (0, 0))
@@ -470,13 +476,19 @@ def _stripe_tiling(
     return None if cells is None else (maps, found, cells, None)
 
 
-def _stripes_note(lattice: Lattice, stripes: Stripes) -> str | None:
+def _stripes_note(lattice: Lattice, stripes: Stripes, match: float | None = None) -> str | None:
     """The one line where a 1-D pattern was tiled by although the maps showed a lattice (one whose
-    cells do not fit, or an ambiguous one); ``None`` otherwise."""
+    cells do not fit or do not match each other, ``match`` (:func:`~brdfgan.core.lattice.cell_match`),
+    or an ambiguous one); ``None`` otherwise."""
     score = f"score {lattice.score:.3f}, threshold {PROMINENCE_THRESHOLD}"
     path = (
         f"tiled by whole periods across its stripes ({stripes.period:.1f} px at {stripes.direction_deg:.1f}°)"
     )
+    if lattice.periodic and match is not None:
+        return (
+            f"a lattice was found ({score}) but its cells match each other at only {match:.2f} "
+            f"(below {MIN_CELL_MATCH}): {path}"
+        )
     if lattice.periodic:
         return f"a lattice was found ({score}) but no whole number of its cells fits: {path}"
     if lattice.ambiguous:
@@ -491,8 +503,8 @@ def _lattice_note(lattice: Lattice, cells: CellTiling | None, align_pattern: boo
     score = f"score {lattice.score:.3f}, threshold {PROMINENCE_THRESHOLD}"
     if lattice.periodic and cells is None:
         return (
-            f"a lattice was found ({score}) but no whole number of its cells fits the maps with room "
-            f"for the seam and a stretch of at most {MAX_STRETCH}: tiled by the minimum-error cut"
+            f"a lattice was found ({score}) but no whole number of its cells fits the maps with a "
+            f"stretch of at most {MAX_STRETCH}: tiled by the minimum-error cut"
         )
     if lattice.ambiguous:
         path = "by whole lattice cells" if cells is not None else "by the minimum-error cut"
