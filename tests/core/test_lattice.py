@@ -597,7 +597,7 @@ def test_bricks_two_to_the_maps_tile_the_whole_maps_with_their_margin_fetched() 
         assert max(wrap_ratios(image)) <= 1.2
     # The test can fail: with room for a margin demanded, there is no whole-cell tile.
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(lattice_module, "FETCH_EXTENT", 0.5)
+        patch.setattr(lattice_module, "FETCH_AREA", 0.5)
         assert choose_cells(lattice, SIZE, SIZE) is None
 
 
@@ -606,6 +606,31 @@ def test_cells_that_repeat_match_each_other_and_wandering_joints_do_not() -> Non
     assert cell_match(lattice_maps(*truth, seed=7), truth) > 0.9
     assert cell_match(brick_maps(40.0, 15.0, 0.0), ((40.0, 0.0), (20.0, 15.0))) > 0.8
     assert cell_match(setts_maps(), ((32.0, 0.0), (16.0, 16.0))) < 0.4
+
+
+def test_bricks_turned_45_degrees_tile_by_a_turned_parallelogram_whose_corners_are_fetched() -> None:
+    # Bricks 96 × 32 turned 45° in 192²: no combination of their vectors near an axis is short
+    # enough for a tile inside the maps; one of at most the maps' area, reaching past them at its
+    # corners, keeps every brick, its corners fetched from the cells inside.
+    maps = brick_maps(96.0, 32.0, 45.0)
+    lattice = find_lattice(maps)
+    assert lattice.vectors is not None
+    tiling = choose_cells(lattice.vectors, SIZE, SIZE)
+    assert tiling is not None and tiling.margin_fetched and tiling.cells >= 4
+    cross = abs(tiling.u[0] * tiling.v[1] - tiling.u[1] * tiling.v[0])
+    assert SIZE * SIZE * 0.5 < cross <= SIZE * SIZE * 1.02 and tiling.stretch <= 0.15
+    origin, edges = torch.tensor(tiling.origin), torch.tensor([tiling.u, tiling.v])
+    corners = origin + torch.tensor([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]]) @ edges
+    assert bool(((corners < 0) | (corners > SIZE)).any())  # it does reach past them
+    tile = tile_whole_cells(maps, tiling)
+    sheet = tile.maps.repeat(1, 2, 2)
+    affine = tile.tiling.affine()
+    a, b = ((affine @ torch.tensor(vector, dtype=torch.float64)).tolist() for vector in lattice.vectors)
+    assert_same_lattice(find_lattice(sheet), ((a[0], a[1]), (b[0], b[1])), 0.02)
+    # The test can fail: with cells held inside the maps there is no such tile.
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(lattice_module, "FETCH_AREA", 0.3)
+        assert choose_cells(lattice.vectors, SIZE, SIZE) is None
 
 
 def test_a_sample_outside_the_maps_is_fetched_from_the_nearest_cell_inside() -> None:

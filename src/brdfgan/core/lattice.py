@@ -47,7 +47,8 @@ synthesis of regular repeatable patterns"). The steps:
    maps, the largest with the least stretch and turn; with ``align`` the frame is turned so that the
    lattice's own direction nearest an axis becomes that axis (the pattern is rectified). A coarse
    lattice (bricks two to a crop) may have no such tile with room for the seam's margin around
-   it; it then takes the largest that fits without one, and its margin is fetched (step 5).
+   it; it then takes the largest of at most the maps' area, and what it reaches beyond the maps
+   (its margin, a turned tile's corners) is fetched (step 5).
 4b. **Closure** (:func:`close_cells`): the lattice is measured to a fraction of a per cent, but a
    tile spans many cells, so 0.5 % becomes a step of a pixel or more where the wrap joins the
    tile's last cell to its first (a checkerboard of two periods a crop: 2.7-4.9 px). ``u`` and
@@ -178,10 +179,13 @@ MAX_STRETCH = 0.15
 MAX_MARGIN = 1.0 / 16.0
 MIN_MARGIN = 1.0 / 32.0
 MIN_BAND = 4
-# Cells whose margin is fetched (choose_cells' second pass) span at most this many maps' sides:
-# a larger tile would hold the same photographed cell twice (tried at 1.5: bricks at 0° then
-# took a stretched tile and lost whole cells, 100 → 81-95 %).
-FETCH_EXTENT = 1.0
+# Cells whose margin is fetched (choose_cells' second pass) hold at most this share of the maps'
+# area, and neither edge spans more than the maps' side along an axis: a larger tile would hold
+# the same photographed cell twice over (tried at 1.5 sides: bricks at 0° then took a stretched
+# tile and lost whole cells, 100 → 81-95 %).
+FETCH_AREA = 1.0
+# A lattice measured a per cent long makes a tile of exactly the maps' area a little larger.
+AREA_TOLERANCE = 0.02
 # Closure (close_cells): the tile's edges are searched this many pixels (at most a quarter of the
 # shorter lattice vector) around the lattice's combinations, on features of at most DETECT_SIDE,
 # and moved where the maps match themselves with at least this correlation.
@@ -1110,11 +1114,7 @@ def choose_cells(
     # cells up to the maps' own size, whose samples (pixel centres) are the maps' or folded in.
     for fetched in (False, True):
         room = 1.0 + 2.0 * MIN_MARGIN
-        extent = (
-            (FETCH_EXTENT * width, FETCH_EXTENT * height)
-            if fetched
-            else ((width - 1.0) / room, (height - 1.0) / room)
-        )
+        extent = (float(width), float(height)) if fetched else ((width - 1.0) / room, (height - 1.0) / room)
         us, u_counts = _axis_candidates(combos, counts, x_axis, extent, max_turn_deg)
         vs, v_counts = _axis_candidates(combos, counts, y_axis, extent, max_turn_deg)
         if us.shape[0] == 0 or vs.shape[0] == 0:
@@ -1129,10 +1129,10 @@ def choose_cells(
             - TURN_WEIGHT * (turn + frame).abs()
         )
         if fetched:
-            # A parallelogram of the maps' size has margin −½ pixel by _margins' count; a tile of
-            # one cell would fetch its margin from its own opposite edge, leaving the seam no choice.
-            side = min(height, width)
-            fits = margin >= 0.5 * ((side - 1.0) / (FETCH_EXTENT * side) - 1.0) - 1e-9
+            # Cells of at most the maps' area, wherever they reach (a turned tile's corners are
+            # fetched too); a tile of one cell would fetch its margin from its own opposite edge,
+            # leaving the seam no choice.
+            fits = cross <= FETCH_AREA * height * width * (1.0 + AREA_TOLERANCE)
             uc, vc = u_counts.unsqueeze(1), v_counts.unsqueeze(0)
             fits &= (uc[..., 0] * vc[..., 1] - uc[..., 1] * vc[..., 0]).abs() >= 2
             margin = torch.where(fits, torch.full_like(margin, MIN_MARGIN), torch.full_like(margin, -1.0))
