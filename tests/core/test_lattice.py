@@ -16,6 +16,7 @@ from brdfgan.core import lattice as lattice_module
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.lattice import (
     MIN_BAND,
+    MIN_PERIOD,
     RETRY_KEYSTONE,
     WINDOW_SHARE,
     CellTiling,
@@ -375,6 +376,17 @@ def test_running_bond_bricks_are_a_lattice_of_half_offset_courses() -> None:
         (tiling.affine() @ torch.tensor(vector, dtype=torch.float64)).tolist() for vector in lattice.vectors
     )
     assert_same_lattice(find_lattice(sheet), ((a[0], a[1]), (b[0], b[1])), 0.02)
+
+
+def test_a_lattice_finer_than_the_shortest_period_is_read_by_whole_multiples() -> None:
+    # Periods under MIN_PERIOD are texture (a scanned tile's grain, resampled at 45° in perspective,
+    # made a peak at 3.7 px that hid Tiles065's 64 px lattice): a 4.5 px grid is read as a coarser
+    # lattice of its own, whose cells are whole numbers of its cells.
+    found = find_lattice(lattice_maps((4.5, 0.0), (0.0, 4.5), noise=0.0))
+    assert found.periodic and found.vectors is not None
+    for dx, dy in found.vectors:
+        assert math.hypot(dx, dy) >= MIN_PERIOD
+        assert abs(dx / 4.5 - round(dx / 4.5)) < 0.02 and abs(dy / 4.5 - round(dy / 4.5)) < 0.02
 
 
 @pytest.mark.parametrize(

@@ -133,8 +133,9 @@ WINDOW_TAPER = 0.2
 # too noisy for a lattice vector; combinations are checked down to CHECK_OVERLAP.
 MIN_OVERLAP = 0.25
 CHECK_OVERLAP = 0.1
-# Periods shorter than this (pixels at detection size) are texture, not a pattern.
-MIN_PERIOD = 4.0
+# Periods shorter than this (pixels at detection size) are texture, not a pattern (at 4 px a scanned
+# tile's grain, resampled at 45° in perspective, made a 3.7 px peak that hid its 64 px lattice).
+MIN_PERIOD = 6.0
 # A lattice peak's height in ρ at least this; candidates are the strongest MAX_CANDIDATES maxima.
 MIN_PEAK = 0.15
 MAX_CANDIDATES = 400
