@@ -276,6 +276,29 @@ def find_stripes(maps: Tensor) -> Stripes | None:
     return Stripes(across=across, along=along, ridge=ridge, peak=peak)
 
 
+def ridge_direction(rho: Tensor, direction_deg: float, reach: float) -> float:
+    """The ridge's direction refined from ``direction_deg``: across the ridge through the origin,
+    at every whole lag ``t`` from :data:`MIN_PERIOD` to ``reach`` along it, the sub-pixel offset of
+    ρ's maximum (a parabola through the samples one pixel either side), and the line through the
+    origin that fits those offsets. A mean along each line (:func:`ridge_means`) favours lines on
+    the pixel grid, where bilinear sampling does not blur ρ, and cannot see a stripe's tilt of a
+    few tenths of a degree in a window (the convergence of level stripes in perspective); the
+    offsets across the ridge do.
+
+    Shape: ``(2H, 2W)`` → degrees.
+    """
+    radians = math.radians(direction_deg)
+    along = torch.tensor([math.cos(radians), math.sin(radians)], dtype=rho.dtype)
+    normal = torch.tensor([-math.sin(radians), math.cos(radians)], dtype=rho.dtype)
+    steps = torch.arange(MIN_PERIOD, max(reach, MIN_PERIOD + 1.0), 1.0, dtype=rho.dtype)
+    across = torch.tensor([-1.0, 0.0, 1.0], dtype=rho.dtype)
+    lags = steps[:, None, None] * along + across[None, :, None] * normal
+    samples = sample_rho(rho, lags)  # (T, 3)
+    offsets = torch.tensor([parabola_vertex(*row) for row in samples.tolist()], dtype=rho.dtype)
+    slope = float((steps * offsets).sum() / steps.square().sum())
+    return direction_deg + math.degrees(math.atan(slope))
+
+
 def window_frequency(window: Tensor, direction_deg: float, period: float) -> Tensor | None:
     """The stripes' spatial frequency ``n / p`` (cycles per pixel, ``n`` their unit normal) in one
     window of detection features, read near the maps' ``direction_deg`` and ``period`` (module
@@ -298,7 +321,7 @@ def window_frequency(window: Tensor, direction_deg: float, period: float) -> Ten
         ),
     )
     best = min(max(int(torch.argmax(means)), 1), angles.shape[0] - 2)
-    direction = _parabola_peak(angles, means, best)
+    direction = ridge_direction(rho, _parabola_peak(angles, means, best), reach)
     offsets, values = across_profile(
         rho, direction, min(0.5 * min(height, width), (1 + 3 * PERIOD_REACH) * period)
     )
