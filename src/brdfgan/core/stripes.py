@@ -22,9 +22,9 @@ one period ``p`` apart across them. :func:`find_stripes` reads both from ρ of t
    (:func:`~brdfgan.core.lattice.find_perspective`), the stripes are measured again in a 3 × 3 grid
    of overlapping windows, each holding :data:`WINDOW_PERIODS` periods, and a homography about the
    centre is fitted to how their frequency ``n / p`` changes (:func:`fit_stripe_perspective`); the
-   maps are rectified through it where it explains the windows. Along axis-aligned stripes a
-   keystone shows only in their slight convergence, and is not fitted (the windows' spread is not
-   halved).
+   maps are rectified through it where it explains the windows. Each window's direction is read
+   across its ridge (:func:`ridge_direction`), so that the slight convergence of level stripes, the
+   only sign there of the scale change along them, is seen.
 
 The maps then tile as a 2-D lattice would (:func:`~brdfgan.core.lattice.choose_cells`,
 :func:`~brdfgan.core.lattice.tile_whole_cells`) on the vectors ``p·n`` and ``p·d``
