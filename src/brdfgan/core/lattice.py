@@ -1084,7 +1084,10 @@ def choose_cells(
     nearest an axis), the pair whose parallelogram, centred, fits in the maps with a margin
     (:data:`MIN_MARGIN` to :data:`MAX_MARGIN` of the side, :data:`MIN_BAND` pixels) and a stretch
     of at most :data:`MAX_STRETCH`, maximising ``log(area / HW) − STRETCH_WEIGHT · stretch −
-    TURN_WEIGHT · |turn − frame|``. ``None`` where no cell fits.
+    TURN_WEIGHT · |turn − frame|``. Where none fits so, the same among pairs of at least two cells
+    and at most :data:`FETCH_AREA` of the maps' area, each edge within the maps' side, whatever
+    they reach beyond the maps fetched by :func:`sample_cells` (``margin_fetched``; a margin of
+    :data:`MIN_MARGIN`). ``None`` where no cell fits either way.
 
     Shape: two ``(dx, dy)``, sizes → :class:`CellTiling` or ``None``.
 
@@ -1111,8 +1114,8 @@ def choose_cells(
     frame = _frame_angle(vectors[0], vectors[1]) if align else 0.0
     x_axis = torch.tensor([math.cos(frame), math.sin(frame)], dtype=torch.float64)
     y_axis = torch.tensor([-math.sin(frame), math.cos(frame)], dtype=torch.float64)
-    # First with room for the seam's margin; a coarse lattice then without (the margin fetched):
-    # cells up to the maps' own size, whose samples (pixel centres) are the maps' or folded in.
+    # First with room for the seam's margin; a coarse lattice then without (what the cells reach
+    # beyond the maps fetched): cells of up to the maps' own area.
     for fetched in (False, True):
         room = 1.0 + 2.0 * MIN_MARGIN
         extent = (float(width), float(height)) if fetched else ((width - 1.0) / room, (height - 1.0) / room)
