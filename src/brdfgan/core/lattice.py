@@ -1116,15 +1116,14 @@ def choose_cells(
     y_axis = torch.tensor([-math.sin(frame), math.cos(frame)], dtype=torch.float64)
     # First with room for the seam's margin; a coarse lattice then without (what the cells reach
     # beyond the maps fetched): cells of up to the maps' own area.
+    room = 1.0 + 2.0 * MIN_MARGIN
     for fetched in (False, True):
-        room = 1.0 + 2.0 * MIN_MARGIN
         extent = (float(width), float(height)) if fetched else ((width - 1.0) / room, (height - 1.0) / room)
         us, u_counts = _axis_candidates(combos, counts, x_axis, extent, max_turn_deg)
         vs, v_counts = _axis_candidates(combos, counts, y_axis, extent, max_turn_deg)
         if us.shape[0] == 0 or vs.shape[0] == 0:
             continue
         u, v = us.unsqueeze(1), vs.unsqueeze(0)  # (U, 1, 2), (1, V, 2): every pair at once
-        margin = _margins(u, v, height, width)
         cross = (u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]).clamp_min(1e-12)
         stretch, turn = _distortion(u, v, height, width)
         score = (
@@ -1139,7 +1138,9 @@ def choose_cells(
             fits = cross <= FETCH_AREA * height * width * (1.0 + AREA_TOLERANCE)
             uc, vc = u_counts.unsqueeze(1), v_counts.unsqueeze(0)
             fits &= (uc[..., 0] * vc[..., 1] - uc[..., 1] * vc[..., 0]).abs() >= 2
-            margin = torch.where(fits, torch.full_like(margin, MIN_MARGIN), torch.full_like(margin, -1.0))
+            margin = torch.where(fits, torch.full_like(cross, MIN_MARGIN), torch.full_like(cross, -1.0))
+        else:
+            margin = _margins(u, v, height, width)
         usable = (margin >= MIN_MARGIN) & (stretch <= MAX_STRETCH)
         usable &= (torch.floor(margin * min(height, width)) >= MIN_BAND) & (cross > 1e-9)
         if bool(usable.any()):

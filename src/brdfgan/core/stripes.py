@@ -162,6 +162,14 @@ def ridge_means(rho: Tensor, reach: float, angles: Tensor | None = None) -> tupl
     return angles, sample_rho(rho, directions[:, None, :] * distances[None, :, None]).mean(dim=-1)
 
 
+def _stripe_axes(direction_deg: float, like: Tensor) -> tuple[Tensor, Tensor]:
+    """The unit vectors along stripes at ``direction_deg`` and across them (``n``, the along
+    vector turned +90°), in ``like``'s dtype. Shape: → ``(2,)``, ``(2,)``."""
+    radians = math.radians(direction_deg)
+    along = torch.tensor([math.cos(radians), math.sin(radians)], dtype=like.dtype)
+    return along, torch.tensor([-math.sin(radians), math.cos(radians)], dtype=like.dtype)
+
+
 def across_profile(
     rho: Tensor, direction_deg: float, reach: float, step: float = 0.5
 ) -> tuple[Tensor, Tensor]:
@@ -170,9 +178,7 @@ def across_profile(
 
     Shape: ``(2H, 2W)`` → ``(S,)`` offsets, ``(S,)`` values.
     """
-    radians = math.radians(direction_deg)
-    along = torch.tensor([math.cos(radians), math.sin(radians)], dtype=rho.dtype)
-    normal = torch.tensor([-math.sin(radians), math.cos(radians)], dtype=rho.dtype)
+    along, normal = _stripe_axes(direction_deg, rho)
     offsets = torch.arange(0.0, reach, step, dtype=rho.dtype)
     band = BAND_SHARE * reach
     shifts = torch.arange(-band, band + 0.5, 1.0, dtype=rho.dtype)
@@ -287,9 +293,7 @@ def ridge_direction(rho: Tensor, direction_deg: float, reach: float) -> float:
 
     Shape: ``(2H, 2W)`` → degrees.
     """
-    radians = math.radians(direction_deg)
-    along = torch.tensor([math.cos(radians), math.sin(radians)], dtype=rho.dtype)
-    normal = torch.tensor([-math.sin(radians), math.cos(radians)], dtype=rho.dtype)
+    along, normal = _stripe_axes(direction_deg, rho)
     steps = torch.arange(MIN_PERIOD, max(reach, MIN_PERIOD + 1.0), 1.0, dtype=rho.dtype)
     across = torch.tensor([-1.0, 0.0, 1.0], dtype=rho.dtype)
     lags = steps[:, None, None] * along + across[None, :, None] * normal
