@@ -148,8 +148,8 @@ def _large(maps: Tensor, frame: Tensor, photo: Tensor | None, side: int) -> dict
     """Wall and CPU seconds of ``make_tileable`` on ``maps`` enlarged to ``side``², the path it took
     there (``whole cells`` or ``cut``), and the CPU seconds of its steps timed again one by one (the
     flash-mark repair, the lattice detection, the tile on that path), and of ``brdfgan predict``'s
-    flash removal (:func:`~brdfgan.core.clipped_fill.remove_flash`, with the lattice on a periodic
-    material) on the photo enlarged with them (``None`` without a photo)."""
+    flash removal (:func:`~brdfgan.core.clipped_fill.remove_flash`, with the lattice or stripes of
+    a repeating material) on the photo enlarged with them (``None`` without a photo)."""
     import torch.nn.functional as F
 
     from brdfgan.core.clipped_fill import remove_flash
@@ -159,7 +159,7 @@ def _large(maps: Tensor, frame: Tensor, photo: Tensor | None, side: int) -> dict
     from brdfgan.core.seamless import make_seamless
     from brdfgan.core.stripes import find_stripes
     from brdfgan.core.svbrdf import resize_maps
-    from brdfgan.inference.pipeline import make_tileable
+    from brdfgan.inference.pipeline import make_tileable, tile_pattern
 
     factor = side / maps.shape[-1]
     large = resize_maps(maps, side)
@@ -189,9 +189,9 @@ def _large(maps: Tensor, frame: Tensor, photo: Tensor | None, side: int) -> dict
     flash_removal = None
     if photo is not None:
         large_photo = F.interpolate(photo[None].float(), size=(side, side), mode="bilinear")[0].clamp(0, 1)
-        lattice = find_lattice(large)
+        twins = tile_pattern(large).flash_twins()
         step = time.process_time()
-        remove_flash(large, large_photo, large_frame, lattice=lattice.vectors if lattice.periodic else None)
+        remove_flash(large, large_photo, large_frame, **twins)
         flash_removal = time.process_time() - step
     return {
         "seconds": wall,

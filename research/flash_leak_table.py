@@ -65,7 +65,6 @@ from brdfgan.core.flash_mark import (
     mark_radius,
     repair_flash_mark,
 )
-from brdfgan.core.lattice import find_lattice
 from brdfgan.core.svbrdf import resize_maps, split_maps, srgb_to_linear
 from brdfgan.data.materials.families import FAMILIES
 from brdfgan.data.materials.scanned import read_scanned_material, scanned_material_folders
@@ -74,6 +73,7 @@ from brdfgan.data.spec.determinism import derive_seed, material_seed
 from brdfgan.inference.intake.photo import read_photo
 from brdfgan.inference.intake.preprocess import preprocess
 from brdfgan.inference.model.weights import load_model
+from brdfgan.inference.pipeline import tile_pattern
 from brdfgan.io.atomic import write_text_atomic
 from research.relief_tables import OOD_SCANS, compose_config
 
@@ -254,18 +254,15 @@ VARIANTS: dict[str, Variant] = {
     "+ clipped fill": filled,
     "+ disc levelled": levelled,
     "+ thin-dark metal rule (remove_flash)": lambda r: remove_flash(r.predicted, r.photo, r.frame)[0],
-    "--tileable: + lattice disc, lost texture patched": lambda r: tileable_removal(r),
+    "--tileable: + pattern disc, lost texture patched": lambda r: tileable_removal(r),
 }
 
 
 def tileable_removal(render: Render) -> Tensor:
     """:func:`remove_flash` as ``--tileable`` runs it (``inference.pipeline.finish_maps``): the
-    predicted maps' lattice found first, the lost texture patched."""
-    lattice = find_lattice(render.predicted)
-    vectors = lattice.vectors if lattice.periodic else None
-    return remove_flash(render.predicted, render.photo, render.frame, lattice=vectors, restore_texture=True)[
-        0
-    ]
+    predicted maps' lattice or stripes found first, the lost texture patched."""
+    twins = tile_pattern(render.predicted).flash_twins()
+    return remove_flash(render.predicted, render.photo, render.frame, **twins, restore_texture=True)[0]
 
 
 def _average(values: Sequence[float]) -> float:

@@ -14,13 +14,14 @@ from torch import Tensor
 
 from brdfgan.core.clipped_fill import (
     CLIP_LEVEL,
+    Twins,
     clipped_mask,
     fill_clipped,
     highlight_radius,
-    lattice_fill,
     push_pull_fill,
     remove_flash,
     suppress_false_metal,
+    twin_fill,
 )
 from brdfgan.core.delit import flash_render, flat_flash_falloff
 from brdfgan.core.exposure import auto_exposure_scale
@@ -146,9 +147,9 @@ def test_a_periodic_material_is_filled_from_the_same_cell_elsewhere() -> None:
     truth = grid_tiles(vectors)
     inside = disc(9.0, (70.0, 58.0))
     marked = with_flash_disc(truth, inside)
-    from_lattice = fill_clipped(marked, inside, lattice=vectors)
+    from_lattice = fill_clipped(marked, inside, twins=Twins.of_lattice(vectors))
     from_surroundings = fill_clipped(marked, inside)
-    assert from_lattice.method == "lattice" and from_lattice.lattice_fraction == pytest.approx(
+    assert from_lattice.method == "lattice" and from_lattice.twin_fraction == pytest.approx(
         from_lattice.clipped_fraction
     )
     lattice_error = (from_lattice.maps[0:3, inside] - truth[0:3, inside]).abs().mean()
@@ -158,11 +159,11 @@ def test_a_periodic_material_is_filled_from_the_same_cell_elsewhere() -> None:
         lattice_error,
         surroundings_error,
     )
-    filled, found = lattice_fill(marked[0:3], inside, vectors)
+    filled, found = twin_fill(marked[0:3], inside, Twins.of_lattice(vectors))
     assert bool(found[inside].all()) and not bool(found[~inside].any())
     assert torch.equal(filled[:, ~inside], marked[0:3, ~inside])
     with pytest.raises(ValueError, match="lattice vectors"):
-        lattice_fill(marked[0:3], inside, ((10.0, 0.0), (20.0, 0.0)))
+        Twins.of_lattice(((10.0, 0.0), (20.0, 0.0)))
 
 
 def test_a_periodic_materials_hotspot_dot_and_halo_come_from_its_cells_at_the_local_level() -> None:
@@ -187,6 +188,59 @@ def test_a_periodic_materials_hotspot_dot_and_halo_come_from_its_cells_at_the_lo
     far = ~disc(1.3 * 1.1 * 0.1 * SIZE + 1.0)  # beyond the blend (REPAIR_INNER × the mark's radius)
     assert torch.equal(removed[:, far], network[:, far]) and torch.equal(removed[3:6], network[3:6])
     assert record.fill.method == "none"  # nothing clipped: the disc is the lattice's, not the fill's
+
+
+def plank_floor(degrees: float) -> Tensor:
+    """Planks at ``degrees``: a groove every 8 px across them, a darker gap between planks every
+    28 px (not a whole number of grooves: twins across the stripes would put a groove where a gap
+    is), and each plank its own tone."""
+    axis = torch.arange(SIZE, dtype=torch.float64) + 0.5
+    ys, xs = torch.meshgrid(axis, axis, indexing="ij")
+    radians = math.radians(degrees)
+    across = -math.sin(radians) * (xs - CENTRE[0]) + math.cos(radians) * (ys - CENTRE[1])
+    # Soft-edged lines, as a network draws them (the twins are bilinear samples).
+    groove = torch.exp(-0.5 * ((torch.remainder(across + 4.0, 8.0) - 4.0) / 0.8).square())
+    gap = torch.exp(-0.5 * ((torch.remainder(across + 14.0, 28.0) - 14.0) / 1.2).square())
+    tone = 0.55 + 0.1 * torch.sin(1.7 * torch.floor(across / 28.0))
+    luminance = tone - 0.15 * groove - 0.3 * gap
+    maps = flat_maps(SIZE, SIZE, roughness=0.5).double()
+    maps[0:3] = luminance * torch.tensor([1.0, 0.7, 0.5], dtype=torch.float64).view(3, 1, 1)
+    maps[6] = 0.5 + 0.05 * gap
+    return maps
+
+
+def test_planks_clipped_streak_is_filled_along_their_stripes_and_keeps_the_gap_across_it() -> None:
+    degrees = 15.0
+    truth = plank_floor(degrees)
+    radians = math.radians(degrees)
+    along = (math.cos(radians), math.sin(radians))
+    # A glossy plank's clipped highlight is a streak along the grooves, longer than the flash mark's
+    # round patch (the wood-plank sample's): 30 px along, 8 across, through a gap between planks.
+    axis = torch.arange(SIZE, dtype=torch.float64) + 0.5
+    ys, xs = torch.meshgrid(axis, axis, indexing="ij")
+    dx, dy = xs - CENTRE[0], ys - CENTRE[1]
+    u, v = dx * along[0] + dy * along[1], -dx * along[1] + dy * along[0]
+    streak = (u / 30.0).square() + (v / 8.0).square() <= 1.0
+    network = with_flash_disc(truth, streak)
+    frame = centred_flash_frame(1, SIZE, SIZE, dtype=torch.float64)
+    photo = 0.4 * flat_flash_falloff(frame, SIZE, SIZE)[0].expand(3, SIZE, SIZE)
+    along_stripes, record = remove_flash(network, photo, frame, clipped=streak, stripes=along)
+    surroundings = remove_flash(network, photo, frame, clipped=streak)[0]
+    assert record.fill.method == "stripes"
+
+    def error(maps: Tensor) -> float:
+        return float((maps[0:3, streak] - truth[0:3, streak]).abs().mean())
+
+    errors = (error(along_stripes), error(surroundings))
+    assert errors[0] < 0.02 < 0.5 * errors[1], errors
+    gap = streak & (truth[0] < 0.3)  # the gap between planks, where it crosses the streak
+    assert bool(gap.any()) and float((along_stripes[0, gap] - truth[0, gap]).abs().mean()) < 0.03
+    assert float(along_stripes[7, streak].max()) < 0.05  # the streak's metal gone
+    assert torch.equal(along_stripes[3:6], network[3:6])  # normals kept
+    with pytest.raises(ValueError, match="not both"):
+        remove_flash(network, photo, frame, lattice=((8.0, 0.0), (0.0, 8.0)), stripes=along)
+    with pytest.raises(ValueError, match="stripes' direction"):
+        Twins.along_stripes((0.0, 0.0), 10.0)
 
 
 def test_metal_in_thin_dark_grout_is_suppressed_and_real_metal_stays() -> None:

@@ -7,6 +7,7 @@ ambiguous or unusable lattice took; ``--align-pattern`` turns the lattice onto t
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from brdfgan.core.lattice import Lattice, find_lattice
 from brdfgan.core.seamless import make_seamless
 from brdfgan.core.svbrdf import validate_maps
 from brdfgan.errors import USER_ERROR_EXIT_CODE
-from brdfgan.inference.pipeline import TileableRecord, make_tileable
+from brdfgan.inference.pipeline import TileableRecord, make_tileable, tile_pattern
 from tests.core.test_lattice import SIZE, brick_maps, lattice_maps, noise_maps, polar, setts_maps
 from tests.core.test_stripes import planks
 
@@ -161,6 +162,15 @@ def test_stripes_are_tiled_by_whole_periods_across_them_and_recorded() -> None:
     _, aligned = make_tileable(maps, HOTSPOT, align_pattern=True)
     assert aligned.cells is not None and aligned.cells.aligned and aligned.note is None
     assert abs(aligned.cells.turn_deg) == pytest.approx(30.0, abs=1.0)
+
+
+def test_the_flash_is_taken_out_along_stripes_or_from_a_lattice_found_before_the_tile() -> None:
+    stripes = tile_pattern(planks(11.3, 30.0)).flash_twins()
+    assert set(stripes) == {"stripes"}
+    along = stripes["stripes"]
+    assert along[1] / along[0] == pytest.approx(math.tan(math.radians(30.0)), abs=0.02)
+    assert set(tile_pattern(tiles()).flash_twins()) == {"lattice"}
+    assert tile_pattern(noise_maps(seed=3)).flash_twins() == {}
 
 
 def test_stripes_in_mild_perspective_are_rectified_before_they_are_tiled() -> None:

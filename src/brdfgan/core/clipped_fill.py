@@ -15,12 +15,15 @@ metallic there only as far as the surroundings contradict them:
   asphalt's stones), and the clipped pixels are a texture's brightest and glossiest part, a bare
   metal patch in rust among them; the clamp keeps a reading the neighbourhood allows and removes
   one it does not (a white glint on black tile, metal in wood);
-- **from the same cell elsewhere** (:func:`lattice_fill`), for a periodic material whose two
-  lattice vectors are known: the median of the unclipped twins one or two periods away, which
-  keeps the pattern (a grout line crossing the hole stays a grout line); pixels with no unclipped
-  twin fall back to the clamp. Given a lattice, :func:`remove_flash` fills the hotspot's whole disc
-  this way (the larger of the flash mark's reach and the highlight's), clipped or not: on a plain
-  tile the network leaves a dot and a halo there that a tiled sheet would repeat.
+- **from the same place elsewhere in the pattern** (:func:`twin_fill`, :class:`Twins`), for a
+  periodic material whose two lattice vectors are known: the median of the unclipped twins one or
+  two periods away, which keeps the pattern (a grout line crossing the hole stays a grout line);
+  for a 1-D pattern (planks, courses) whose stripes' direction is known: twins along the stripes,
+  where grooves and gaps run on. Pixels with no unclipped twin fall back to the clamp. Given a
+  pattern, :func:`remove_flash` fills the hotspot's whole disc this way (the larger of the flash
+  mark's reach and the highlight's), clipped or not: on a plain tile the network leaves a dot and
+  a halo there, and on glossy planks a clipped streak longer than the mark's round patch, that a
+  tiled sheet would repeat.
 
 Normals are kept: a clipped hotspot leaves them flat rather than wrong, and the flash-mark repair
 patches a dimple.
@@ -77,8 +80,10 @@ WORKING_SIDE = 256
 RANGE_SIGMA_FRACTION = 1.0 / 32.0
 RANGE_MIN_KNOWN = 0.25
 RANGE_SPREAD = 1.0
-# The lattice fill looks this many periods away along each lattice vector.
+# The lattice fill looks this many periods away along each lattice vector; the stripes' fill this
+# many times the hole's radius along the stripes, both ways (Twins).
 LATTICE_REACH = 2
+STRIPE_TWIN_STEPS = (1.0, 1.25, 1.5, 1.75, 2.0)
 # Thin dark features: the window (fraction of the shorter side; 9 px at 256²) and how much darker
 # than the window's closing a texel must be (smoothstep from the first to the second value).
 THIN_WINDOW_FRACTION = 9.0 / 256.0
@@ -182,45 +187,79 @@ def surroundings_range(image: Tensor, known: Tensor, spread: float) -> tuple[Ten
     return mean - spread * deviation, mean + spread * deviation
 
 
-def lattice_fill(
-    image: Tensor, hole: Tensor, vectors: tuple[tuple[float, float], tuple[float, float]]
-) -> tuple[Tensor, Tensor]:
-    """The hole's pixels taken from the same place in other cells of a periodic texture: per hole
-    pixel the median of its twins ``p + i·a + j·b`` (``|i|, |j| ≤`` :data:`LATTICE_REACH`, not both
-    0; bilinear samples) that lie inside the image and away from the hole; and where a pixel found
-    at least one twin.
+@dataclass(frozen=True)
+class Twins:
+    """Where a pattern repeats itself, as seen from a pixel: the ``offsets`` ``(dx, dy)`` in pixels
+    that carry it onto the same place in another cell, and the pattern's ``kind``:
 
-    Shape: image ``(C, H, W)``; hole ``(H, W)`` bool; vectors ``((dx, dy), (dx, dy))`` in pixels →
-    ``(C, H, W)`` (the image outside the hole, and where no twin was found) and ``(H, W)`` bool.
+    - ``"lattice"`` (:meth:`of_lattice`): ``i·a + j·b`` for ``|i|, |j| ≤`` :data:`LATTICE_REACH`,
+      not both 0;
+    - ``"stripes"`` (:meth:`along_stripes`): ``±s·d`` along the stripes' direction ``d`` for ``s`` in
+      :data:`STRIPE_TWIN_STEPS` × ``reach``. Along its stripes a 1-D pattern (planks, courses) is the
+      same at any distance: its grooves and gaps run on. Across them it repeats only roughly (one
+      plank's tone is not the next's, and a coarser plank gap falls every few grooves), so twins
+      across would fill a groove where the disc holds a gap. The steps start at ``reach`` so that
+      a hole of that radius around the hotspot finds its twins beyond it (the nearer ones for the
+      pixels near its edge, the farther ones for those across it).
+    """
+
+    kind: str
+    offsets: tuple[tuple[float, float], ...]
+
+    @classmethod
+    def of_lattice(cls, vectors: tuple[tuple[float, float], tuple[float, float]]) -> Twins:
+        (ax, ay), (bx, by) = vectors
+        if not all(math.isfinite(v) for v in (ax, ay, bx, by)) or abs(ax * by - ay * bx) < 1.0:
+            raise ValueError(
+                f"the lattice vectors must be finite and span a cell of at least 1 px², got {vectors}"
+            )
+        steps = range(-LATTICE_REACH, LATTICE_REACH + 1)
+        offsets = tuple((i * ax + j * bx, i * ay + j * by) for i in steps for j in steps if (i, j) != (0, 0))
+        return cls("lattice", offsets)
+
+    @classmethod
+    def along_stripes(cls, along: tuple[float, float], reach: float) -> Twins:
+        length = math.hypot(*along)
+        if not (math.isfinite(length) and length > 0 and math.isfinite(reach) and reach > 0):
+            raise ValueError(
+                f"the stripes' direction must be finite and non-zero and the reach > 0, got {along}, {reach}"
+            )
+        dx, dy = along[0] / length, along[1] / length
+        steps = [sign * step * reach for step in STRIPE_TWIN_STEPS for sign in (1, -1)]
+        offsets = tuple((step * dx, step * dy) for step in steps)
+        return cls("stripes", offsets)
+
+
+def twin_fill(
+    image: Tensor, hole: Tensor, twins: Twins, avoid: Tensor | None = None
+) -> tuple[Tensor, Tensor]:
+    """The hole's pixels taken from the same place elsewhere in a repeating pattern: per hole pixel
+    the median of its twins ``p + offset`` (:class:`Twins`; bilinear samples) that lie inside the
+    image and away from the hole and from ``avoid`` (pixels that are no evidence, clipped ones); and
+    where a pixel found at least one twin.
+
+    Shape: image ``(C, H, W)``; hole, avoid ``(H, W)`` bool → ``(C, H, W)`` (the image outside the
+    hole, and where no twin was found) and ``(H, W)`` bool.
     """
     dims = check_shape(image, "C H W", name="image")
     check_shape(hole, "H W", name="hole", dims=dims)
-    (ax, ay), (bx, by) = vectors
-    if not all(math.isfinite(v) for v in (ax, ay, bx, by)) or abs(ax * by - ay * bx) < 1.0:
-        raise ValueError(
-            f"the lattice vectors must be finite and span a cell of at least 1 px², got {vectors}"
-        )
+    if avoid is not None:
+        check_shape(avoid, "H W", name="avoid", dims=dims)
     rows, columns = torch.nonzero(hole, as_tuple=True)
     result, found = image.clone(), torch.zeros_like(hole)
     if rows.numel() == 0:
         return result, found
-    steps = [
-        (i, j)
-        for i in range(-LATTICE_REACH, LATTICE_REACH + 1)
-        for j in range(-LATTICE_REACH, LATTICE_REACH + 1)
-    ]
-    offsets = torch.tensor(
-        [(i * ax + j * bx, i * ay + j * by) for i, j in steps if (i, j) != (0, 0)], dtype=torch.float64
-    )
+    offsets = torch.tensor(twins.offsets, dtype=torch.float64)
     height, width = dims["H"], dims["W"]
     x = columns.double()[:, None] + offsets[None, :, 0]  # (N, K)
     y = rows.double()[:, None] + offsets[None, :, 1]
     # grid_sample's normalised coordinates, pixel centres at (2i + 1)/size − 1.
     grid = torch.stack([(2 * x + 1) / width - 1, (2 * y + 1) / height - 1], dim=-1)[None].to(image.dtype)
-    sources = torch.cat([image, hole[None].to(image.dtype)])[None]
+    unusable = hole if avoid is None else hole | avoid
+    sources = torch.cat([image, unusable[None].to(image.dtype)])[None]
     sampled = F.grid_sample(sources, grid, mode="bilinear", padding_mode="zeros", align_corners=False)[0]
     inside = (x >= 0) & (x <= width - 1) & (y >= 0) & (y <= height - 1)
-    usable = inside & (sampled[-1] <= 0)  # no clipped pixel in the bilinear footprint
+    usable = inside & (sampled[-1] <= 0)  # no unusable pixel in the bilinear footprint
     values = torch.where(usable[None], sampled[:-1], torch.full_like(sampled[:-1], float("nan")))
     median = values.nanmedian(dim=-1).values  # (C, N)
     any_twin = usable.any(dim=-1)
@@ -231,35 +270,36 @@ def lattice_fill(
 
 # What a fill changes: normals are kept (module docstring).
 FILLED_MAPS = (BASECOLOR, ROUGHNESS, METALLIC)
-# The lattice disc blends into the maps over this many times its reach; the ring there sets its level.
-LATTICE_DISC_BLEND = 1.3
+# The pattern disc blends into the maps over this many times its reach; the ring there sets its level.
+DISC_BLEND = 1.3
 
 
-def lattice_disc(
-    maps: Tensor, distance: Tensor, reach: float, vectors: tuple[tuple[float, float], tuple[float, float]]
+def pattern_disc(
+    maps: Tensor, distance: Tensor, reach: float, twins: Twins, clipped: Tensor | None = None
 ) -> Tensor:
     """Base colour, roughness and metallic within ``reach`` of the hotspot (``distance`` in pixels)
-    taken from the same place in other cells (:func:`lattice_fill`), shifted by the median
-    difference between the maps and their twins on the ring out to :data:`LATTICE_DISC_BLEND` ×
-    ``reach`` (the network's maps drift in level across the photo: the twins are farther from the
-    flash) and blended out over that ring. Pixels with no twin, and beyond the ring, are unchanged.
+    taken from the same place elsewhere in the pattern (:func:`twin_fill`, never from a
+    ``clipped`` pixel: a streak reaches beyond the disc along glossy planks), shifted by the median
+    difference between the maps and their twins on the ring out to :data:`DISC_BLEND` × ``reach``
+    (the network's maps drift in level across the photo: the twins are farther from the flash) and
+    blended out over that ring. Pixels with no twin, and beyond the ring, are unchanged.
 
-    Shape: maps ``(8, H, W)``; distance ``(H, W)`` → ``(8, H, W)``.
+    Shape: maps ``(8, H, W)``; distance, clipped ``(H, W)`` → ``(8, H, W)``.
     """
     check_single_maps(maps)
     check_shape(distance, "H W", name="distance", dims={"H": maps.shape[-2], "W": maps.shape[-1]})
-    outer = LATTICE_DISC_BLEND * reach
+    outer = DISC_BLEND * reach
     area = distance <= outer
     if not bool(area.any()):
         return maps
     channels = _filled_channels(maps)
-    twins, found = lattice_fill(channels, area, vectors)
+    twins_found, found = twin_fill(channels, area, twins, avoid=clipped)
     ring = found & (distance > reach) & area
     if not bool(ring.any()):
         return maps
-    level = (channels - twins)[:, ring].median(dim=-1).values.view(-1, 1, 1)
+    level = (channels - twins_found)[:, ring].median(dim=-1).values.view(-1, 1, 1)
     weight = (1.0 - smoothstep(reach, outer, distance)).to(maps.dtype) * found.to(maps.dtype)
-    blended = (channels + weight * (twins + level - channels)).clamp(0.0, 1.0)
+    blended = (channels + weight * (twins_found + level - channels)).clamp(0.0, 1.0)
     return _with_filled_maps(maps, torch.where(area[None], blended, channels))
 
 
@@ -282,13 +322,14 @@ def _with_filled_maps(maps: Tensor, channels: Tensor) -> Tensor:
 @dataclass(frozen=True)
 class ClippedFill:
     """What :func:`fill_clipped` did: the ``maps``; the share of pixels clipped (the mask given), of
-    pixels changed, and of pixels taken from a lattice twin; the ``method`` (``"surroundings"``,
-    ``"lattice"``, or ``"none"`` when nothing was clipped)."""
+    pixels changed, and of pixels taken from a twin elsewhere in the pattern; the ``method``
+    (``"surroundings"``, the twins' kind (``"lattice"``, ``"stripes"``), or ``"none"`` when nothing
+    was clipped)."""
 
     maps: Tensor
     clipped_fraction: float
     changed_fraction: float
-    lattice_fraction: float
+    twin_fraction: float
     method: str
 
     def to_json(self) -> dict[str, Any]:
@@ -297,7 +338,7 @@ class ClippedFill:
             "range_spread": RANGE_SPREAD,
             "clipped_fraction": self.clipped_fraction,
             "changed_fraction": self.changed_fraction,
-            "lattice_fraction": self.lattice_fraction,
+            "twin_fraction": self.twin_fraction,
             "method": self.method,
         }
 
@@ -306,15 +347,15 @@ def fill_clipped(
     maps: Tensor,
     clipped: Tensor,
     *,
-    lattice: tuple[tuple[float, float], tuple[float, float]] | None = None,
+    twins: Twins | None = None,
     spread: float = RANGE_SPREAD,
 ) -> ClippedFill:
     """The maps with base colour, roughness and metallic of the clipped pixels brought back to what
-    their surroundings say (module docstring): from a lattice twin where ``lattice`` (two vectors
-    ``(dx, dy)`` in the maps' pixels) is given and one is found, else clamped into the range of the
-    unclipped pixels around them (:func:`surroundings_range`, ``spread`` standard deviations).
-    Normals and every unclipped pixel are unchanged, bit for bit; with no clipped pixel (or no
-    unclipped one) the maps themselves are returned.
+    their surroundings say (module docstring): from their ``twins`` elsewhere in a repeating pattern
+    where given and found, else clamped into the range of the unclipped pixels around them
+    (:func:`surroundings_range`, ``spread`` standard deviations). Normals and every unclipped pixel
+    are unchanged, bit for bit; with no clipped pixel (or no unclipped one) the maps themselves are
+    returned.
 
     Shape: maps ``(8, H, W)``; clipped ``(H, W)`` bool (:func:`clipped_mask` of the photo the maps
     were predicted from, at the maps' size) → :class:`ClippedFill` with maps ``(8, H, W)``.
@@ -328,16 +369,16 @@ def fill_clipped(
     low, high = surroundings_range(channels, (~clipped).to(maps.dtype), spread)
     filled = torch.minimum(torch.maximum(channels, low), high)
     found = torch.zeros_like(clipped)
-    if lattice is not None:
-        twins, found = lattice_fill(channels, clipped, lattice)
-        filled = torch.where(found[None], twins, filled)
+    if twins is not None:
+        from_twins, found = twin_fill(channels, clipped, twins)
+        filled = torch.where(found[None], from_twins, filled)
     filled = torch.where(clipped[None], filled.clamp(0.0, 1.0), channels)
     return ClippedFill(
         maps=_with_filled_maps(maps, filled),
         clipped_fraction=float(clipped.sum()) / pixels,
         changed_fraction=float((filled != channels).any(dim=0).sum()) / pixels,
-        lattice_fraction=float((found & clipped).sum()) / pixels,
-        method="lattice" if lattice is not None else "surroundings",
+        twin_fraction=float((found & clipped).sum()) / pixels,
+        method=twins.kind if twins is not None else "surroundings",
     )
 
 
@@ -485,11 +526,13 @@ def remove_flash(
     *,
     clipped: Tensor | None = None,
     lattice: tuple[tuple[float, float], tuple[float, float]] | None = None,
+    stripes: tuple[float, float] | None = None,
     restore_texture: bool = False,
 ) -> tuple[Tensor, FlashRemoval]:
     """The flash taken out of maps predicted from ``photo`` (module docstring): the clipped pixels
     filled (:func:`fill_clipped`, ``clipped`` defaulting to :func:`clipped_mask` of the photo; with
-    a ``lattice``, the hotspot's disc too, from its twins in other cells), the
+    a ``lattice`` (two vectors ``(dx, dy)``) or ``stripes`` (their direction ``(dx, dy)``), the
+    hotspot's disc too, from its twins elsewhere in the pattern, :class:`Twins`), the
     hotspot's disc levelled and a leaked blotch patched within the highlight's radius
     (:func:`~brdfgan.core.flash_mark.repair_flash_mark`), and thin dark features' metal lowered
     (:func:`suppress_false_metal`). A photo with nothing clipped, no highlight and no thin dark
@@ -508,16 +551,26 @@ def remove_flash(
     check_single_maps(maps)
     check_shape(photo, "3 H W", name="photo", dims={"H": maps.shape[-2], "W": maps.shape[-1]})
     check_flash_frame(frame, 1)
+    if lattice is not None and stripes is not None:
+        raise ValueError("remove_flash takes a lattice or stripes, not both")
     clipped = clipped_mask(photo) if clipped is None else clipped
     radius = highlight_radius(photo, frame)
-    if lattice is not None:
-        # A periodic material's hotspot disc comes from the same place in other cells: the mark's
-        # reach or the highlight's, whichever is larger (a dot and its halo on a plain tile).
+    # A repeating material's hotspot disc comes from the same place elsewhere in its pattern: the
+    # mark's reach or the highlight's, whichever is larger (a dot and its halo on a plain tile; the
+    # clipped streak a glossy plank stretches along its grooves).
+    reach = max(REPAIR_INNER * mark_radius(*maps.shape[-2:]), radius)
+    twins = (
+        Twins.of_lattice(lattice)
+        if lattice is not None
+        else Twins.along_stripes(stripes, DISC_BLEND * reach)
+        if stripes is not None
+        else None
+    )
+    if twins is not None:
         distance = hotspot_distance(frame[:, :2].double(), *maps.shape[-2:])[0]
-        reach = max(REPAIR_INNER * mark_radius(*maps.shape[-2:]), radius)
-        maps = lattice_disc(maps, distance, reach, lattice)
+        maps = pattern_disc(maps, distance, reach, twins, clipped)
         clipped = clipped & (distance > reach)
-    fill = fill_clipped(maps, clipped, lattice=lattice)
+    fill = fill_clipped(maps, clipped, twins=twins)
     hotspot = (float(frame[0, 0]), float(frame[0, 1]))
     repaired, mark = repair_flash_mark(
         fill.maps, hotspot, radius=radius, clipped=clipped if restore_texture else None

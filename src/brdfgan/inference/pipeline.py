@@ -370,13 +370,39 @@ class TileableRecord:
         )
 
 
+@dataclass(frozen=True)
+class TilePattern:
+    """The pattern a tile keeps, found on the maps before the flash is taken out of them (so that
+    the hotspot's disc is filled from it): their ``lattice``, and where it is not periodic their
+    ``stripes`` (``None``: none found; not looked for beside a periodic lattice)."""
+
+    lattice: Lattice
+    stripes: Stripes | None
+
+    @property
+    def stripes_searched(self) -> bool:
+        return not self.lattice.periodic
+
+    def flash_twins(self) -> dict[str, Any]:
+        """:func:`~brdfgan.core.clipped_fill.remove_flash`'s ``lattice`` or ``stripes`` argument."""
+        if self.lattice.periodic and self.lattice.vectors is not None:
+            return {"lattice": self.lattice.vectors}
+        return {"stripes": self.stripes.along} if self.stripes is not None else {}
+
+
+def tile_pattern(maps: Tensor) -> TilePattern:
+    """The maps' :class:`TilePattern`. Shape: ``(8, H, W)``."""
+    lattice = find_lattice(maps)
+    return TilePattern(lattice, None if lattice.periodic else find_stripes(maps))
+
+
 def make_tileable(
     maps: Tensor,
     hotspot: tuple[float, float],
     *,
     align_pattern: bool = False,
     flash_mark: FlashMark | None = None,
-    lattice: Lattice | None = None,
+    pattern: TilePattern | None = None,
 ) -> tuple[Tensor, TileableRecord]:
     """``--tileable``: the flash mark repaired where it leaked into the maps (:mod:`brdfgan.core.flash_mark`,
     ``hotspot`` ``(x, y)`` in the maps' pixels), so that no tile repeats it; then, for a material
@@ -387,8 +413,8 @@ def make_tileable(
     lattice whose cells do not fit, rolled and cut into a tile
     (:func:`~brdfgan.core.seamless.make_seamless`, unchanged), with the record of all.
     ``flash_mark``: the repair already made (``brdfgan predict``'s
-    :func:`~brdfgan.core.clipped_fill.remove_flash`): the maps are taken as repaired; ``lattice``:
-    the maps' lattice found before that repair (else found here).
+    :func:`~brdfgan.core.clipped_fill.remove_flash`): the maps are taken as repaired; ``pattern``:
+    the maps' lattice and stripes found before that repair (else found here).
 
     Shape: ``(8, H, W)`` → ``(8, H, W)``.
     """
@@ -397,7 +423,7 @@ def make_tileable(
         raise PredictError(f"--tileable needs maps of at least {MIN_SIDE}×{MIN_SIDE}, got {height}×{width}")
     repaired, mark = repair_flash_mark(maps, hotspot) if flash_mark is None else (maps, flash_mark)
     before = {name: wrap_ratios(image) for name, image in zip(MAP_NAMES, file_units(maps), strict=True)}
-    lattice = find_lattice(repaired) if lattice is None else lattice
+    lattice = find_lattice(repaired) if pattern is None else pattern.lattice
     cells = None
     if lattice.periodic and lattice.vectors is not None:
         cells = choose_cells(lattice.vectors, height, width, align=align_pattern)
@@ -424,7 +450,9 @@ def make_tileable(
     match = None if cells is None or lattice.vectors is None else cell_match(repaired, lattice.vectors)
     if cells is None or (match is not None and match < MIN_CELL_MATCH):
         # No 2-D lattice to tile by: a 1-D pattern still tiles by whole periods across its stripes.
-        stripe_tiling = _stripe_tiling(unrectified, align_pattern)
+        searched = pattern is not None and pattern.stripes_searched
+        found = pattern.stripes if pattern is not None and searched else find_stripes(unrectified)
+        stripe_tiling = None if found is None else _stripe_tiling(unrectified, found, align_pattern)
         if stripe_tiling is not None:
             repaired, stripes, cells, perspective = stripe_tiling
             note = _stripes_note(lattice, stripes, match)
@@ -451,19 +479,16 @@ def make_tileable(
 
 
 def _stripe_tiling(
-    maps: Tensor, align_pattern: bool
+    maps: Tensor, found: Stripes, align_pattern: bool
 ) -> tuple[Tensor, Stripes, CellTiling, Perspective | None] | None:
-    """``make_tileable``'s stripes path (:mod:`brdfgan.core.stripes`): the maps' stripes and their
-    whole-period cells, after taking out a mild perspective where the rectified maps show stripes
-    whose cells fit (else on the maps as they are), with the maps the cells are cut from and the
-    perspective; ``None`` where there are no stripes or no cells fit.
+    """``make_tileable``'s stripes path (:mod:`brdfgan.core.stripes`): the maps' stripes (``found``
+    on them) and their whole-period cells, after taking out a mild perspective where the rectified
+    maps show stripes whose cells fit (else on the maps as they are), with the maps the cells are
+    cut from and the perspective; ``None`` where no cells fit.
 
     Shape: ``(8, H, W)`` → ``(8, H, W)`` and the rest.
     """
     height, width = maps.shape[-2:]
-    found = find_stripes(maps)
-    if found is None:
-        return None
     perspective = find_stripe_perspective(maps, found)
     if perspective is not None:
         rectified = rectify(maps, perspective)
@@ -678,21 +703,25 @@ def finish_maps(
     clock = clock or StageClock({})
     prepared, frame = reference.prepared, reference.flash_frame
     with clock("flash"):
-        lattice = find_lattice(maps) if tileable else None
+        pattern = tile_pattern(maps) if tileable else None
         maps, removal = remove_flash(
             maps,
             prepared.photo,
             frame,
             clipped=input_clipped(reference.photo, prepared),
-            lattice=lattice.vectors if lattice is not None and lattice.periodic else None,
+            **(pattern.flash_twins() if pattern is not None else {}),
             restore_texture=tileable,
         )
-    if not tileable:
+    if pattern is None:
         return maps, removal, None
     with clock("tileable"):
         hotspot = (float(frame[0, 0]), float(frame[0, 1]))
         maps, tiling = make_tileable(
-            maps, hotspot, align_pattern=align_pattern, flash_mark=removal.mark, lattice=lattice
+            maps,
+            hotspot,
+            align_pattern=align_pattern,
+            flash_mark=removal.mark,
+            pattern=pattern,
         )
     return maps, removal, tiling
 
