@@ -58,6 +58,7 @@ from brdfgan.losses.parameter import angular_distance
 from brdfgan.metrics import SlopeAgreement
 from brdfgan.metrics import relief_shading as flash_relief_shading
 from brdfgan.models.anchored import AnchoredUNet
+from brdfgan.runs import stored_constructor_arguments
 from brdfgan.training.config import register_configs
 from research.relief import observable_mask, srgb8_rounding_log
 
@@ -271,8 +272,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     # A warm start takes the weights file's own architecture (its config), not the experiment's.
     shipped = load_model(args.init) if args.init is not None else None
     if shipped is not None:
-        stored = AnchoredUNet.upgrade_stored_config(shipped.config)
-        config = {k: v for k, v in stored.items() if k not in AnchoredUNet.RETIRED_OPTIONS}
+        config = stored_constructor_arguments(AnchoredUNet, shipped.config, args.init, "AnchoredUNet")
     else:
         node = cast(dict[str, Any], OmegaConf.to_container(cfg.model.generator, resolve=True))
         config = {k: v for k, v in node.items() if k != "_target_"}

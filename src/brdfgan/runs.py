@@ -163,12 +163,16 @@ def network_from_config(node: Any, where: str | os.PathLike[str]) -> nn.Module:
     return build_network(target, arguments, where)
 
 
-def _without_retired_options(
+def stored_constructor_arguments(
     cls: type, arguments: Mapping[str, Any], where: str | os.PathLike[str], target: str
 ) -> dict[str, Any]:
-    """``arguments`` less the options ``cls`` has retired (its ``RETIRED_OPTIONS``: name → the
-    value the network is now always built with), so that configs stored before an option went
-    still load; a retired option stored with another value cannot be honoured: an error."""
+    """The constructor arguments of ``cls`` from a stored config's ``arguments`` (``target`` its
+    name, ``where`` the file, for errors): brought up to date (its ``upgrade_stored_config``, where
+    it has one), less the options ``cls`` has retired (its ``RETIRED_OPTIONS``: name → the value the
+    network is now always built with), so that configs stored before an option went still load; a
+    retired option stored with another value cannot be honoured: an error."""
+    upgrade = getattr(cls, "upgrade_stored_config", None)
+    arguments = upgrade(arguments) if upgrade else arguments
     retired: Mapping[str, Any] = getattr(cls, "RETIRED_OPTIONS", {})
     for name, value in arguments.items():
         if name in retired and value != retired[name]:
@@ -190,8 +194,7 @@ def build_network(target: str, arguments: Mapping[str, Any], where: str | os.Pat
     module_name, class_name = NETWORK_CLASSES[target]
     cls = getattr(importlib.import_module(module_name), class_name)
     _reject_nested_targets(arguments, where, target)
-    upgrade = getattr(cls, "upgrade_stored_config", None)
-    arguments = _without_retired_options(cls, upgrade(arguments) if upgrade else arguments, where, target)
+    arguments = stored_constructor_arguments(cls, arguments, where, target)
     parameters, hints, _ = signature_of(cls)
     for name, value in arguments.items():
         if name not in parameters:
