@@ -87,7 +87,14 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from brdfgan.core.lattice import PROMINENCE_THRESHOLD, find_lattice, pattern_features, rectify, reduce_basis
+from brdfgan.core.lattice import (
+    ALL_FEATURES,
+    PROMINENCE_THRESHOLD,
+    find_lattice,
+    pattern_features,
+    rectify,
+    reduce_basis,
+)
 from brdfgan.core.seamless import file_units
 from brdfgan.core.stripes import Stripes, find_stripes
 from brdfgan.core.svbrdf import check_single_maps, join_maps, normalize_normal, split_maps
@@ -886,6 +893,7 @@ def _detect(row: Row, crop: Tensor, crop_truth: Basis | None) -> None:
         return
     row.score = detected.score
     row.extra["detection"] = detected.notes
+    row.extra["features"] = detected.features
     if crop_truth is not None and detected.vectors is not None:
         row.found_error = period_error(detected.vectors, crop_truth)
 
@@ -1059,7 +1067,10 @@ def _case_line(row: Row) -> str:
     """One case of the table (:func:`report`)."""
     lattice = "—"
     if row.path == "new":
-        score = f" ({row.score:.2f})" if math.isfinite(row.score) else ""
+        # The feature groups the lattice was read from, where not both (core.lattice.FEATURE_CHOICES).
+        features = row.extra.get("features", ALL_FEATURES)
+        alone = "" if features == ALL_FEATURES else f", {features}"
+        score = f" ({row.score:.2f}{alone})" if math.isfinite(row.score) else ""
         lattice = ("yes" if row.whole_cells else "no") + score
     if row.extra.get("sheet_error"):
         period = "crash"

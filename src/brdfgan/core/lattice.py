@@ -23,7 +23,12 @@ synthesis of regular repeatable patterns"). The steps:
    The lattice is accepted when its *score*, the least prominence among the peaks at ``a``, ``b``
    and the combinations ``a ± b``, ``2a``, ``2b`` that the maps are large enough to show (at least
    one of them), reaches :data:`PROMINENCE_THRESHOLD`: a spurious pair of noise maxima has no peak
-   at its sum.
+   at its sum. The lattice is read from both groups' ρ, and again from each group's alone: where
+   one group alone is periodic and scores at least :data:`ONE_GROUP_FACTOR` times both together,
+   the other group only blurs the lattice's peaks (a scanned checkerboard of marble whose relief is
+   each slab's own: both together 0.7 % off square-on and nothing found at 15° and 30°; its colour
+   alone within 0.2 % at every angle), and that group is the lattice's :attr:`Lattice.features`,
+   which the perspective's windows, the cells' match and their closure read too.
 3b. **Mild perspective** (:func:`find_perspective`, :func:`rectify`): a phone tilted by a degree or
    two shrinks the cells towards one side, so whole periods at the centre are off by a pixel or
    more at the wraps. The lattice is refined again in a 3 × 3 grid of overlapping windows (each
@@ -118,6 +123,11 @@ Vector = tuple[float, float]
 
 # Feature channels (pattern_features) and their groups: colour (luminance) and relief (slopes).
 FEATURE_GROUPS = (1, 2)
+# The groups a lattice can be read from (module docstring, step 3): both, or either alone where
+# only it repeats (a scanned checkerboard of marble whose relief is each slab's own).
+FEATURE_CHOICES: dict[str, tuple[int, ...]] = {"colour and relief": (0, 1), "colour": (0,), "relief": (1,)}
+ALL_FEATURES = "colour and relief"
+ONE_GROUP_FACTOR = 2.0
 # A feature group whose detrended energy per pixel is below this square (a constant map, a flat
 # normal map) carries no pattern: it is left out instead of normalising its noise up to weight 1.
 FEATURE_FLOOR = 1e-3
@@ -213,6 +223,7 @@ class Lattice:
     periodic: bool
     method: str = "autocorrelation"
     notes: str = ""
+    features: str = ALL_FEATURES  # the feature groups it was read from (FEATURE_CHOICES)
 
     @property
     def ambiguous(self) -> bool:
@@ -232,6 +243,7 @@ class Lattice:
             "periodic": self.periodic,
             "method": self.method,
             "notes": self.notes,
+            "features": self.features,
         }
 
     @classmethod
@@ -243,6 +255,8 @@ class Lattice:
             periodic=bool(record["periodic"]),
             method=str(record["method"]),
             notes=str(record["notes"]),
+            # A record from before the choice of features read both groups.
+            features=str(record.get("features", ALL_FEATURES)),
         )
 
 
@@ -277,6 +291,17 @@ def detection_features(maps: Tensor) -> tuple[Tensor, Tensor]:
         features = F.interpolate(features[None], size=size, mode="area")[0]
     small_h, small_w = features.shape[-2:]
     return features, torch.tensor([width / small_w, height / small_h], dtype=torch.float64)
+
+
+def feature_groups(features: Tensor, choice: str) -> tuple[Tensor, tuple[int, ...]]:
+    """The channels of the feature groups ``choice`` names (:data:`FEATURE_CHOICES`) and their
+    group sizes, for :func:`autocorrelation`. Shape: ``(3, H, W)`` → ``(C, H, W)``."""
+    if choice not in FEATURE_CHOICES:
+        raise ValueError(f"unknown pattern features {choice!r}: one of {', '.join(FEATURE_CHOICES)}")
+    starts = [sum(FEATURE_GROUPS[:index]) for index in range(len(FEATURE_GROUPS))]
+    chosen = FEATURE_CHOICES[choice]
+    channels = [c for group in chosen for c in range(starts[group], starts[group] + FEATURE_GROUPS[group])]
+    return features[channels], tuple(FEATURE_GROUPS[group] for group in chosen)
 
 
 def _detrend(features: Tensor) -> Tensor:
@@ -317,6 +342,25 @@ def autocorrelation(features: Tensor, groups: Sequence[int] = FEATURE_GROUPS) ->
         >>> round(float(rho[32, 32]), 3), float(rho[32, 40]) > 0.9, float(rho[32, 36]) < 0
         (1.0, True, True)
     """
+    return _mean_rho(group_autocorrelations(features, groups), features)
+
+
+def _mean_rho(rhos: Sequence[Tensor | None], features: Tensor) -> Tensor:
+    """The mean of the groups' ρ that are not constant; 0 everywhere where none is.
+    Shape: each ``(2H, 2W)``; features ``(C, H, W)`` → ``(2H, 2W)``."""
+    used = [rho for rho in rhos if rho is not None]
+    if not used:
+        height, width = features.shape[-2:]
+        return torch.zeros(2 * height, 2 * width, dtype=torch.float64, device=features.device)
+    return torch.stack(used).mean(dim=0)
+
+
+def group_autocorrelations(features: Tensor, groups: Sequence[int] = FEATURE_GROUPS) -> list[Tensor | None]:
+    """Per channel group, its normalised autocorrelation (:func:`autocorrelation`'s terms), or
+    ``None`` where the group is constant (:data:`FEATURE_FLOOR`).
+
+    Shape: ``(C, H, W)`` → each ``(2H, 2W)``.
+    """
     check_shape(features, "C H W", name="features")
     channels, height, width = features.shape
     if sum(groups) != channels or min(groups) < 1:
@@ -330,14 +374,13 @@ def autocorrelation(features: Tensor, groups: Sequence[int] = FEATURE_GROUPS) ->
     overlap = torch.fft.irfft2(torch.fft.rfft2(window, s=size).abs().square(), s=size)
     # The window's autocorrelation vanishes at lags beyond the image; those are cut off later.
     unbiased = per_channel / overlap.clamp_min(1e-9 * float(overlap[0, 0]))
-    rho = torch.zeros(size, dtype=work.dtype, device=work.device)
-    used = 0
+    rhos: list[Tensor | None] = []
     for part in unbiased.split(list(groups)):
         summed = part.sum(dim=0)
-        if float(summed[0, 0]) > FEATURE_FLOOR**2:
-            rho += summed / summed[0, 0]
-            used += 1
-    return torch.fft.fftshift(rho / max(used, 1))
+        rhos.append(
+            torch.fft.fftshift(summed / summed[0, 0]) if float(summed[0, 0]) > FEATURE_FLOOR**2 else None
+        )
+    return rhos
 
 
 def _lag_overlap(lags: Tensor, height: int, width: int) -> Tensor:
@@ -577,21 +620,44 @@ def _score_lattice(rho: Tensor, a: Vector, b: Vector, image_size: tuple[int, int
 
 def find_lattice(maps: Tensor) -> Lattice:
     """Whether the map set repeats on a 2-D lattice, and its reduced lattice vectors in the maps'
-    pixels (module docstring, steps 1–3). Stripes and other 1-D patterns are not periodic.
+    pixels (module docstring, steps 1–3): read from both feature groups, or from one alone where
+    that one is periodic and scores at least :data:`ONE_GROUP_FACTOR` times both together (the
+    other group then only blurs the lattice's peaks). Stripes and other 1-D patterns are not
+    periodic.
 
     Shape: ``(8, H, W)`` → :class:`Lattice`.
     """
     check_single_maps(maps)
     features, factor = detection_features(maps)
-    small_h, small_w = features.shape[-2:]
-    rho = autocorrelation(features)
-    pair = _pick_pair(rho, _candidates(rho, small_h, small_w))
+    image_size = (features.shape[-2], features.shape[-1])
+    rhos = group_autocorrelations(features)
+    both = _lattice_in(_mean_rho(rhos, features), image_size, factor, ALL_FEATURES)
+    best = both
+    # One group alone (a constant group leaves the other's lattice as it is: nothing to compare).
+    singles = [(name, groups[0]) for name, groups in FEATURE_CHOICES.items() if len(groups) == 1]
+    for choice, group in singles:
+        rho = rhos[group]
+        if rho is None or any(other is None for other in rhos):
+            continue
+        alone = _lattice_in(rho, image_size, factor, choice)
+        standing_out = alone.periodic and alone.score >= ONE_GROUP_FACTOR * max(both.score, 0.0)
+        if standing_out and alone.score > best.score:
+            best = alone
+    return best
+
+
+def _lattice_in(rho: Tensor, image_size: tuple[int, int], factor: Tensor, choice: str) -> Lattice:
+    """:func:`find_lattice` on one autocorrelation (of the feature groups ``choice``), in the maps'
+    pixels (``factor`` per detection pixel). Shape: ``(2H, 2W)``, ``(H, W)``, ``(2,)``."""
+    pair = _pick_pair(rho, _candidates(rho, *image_size))
     if pair is None:
-        return Lattice(None, 0.0, False, notes="no isolated autocorrelation peak (no 2-D lattice)")
+        return Lattice(
+            None, 0.0, False, notes="no isolated autocorrelation peak (no 2-D lattice)", features=choice
+        )
     a, b = reduce_basis(*pair)
-    a, b = refine_lattice(rho, a, b, (small_h, small_w))
+    a, b = refine_lattice(rho, a, b, image_size)
     a, b = reduce_basis(a, b)
-    score, weakest = _score_lattice(rho, a, b, (small_h, small_w))
+    score, weakest = _score_lattice(rho, a, b, image_size)
     periodic = score >= PROMINENCE_THRESHOLD
     if not math.isfinite(score):
         notes, score = weakest, 0.0
@@ -602,7 +668,7 @@ def find_lattice(maps: Tensor) -> Lattice:
     scaled = tuple(
         _vector((torch.tensor(vector, dtype=torch.float64) * factor).tolist()) for vector in (a, b)
     )
-    return Lattice((scaled[0], scaled[1]), score, periodic, notes=notes)
+    return Lattice((scaled[0], scaled[1]), score, periodic, notes=notes, features=choice)
 
 
 # Perspective (module docstring, step 3b): the lattice measured in a grid of windows this many a
@@ -730,6 +796,7 @@ def find_perspective(maps: Tensor, lattice: Lattice) -> Perspective | None:
     if lattice.vectors is None or not (lattice.periodic or lattice.ambiguous):
         return None
     features, factor = detection_features(maps)
+    features, groups = feature_groups(features, lattice.features)
     small_h, small_w = features.shape[-2:]
     start = torch.stack([torch.tensor(vector, dtype=torch.float64) / factor for vector in lattice.vectors])
     extent = start.abs().amax(dim=0)  # the lattice vectors' reach along x and y
@@ -740,7 +807,7 @@ def find_perspective(maps: Tensor, lattice: Lattice) -> Perspective | None:
         return None  # too few cells to see the lattice change across the maps
     for tried in dict.fromkeys((share, WINDOW_SHARE[1])):
         perspective, seen = _perspective_in_windows(
-            features, factor, start, tried, (maps.shape[-2], maps.shape[-1])
+            features, groups, factor, start, tried, (maps.shape[-2], maps.shape[-1])
         )
         if perspective is not None or seen < RETRY_KEYSTONE:
             return perspective
@@ -748,19 +815,25 @@ def find_perspective(maps: Tensor, lattice: Lattice) -> Perspective | None:
 
 
 def _perspective_in_windows(
-    features: Tensor, factor: Tensor, start: Tensor, share: float, size: tuple[int, int]
+    features: Tensor,
+    groups: tuple[int, ...],
+    factor: Tensor,
+    start: Tensor,
+    share: float,
+    size: tuple[int, int],
 ) -> tuple[Perspective | None, float]:
     """:func:`find_perspective` in a grid of windows of ``share`` of the detection features'
-    sides: each window's lattice refined from ``start`` (rows a, b, in the features' pixels), and
-    the perspective fitted to them (:func:`_fit_windows`), or ``None`` (its conditions); in the
-    maps' pixels (``size`` ``(H, W)``, ``factor`` the maps' pixels per feature pixel). With it, the
-    keystone's strength the fit saw, kept or not (infinite where a window's lattice was not the
-    maps': nothing was fitted)."""
+    sides (feature ``groups``, the lattice's): each window's lattice refined from ``start`` (rows
+    a, b, in the features' pixels), and the perspective fitted to them (:func:`_fit_windows`), or
+    ``None`` (its conditions); in the maps' pixels (``size`` ``(H, W)``, ``factor`` the maps'
+    pixels per feature pixel). With it, the keystone's strength the fit saw, kept or not (infinite
+    where a window's lattice was not the maps': nothing was fitted)."""
     seed = (_vector(start[0].tolist()), _vector(start[1].tolist()))
     reach = SEARCH_FRACTION * float(start.norm(dim=-1).min())
     centres, measured = [], []
     for window, centre in perspective_windows(features, factor, share, size):
-        refined = refine_lattice(autocorrelation(window), *seed, (window.shape[-2], window.shape[-1]))
+        rho = autocorrelation(window, groups)
+        refined = refine_lattice(rho, *seed, (window.shape[-2], window.shape[-1]))
         local = torch.tensor(refined, dtype=torch.float64)
         if float((local - start).norm(dim=-1).max()) > reach:
             return None, math.inf  # the window's lattice is not the maps' (a window of grout, a stain)
@@ -1166,28 +1239,29 @@ def choose_cells(
     )
 
 
-def _match_features(maps: Tensor) -> tuple[Tensor, Tensor]:
-    """The detrended pattern features the maps are matched against themselves on (at most
-    :data:`DETECT_SIDE` a side), each channel at unit spread, and the detection's pixel size.
-    Shape: ``(8, H, W)`` → ``(C, h, w)``, ``(2,)``."""
+def _match_features(maps: Tensor, choice: str = ALL_FEATURES) -> tuple[Tensor, Tensor]:
+    """The detrended pattern features (the groups ``choice`` names, :data:`FEATURE_CHOICES`) the
+    maps are matched against themselves on (at most :data:`DETECT_SIDE` a side), each channel at
+    unit spread, and the detection's pixel size. Shape: ``(8, H, W)`` → ``(C, h, w)``, ``(2,)``."""
     features, factor = detection_features(maps)
-    features = _detrend(features)
+    features = _detrend(feature_groups(features, choice)[0])
     return features / features.flatten(1).std(dim=1).clamp_min(FEATURE_FLOOR).view(-1, 1, 1), factor
 
 
-def cell_match(maps: Tensor, vectors: tuple[Vector, Vector]) -> float:
+def cell_match(maps: Tensor, vectors: tuple[Vector, Vector], features: str = ALL_FEATURES) -> float:
     """How well the maps' cells match each other: the lesser of their normalised self-correlations
-    (:func:`_shift_match`, the pattern features) one lattice vector on, ``a`` and ``b`` rounded to
-    whole detection pixels. A tiled floor or a brick wall repeats its cells (0.45-0.99 on the
-    rendered families and regular scans, square-on or in mild perspective); rows of setts whose
-    joints wander do not (0.30-0.36), though their autocorrelation shows a weak lattice.
+    (:func:`_shift_match`, the pattern ``features`` the lattice was read from) one lattice vector
+    on, ``a`` and ``b`` rounded to whole detection pixels. A tiled floor or a brick wall repeats
+    its cells (0.45-0.99 on the rendered families and regular scans, square-on or in mild
+    perspective); rows of setts whose joints wander do not (0.30-0.36), though their
+    autocorrelation shows a weak lattice.
 
     Shape: ``(8, H, W)``, two ``(dx, dy)`` → a number in [−1, 1].
     """
     check_single_maps(maps)
-    features, factor = _match_features(maps)
+    matched, factor = _match_features(maps, features)
     step_x, step_y = float(factor[0]), float(factor[1])
-    return min(_shift_match(features, round(dx / step_x), round(dy / step_y)) for dx, dy in vectors)
+    return min(_shift_match(matched, round(dx / step_x), round(dy / step_y)) for dx, dy in vectors)
 
 
 def _shift_match(features: Tensor, dx: int, dy: int) -> float:
@@ -1224,10 +1298,10 @@ def closing_shift(features: Tensor, shift: Vector, reach: int) -> tuple[Vector, 
     return (cx + span[column] + dx, cy + span[row] + dy), float(grid[row, column])
 
 
-def close_cells(maps: Tensor, tiling: CellTiling) -> CellTiling:
+def close_cells(maps: Tensor, tiling: CellTiling, features: str = ALL_FEATURES) -> CellTiling:
     """The tiling with ``u`` and ``v`` moved to the shifts at which the maps match themselves
-    (module docstring, step 4b: :func:`closing_shift` over the detrended pattern features, on a
-    copy of at most :data:`DETECT_SIDE` a side), re-centred; each kept as the lattice gave it
+    (module docstring, step 4b: :func:`closing_shift` over the detrended pattern ``features``, the
+    lattice's, on a copy of at most :data:`DETECT_SIDE` a side), re-centred; each kept as the lattice gave it
     where no clear match lies within :data:`CLOSURE_REACH` pixels (at most a quarter of the
     shorter lattice vector, from ``u``, ``v`` and their counts) or the match is under
     :data:`CLOSURE_MIN_MOVE` pixels from it, and both where the cells would no longer fit their
@@ -1237,7 +1311,7 @@ def close_cells(maps: Tensor, tiling: CellTiling) -> CellTiling:
     """
     check_single_maps(maps)
     height, width = tiling.size
-    features, factor = _match_features(maps)
+    matched, factor = _match_features(maps, features)
     edges = torch.tensor([tiling.u, tiling.v], dtype=torch.float64) / factor  # detection pixels
     lattice = tiling.basis() / factor
     reach = min(CLOSURE_REACH, math.floor(0.25 * float(lattice.norm(dim=1).min())))
@@ -1245,7 +1319,7 @@ def close_cells(maps: Tensor, tiling: CellTiling) -> CellTiling:
         return tiling
     closed: list[Vector] = []
     for edge, small in zip((tiling.u, tiling.v), edges.tolist(), strict=True):
-        found = closing_shift(features, _vector(small), reach)
+        found = closing_shift(matched, _vector(small), reach)
         if (
             found is None
             or found[1] < CLOSURE_MIN_CORRELATION
@@ -1440,10 +1514,10 @@ class CellTile:
     measures: TilingMeasures
 
 
-def tile_whole_cells(maps: Tensor, tiling: CellTiling) -> CellTile:
-    """The tiling closed on the maps (:func:`close_cells`), the maps resampled to its whole lattice
-    cells, their wraps cut and the tile rolled to a quiet wrap (module docstring, steps 4b–7), in
-    the maps' dtype, with
+def tile_whole_cells(maps: Tensor, tiling: CellTiling, features: str = ALL_FEATURES) -> CellTile:
+    """The tiling closed on the maps (:func:`close_cells` on the pattern ``features``), the maps
+    resampled to its whole lattice cells, their wraps cut and the tile rolled to a quiet wrap
+    (module docstring, steps 4b–7), in the maps' dtype, with
     :class:`~brdfgan.core.seamless.TilingMeasures` (wrap ratios of the tile; copied fractions
     against the resampled maps, :func:`period_copied_fraction`, which a roll does not change).
 
@@ -1452,7 +1526,7 @@ def tile_whole_cells(maps: Tensor, tiling: CellTiling) -> CellTile:
     check_single_maps(maps)
     if tuple(maps.shape[-2:]) != tiling.size:
         raise ValueError(f"the tiling is for maps of {tiling.size}, got {tuple(maps.shape[-2:])}")
-    tiling = close_cells(maps, tiling)
+    tiling = close_cells(maps, tiling, features)
     resampled = sample_cells(maps, tiling)
     tile = cut_wrap(resampled, tiling.margin)
     roll_x = quiet_cut(tile, -1, MAP_GROUPS)

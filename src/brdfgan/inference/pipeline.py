@@ -38,6 +38,7 @@ from brdfgan.core.clipped_fill import FlashRemoval, clipped_mask, remove_flash
 from brdfgan.core.flash_geometry import centred_flash_frame, resize_flash_frame
 from brdfgan.core.flash_mark import FlashMark, repair_flash_mark
 from brdfgan.core.lattice import (
+    ALL_FEATURES,
     MAX_STRETCH,
     MIN_CELL_MATCH,
     PROMINENCE_THRESHOLD,
@@ -447,7 +448,11 @@ def make_tileable(
     stripes = None
     # Cells that do not match each other (setts whose joints wander along their rows) keep nothing
     # whole; where the maps have stripes, their rows are the pattern to keep.
-    match = None if cells is None or lattice.vectors is None else cell_match(repaired, lattice.vectors)
+    match = (
+        None
+        if cells is None or lattice.vectors is None
+        else cell_match(repaired, lattice.vectors, lattice.features)
+    )
     if cells is None or (match is not None and match < MIN_CELL_MATCH):
         # No 2-D lattice to tile by: a 1-D pattern still tiles by whole periods across its stripes.
         searched = pattern is not None and pattern.stripes_searched
@@ -457,7 +462,8 @@ def make_tileable(
             repaired, stripes, cells, perspective = stripe_tiling
             note = _stripes_note(lattice, stripes, match)
     if cells is not None:
-        whole = tile_whole_cells(repaired, cells)
+        # A lattice read from one feature group alone closes its cells on that group.
+        whole = tile_whole_cells(repaired, cells, lattice.features if stripes is None else ALL_FEATURES)
         shifts = ((height, width), (height, 0), (0, width), (0, 0))
         record = TileableRecord(
             mark,
