@@ -23,9 +23,11 @@ texture scores ~1-2 and a visible disc well above :data:`LEVEL_THRESHOLD` (3: ov
 renders of held-out materials did not separate 2-5, and the wood-plank sample's disc scores 4.6
 once its clipped pixels are filled; research/notes/2026-12-flash-leak.md). A map whose
 score is above it gets the bias profile subtracted (interpolated over the radius, 0 at its edge):
-the disc's level goes, the texture in it stays. Normals are left to the detail repair, and the
-level repair stands down where the surroundings read as metal (:data:`METAL_SURFACE`): there the
-highlight is the metal's own look, and a disc of bright base colour belongs to it.
+the disc's level goes, the texture in it stays. Normals are left to the detail repair. Metals are
+levelled too: their highlight belongs in the render, not in the base colour map (standing down
+where the surroundings read as metal left a disc a viewer sees on 12 of 76 over-exposed renders,
+levelling them on 6, with the disc's base-colour error and the metal kept unchanged;
+research/notes/2026-12-flash-leak.md).
 
 **Lost texture.** Where the photo clipped half the disk or more (:data:`CLIPPED_DISK_SHARE`), the
 maps there hold no evidence, and once the clipped pixels are brought into their surroundings'
@@ -62,7 +64,7 @@ from brdfgan.core.checks import check_shape
 from brdfgan.core.filtering import gaussian_blur, smoothstep
 from brdfgan.core.flash_geometry import hotspot_distance
 from brdfgan.core.seamless import MAP_GROUPS, MAP_NAMES, copy_error, local_contrast, map_scales
-from brdfgan.core.svbrdf import CHANNELS, METALLIC, check_single_maps, normalize_normal
+from brdfgan.core.svbrdf import CHANNELS, check_single_maps, normalize_normal
 
 # The disk whose detail is compared with its surroundings, as a fraction of the shorter side: the
 # marks of the shipped model span up to ~0.11 of the side (wood planks at 256²).
@@ -84,14 +86,13 @@ MATCH_OUTER = 2.0
 PATCH_DIRECTIONS = 16
 # The level check (module docstring): equal-area rings inside the radius, the reference ring in
 # radii (widened to LEVEL_REFERENCE_WIDE when the image cuts it to fewer than LEVEL_MIN_PIXELS),
-# the threshold on the score, and the metallic (smoothstep edges) at which surroundings read as metal.
+# and the threshold on the score.
 LEVEL_BINS = 12
 LEVEL_REFERENCE = (1.0, 1.5)
 LEVEL_REFERENCE_WIDE = 2.0
 LEVEL_MIN_PIXELS = 16
 LEVEL_WORKING_SIDE = 256
 LEVEL_THRESHOLD = 3.0  # module docstring
-METAL_SURFACE = (0.3, 0.6)
 LEVELLED_MAPS = ("basecolor", "roughness", "metallic")
 PATCH_DISTANCES = (2.6, 3.2, 3.8, 4.4)
 # The share of the scoring disk the photo must clip before a smooth disk counts as lost texture,
@@ -312,14 +313,12 @@ def fill_disk(
 class LevelBias:
     """The disc's bias profile (module docstring): the hotspot ``centre`` and ``radius`` in the
     maps' pixels, each channel's ``steps`` over the :data:`LEVEL_BINS` rings (map units),
-    ``scores`` per map of :data:`LEVELLED_MAPS`, and ``metal``, how much the reference ring reads as
-    metal (0-1)."""
+    and ``scores`` per map of :data:`LEVELLED_MAPS`."""
 
     centre: tuple[float, float]
     radius: float
     steps: Tensor  # (8, LEVEL_BINS)
     scores: dict[str, float]
-    metal: float
 
     def field(self, maps: Tensor) -> tuple[_Window, Tensor]:
         """The window around the disc and the bias of every channel at its pixels: the steps
@@ -370,8 +369,7 @@ def level_bias(maps: Tensor, centre: tuple[float, float], radius: float) -> Leve
     steps = torch.stack([pixels[:, ring].median(dim=-1).values - level for ring in rings], dim=-1)  # (8, K)
     relative = (steps.abs() / spread[:, None]).amax(dim=-1)  # (8,)
     scores = {name: float(relative[CHANNELS[name]].max()) for name in LEVELLED_MAPS}
-    metal = float(smoothstep(*METAL_SURFACE, level[METALLIC].max()))
-    return LevelBias((float(centre[0]), float(centre[1])), float(radius), steps, scores, metal)
+    return LevelBias((float(centre[0]), float(centre[1])), float(radius), steps, scores)
 
 
 def level_scores(maps: Tensor, centre: tuple[float, float], radius: float) -> dict[str, float]:
@@ -415,10 +413,10 @@ def repair_flash_mark(
     """The maps with the flash mark removed (module docstring), and what was found and done: first,
     given the highlight's ``radius`` in pixels (:func:`~brdfgan.core.clipped_fill.highlight_radius`
     of the photo), the disc's level taken out of the maps whose level score is above
-    ``level_threshold`` unless the surroundings read as metal (``None`` or 0: no level check, as
-    without a photo); then the patch copied into the maps whose detail score is above
-    ``threshold``, or, where ``clipped`` (the photo's clipped pixels) covers
-    :data:`CLIPPED_DISK_SHARE` of the disk, below ``1 / threshold`` (lost texture).
+    ``level_threshold`` (``None`` or 0: no level check, as without a photo); then the patch copied
+    into the maps whose detail score is above ``threshold``, or, where ``clipped`` (the photo's
+    clipped pixels) covers :data:`CLIPPED_DISK_SHARE` of the disk, below ``1 / threshold`` (lost
+    texture).
 
     Shape: ``(8, H, W)`` → ``(8, H, W)``; centre ``(x, y)`` in pixels; clipped ``(H, W)`` bool.
     """
@@ -431,7 +429,7 @@ def repair_flash_mark(
         raise ValueError(f"the level radius must be a finite number >= 0, got {radius}")
     bias = level_bias(maps, centre, radius) if radius > 0 else None
     levelled: tuple[str, ...] = ()
-    if bias is not None and bias.metal < 0.5:
+    if bias is not None:
         levelled = tuple(name for name in LEVELLED_MAPS if bias.scores[name] > level_threshold)
     levelled_maps = level_disc(maps, bias, levelled) if bias is not None and levelled else maps
     scores = leak_scores(levelled_maps, centre)
