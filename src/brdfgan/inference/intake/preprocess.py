@@ -491,8 +491,9 @@ def _hotspot_stats(
         stats["clipped_fraction"] = fraction
         if fraction > CLIPPED_WARNING_FRACTION:
             warnings.append(
-                f"flash hotspot is clipped ({fraction:.1%} of pixels saturated): the highlight's shape "
-                f"and the roughness estimate suffer; lower the exposure"
+                f"flash hotspot is clipped ({fraction:.1%} of the pixels within {CLIP_DISC_FRACTION:.0%} "
+                f"of the crop's side of it saturated): the highlight's shape and the roughness "
+                f"estimate suffer; lower the exposure"
             )
     return stats
 
