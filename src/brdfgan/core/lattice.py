@@ -723,6 +723,18 @@ class Perspective:
             "spread_after_px": self.spread_after,
         }
 
+    def then(self, rest: Perspective) -> Perspective:
+        """This perspective and ``rest``, measured on the maps this one rectified, as one: two
+        homographies about one centre compose by adding their ``g`` (``q = d / (1 + (g₁ + g₂)·d)``);
+        the spread before is this one's, the spread after the second fit's."""
+        return Perspective(
+            g=(self.g[0] + rest.g[0], self.g[1] + rest.g[1]),
+            centre=self.centre,
+            keystone=(self.keystone[0] + rest.keystone[0], self.keystone[1] + rest.keystone[1]),
+            spread_before=self.spread_before,
+            spread_after=rest.spread_after,
+        )
+
     @classmethod
     def from_json(cls, record: dict[str, Any]) -> Perspective:
         return cls(
@@ -945,8 +957,7 @@ def refine_perspective(maps: Tensor, perspective: Perspective) -> tuple[Perspect
     through the result and their lattice: where the first fit over- or undershoots by more than
     :data:`MIN_KEYSTONE` (a tread plate at 45°: 2.4 % for the truth's 2 %), the rectified maps show
     the rest, and since two such homographies about one centre compose by adding their ``g``
-    (``q = d / (1 + (g₁ + g₂)·d)``), the sum is returned (its spread after being the second fit's);
-    else ``perspective`` as it is.
+    (:meth:`Perspective.then`), the sum is returned; else ``perspective`` as it is.
 
     Shape: ``(8, H, W)`` and their :class:`Perspective` → :class:`Perspective`, ``(8, H, W)``,
     :class:`Lattice`.
@@ -956,13 +967,7 @@ def refine_perspective(maps: Tensor, perspective: Perspective) -> tuple[Perspect
     rest = find_perspective(rectified, straight)
     if rest is None:
         return perspective, rectified, straight
-    combined = Perspective(
-        g=(perspective.g[0] + rest.g[0], perspective.g[1] + rest.g[1]),
-        centre=perspective.centre,
-        keystone=(perspective.keystone[0] + rest.keystone[0], perspective.keystone[1] + rest.keystone[1]),
-        spread_before=perspective.spread_before,
-        spread_after=rest.spread_after,
-    )
+    combined = perspective.then(rest)
     rectified = rectify(maps, combined)
     return combined, rectified, find_lattice(rectified)
 
