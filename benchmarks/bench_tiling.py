@@ -189,9 +189,9 @@ def _large(maps: Tensor, frame: Tensor, photo: Tensor | None, side: int) -> dict
     flash_removal = None
     if photo is not None:
         large_photo = F.interpolate(photo[None].float(), size=(side, side), mode="bilinear")[0].clamp(0, 1)
-        twins = tile_pattern(large).flash_twins()
+        lattice, stripes = tile_pattern(large).flash_twins()
         step = time.process_time()
-        remove_flash(large, large_photo, large_frame, **twins)
+        remove_flash(large, large_photo, large_frame, lattice=lattice, stripes=stripes)
         flash_removal = time.process_time() - step
     return {
         "seconds": wall,

@@ -271,8 +271,8 @@ VARIANTS: dict[str, Variant] = {
 def tileable_removal(maps: Tensor, photo: Tensor, frame: Tensor) -> Tensor:
     """:func:`remove_flash` as ``--tileable`` runs it (``inference.pipeline.finish_maps``): the
     maps' lattice or stripes found first, the lost texture patched."""
-    twins = tile_pattern(maps).flash_twins()
-    return remove_flash(maps, photo, frame, **twins, restore_texture=True)[0]
+    lattice, stripes = tile_pattern(maps).flash_twins()
+    return remove_flash(maps, photo, frame, lattice=lattice, stripes=stripes, restore_texture=True)[0]
 
 
 def _average(values: Sequence[float]) -> float:

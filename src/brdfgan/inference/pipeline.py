@@ -45,6 +45,7 @@ from brdfgan.core.lattice import (
     CellTiling,
     Lattice,
     Perspective,
+    Vector,
     cell_match,
     central_lattice,
     choose_cells,
@@ -384,11 +385,12 @@ class TilePattern:
     def stripes_searched(self) -> bool:
         return not self.lattice.periodic
 
-    def flash_twins(self) -> dict[str, Any]:
-        """:func:`~brdfgan.core.clipped_fill.remove_flash`'s ``lattice`` or ``stripes`` argument."""
+    def flash_twins(self) -> tuple[tuple[Vector, Vector] | None, Vector | None]:
+        """:func:`~brdfgan.core.clipped_fill.remove_flash`'s ``lattice`` and ``stripes`` arguments:
+        the lattice's vectors where it is periodic, else the stripes' direction, else neither."""
         if self.lattice.periodic and self.lattice.vectors is not None:
-            return {"lattice": self.lattice.vectors}
-        return {"stripes": self.stripes.along} if self.stripes is not None else {}
+            return self.lattice.vectors, None
+        return None, self.stripes.along if self.stripes is not None else None
 
 
 def tile_pattern(maps: Tensor) -> TilePattern:
@@ -710,12 +712,14 @@ def finish_maps(
     prepared, frame = reference.prepared, reference.flash_frame
     with clock("flash"):
         pattern = tile_pattern(maps) if tileable else None
+        lattice, stripes = pattern.flash_twins() if pattern is not None else (None, None)
         maps, removal = remove_flash(
             maps,
             prepared.photo,
             frame,
             clipped=input_clipped(reference.photo, prepared),
-            **(pattern.flash_twins() if pattern is not None else {}),
+            lattice=lattice,
+            stripes=stripes,
             restore_texture=tileable,
         )
     if pattern is None:
