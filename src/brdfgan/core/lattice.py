@@ -633,13 +633,13 @@ def find_lattice(maps: Tensor) -> Lattice:
     rhos = group_autocorrelations(features)
     both = _lattice_in(_mean_rho(rhos, features), image_size, factor, ALL_FEATURES)
     best = both
-    # One group alone (a constant group leaves the other's lattice as it is: nothing to compare).
-    singles = [(name, groups[0]) for name, groups in FEATURE_CHOICES.items() if len(groups) == 1]
-    for choice, group in singles:
-        rho = rhos[group]
-        if rho is None or any(other is None for other in rhos):
+    present = [rho for rho in rhos if rho is not None]
+    if len(present) < len(rhos):
+        return best  # a constant group leaves the other's lattice as it is: nothing to compare
+    for choice, groups in FEATURE_CHOICES.items():
+        if len(groups) != 1:
             continue
-        alone = _lattice_in(rho, image_size, factor, choice)
+        alone = _lattice_in(present[groups[0]], image_size, factor, choice)
         standing_out = alone.periodic and alone.score >= ONE_GROUP_FACTOR * max(both.score, 0.0)
         if standing_out and alone.score > best.score:
             best = alone
