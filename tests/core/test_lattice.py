@@ -19,6 +19,8 @@ from brdfgan.core.lattice import (
     MIN_BAND,
     MIN_PERIOD,
     RETRY_KEYSTONE,
+    SELF_MATCH,
+    SELF_MATCH_GAIN,
     WINDOW_SHARE,
     CellTiling,
     Lattice,
@@ -315,6 +317,31 @@ def test_a_square_on_lattice_is_measured_in_one_grid_of_windows(monkeypatch: pyt
     monkeypatch.setattr(lattice_module, "_perspective_in_windows", counted)
     assert find_perspective(maps, find_lattice(maps)) is None
     assert calls == [WINDOW_SHARE[0]]
+
+
+@pytest.mark.parametrize("working_side", [256, 96])
+def test_a_lattice_of_two_cells_a_side_has_its_perspective_fitted_to_the_whole_maps(
+    monkeypatch: pytest.MonkeyPatch, working_side: int
+) -> None:
+    # Cells of 88 px in 192² (a checkerboard of marble slabs two to a crop): no window holds two
+    # cells, so the maps' match with themselves one lattice vector on measures the keystone; also
+    # where the maps are larger than the fit's working side (shrunk first, as 2048² maps are).
+    monkeypatch.setattr(lattice_module, "SELF_MATCH_SIDE", working_side)
+    truth = (0.02, -0.015)
+    g = (truth[0] / (SIZE / 2), truth[1] / (SIZE / 2))
+    cells = (polar(88.0, 30.0), polar(88.0, 120.0))
+    maps = lattice_maps(*cells, perspective=g, seed=3)
+    lattice = find_lattice(maps)
+    perspective = find_perspective(maps, lattice)
+    assert perspective is not None and perspective.method == SELF_MATCH
+    assert perspective.keystone == pytest.approx(truth, abs=0.003)
+    assert perspective.spread_after <= SELF_MATCH_GAIN * perspective.spread_before
+    assert Perspective.from_json(json.loads(json.dumps(perspective.to_json()))) == perspective
+    # Fitted to the whole maps, it is not measured a second time.
+    assert refine_perspective(maps, perspective)[0] == perspective
+    # Square-on, the same lattice shows no perspective.
+    square_on = lattice_maps(*cells, seed=3)
+    assert find_perspective(square_on, find_lattice(square_on)) is None
 
 
 def test_a_perspective_that_overshoots_is_measured_again_on_the_maps_it_rectifies() -> None:
