@@ -27,6 +27,7 @@ from brdfgan.core.delit import flash_render, flat_flash_falloff
 from brdfgan.core.exposure import auto_exposure_scale
 from brdfgan.core.filtering import gaussian_blur
 from brdfgan.core.flash_geometry import centred_flash_frame, hotspot_distance
+from brdfgan.core.flash_mark import mark_radius
 from brdfgan.core.svbrdf import flat_maps, join_maps, srgb_to_linear, validate_maps
 
 SIZE = 128
@@ -338,6 +339,20 @@ def test_remove_flash_takes_a_grey_disc_and_its_metal_out_of_a_clipped_render() 
     document = json.loads(json.dumps(record.to_json()))
     assert document["highlight_radius"] == pytest.approx(radius)
     assert document["clipped_fill"]["clipped_fraction"] > 0
+
+
+def test_a_metallic_disc_wider_than_a_narrow_highlight_is_levelled_out_to_the_marks_radius() -> None:
+    # A glossy paint's highlight reaches 8 px; the network's metallic disc spans the mark's radius.
+    truth = wood(seed=5)
+    truth[6] = 0.1
+    photo, frame = clipped_render(truth, 1.0)
+    radius, mark = highlight_radius(photo, frame), mark_radius(SIZE, SIZE)
+    assert 0.0 < radius < 0.75 * mark
+    network = truth.clone()
+    network[7] = torch.where(disc(mark), 0.6, 0.0)
+    maps, record = remove_flash(network, photo, frame)
+    assert record.mark.level_radius == mark and "metallic" in record.mark.levelled
+    assert float(maps[7, disc(mark)].mean()) < 0.05
 
 
 def test_bad_shapes_are_refused() -> None:

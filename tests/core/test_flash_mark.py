@@ -24,6 +24,7 @@ from brdfgan.core.flash_mark import (
     leak_scores,
     level_scores,
     mark_radius,
+    patch_candidates,
     repair_flash_mark,
 )
 from brdfgan.core.svbrdf import join_maps, normalize_normal, split_maps, validate_maps
@@ -94,6 +95,26 @@ def test_a_hotspot_mark_is_detected_and_repaired_where_it_leaked(centre: tuple[f
     assert torch.equal(repaired[6:8], marked[6:8])
     outside = hotspot_distance(torch.tensor([centre]), SIZE, SIZE)[0] > REPAIR_OUTER * mark.radius
     assert torch.equal(repaired[:, outside], marked[:, outside])
+
+
+def test_a_patch_that_would_read_as_a_disc_gives_way_to_the_next_best() -> None:
+    # A terrazzo chip as large as the disc where the best patch comes from: copied onto the hotspot
+    # it is a bright disc of its own, which a tile would repeat. Where the level is checked, the next
+    # best patch is taken; without a level check (no highlight), the best as before.
+    centre = (64.0, 60.0)
+    radius = mark_radius(SIZE, SIZE)
+    marked = with_mark(surface(), centre)
+    dy, dx = patch_candidates(marked, centre)[0]
+    chip = hotspot_distance(torch.tensor([(centre[0] + dx, centre[1] + dy)]), SIZE, SIZE)[0] <= radius
+    marked[0:3] = torch.where(chip, torch.full_like(marked[0:3], 0.95), marked[0:3])
+    assert patch_candidates(marked, centre)[0] == (dy, dx)
+    unchecked, plain = repair_flash_mark(marked, centre)
+    assert plain.patch_offset == (dy, dx)
+    assert level_scores(unchecked, centre, radius)["basecolor"] > LEVEL_THRESHOLD
+    repaired, mark = repair_flash_mark(marked, centre, radius=radius)
+    assert mark.patch_offset not in (None, (dy, dx)) and "basecolor" in mark.repaired
+    assert level_scores(repaired, centre, radius)["basecolor"] <= LEVEL_THRESHOLD
+    assert leak_scores(repaired, centre)["basecolor"] < LEAK_THRESHOLD
 
 
 def test_clean_maps_are_left_alone() -> None:

@@ -533,8 +533,9 @@ def remove_flash(
     filled (:func:`fill_clipped`, ``clipped`` defaulting to :func:`clipped_mask` of the photo; with
     a ``lattice`` (two vectors ``(dx, dy)``) or ``stripes`` (their direction ``(dx, dy)``), the
     hotspot's disc too, from its twins elsewhere in the pattern, :class:`Twins`), the
-    hotspot's disc levelled and a leaked blotch patched within the highlight's radius
-    (:func:`~brdfgan.core.flash_mark.repair_flash_mark`), and thin dark features' metal lowered
+    hotspot's disc levelled within the flash mark's radius or the highlight's, whichever is larger,
+    and a leaked blotch patched (:func:`~brdfgan.core.flash_mark.repair_flash_mark`), and thin dark
+    features' metal lowered
     (:func:`suppress_false_metal`). A photo with nothing clipped, no highlight and no thin dark
     feature under metal returns the maps unchanged, bit for bit.
 
@@ -572,9 +573,16 @@ def remove_flash(
         clipped = clipped & (distance > reach)
     fill = fill_clipped(maps, clipped, twins=twins)
     hotspot = (float(frame[0, 0]), float(frame[0, 1]))
-    repaired, mark = repair_flash_mark(
-        fill.maps, hotspot, radius=radius, clipped=clipped if restore_texture else None
+    # Where the photo shows a highlight, the disc's level is read over the mark's radius or the
+    # highlight's, whichever is larger: the network's marks span up to a tenth of the side whatever
+    # the highlight's reach (a metallic disc past a glossy paint's narrow highlight). Without one,
+    # nothing is levelled: a plain tile in grout would read as a disc.
+    level_radius = max(mark_radius(*maps.shape[-2:]), radius) if radius > 0 else 0.0
+    # Thin dark features' metal first: lowered in the ring around the disc, it would leave the
+    # disc's own metal standing out of a level that was read before.
+    lowered_maps, _ = suppress_false_metal(fill.maps, photo)
+    lowered = float(((fill.maps[METALLIC] - lowered_maps[METALLIC]) > 1.0 / 255.0).float().mean())
+    result, mark = repair_flash_mark(
+        lowered_maps, hotspot, radius=level_radius, clipped=clipped if restore_texture else None
     )
-    result, _ = suppress_false_metal(repaired, photo)
-    lowered = float(((repaired[METALLIC] - result[METALLIC]) > 1.0 / 255.0).float().mean())
     return result, FlashRemoval(fill, radius, mark, lowered)

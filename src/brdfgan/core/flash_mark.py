@@ -15,7 +15,9 @@ with a score above :data:`LEAK_THRESHOLD` has leaked.
 **Level** (:func:`level_scores`). A clipped hotspot more often leaves a *smooth* disc: the base
 colour greyed and lightened, the metallic raised, the roughness lowered, with the texture still
 visible through it (the wood-plank sample: detail scores 0.35-1.21, a disc every viewer sees). Per
-map, the median of each of :data:`LEVEL_BINS` equal-area rings inside the highlight's radius minus
+map, the median of each of :data:`LEVEL_BINS` equal-area rings inside the disc's radius (the
+highlight's reach or the mark's radius, whichever is larger:
+:func:`~brdfgan.core.clipped_fill.remove_flash`) minus
 the median of the reference ring outside it (:data:`LEVEL_REFERENCE` radii) is the disc's *bias
 profile*; its largest step over the reference's spread (1.4826 × its median absolute deviation,
 plus one 8-bit level) is the map's level score. Ring medians ignore the texture, so a stationary
@@ -46,7 +48,10 @@ surroundings best match the disk's surroundings (the ring out to :data:`MATCH_OU
 maps together, normalised per map as the seam cuts do), added with the mean level difference
 between the two surroundings so that the patch joins at the right brightness. Displacements whose
 patch would leave the image are skipped, so a hotspot near an edge takes its patch from inside.
-One displacement serves every leaked map, which stay aligned.
+One displacement serves every leaked map, which stay aligned. Where the level is checked, a patch
+that would itself read as a disc (a terrazzo chip as large as the disc: a level score of 40 after
+the patch on a validation render where the smooth fill scored 2.8) gives way to the next best
+(:func:`patch_disk`).
 """
 
 from __future__ import annotations
@@ -95,6 +100,8 @@ LEVEL_WORKING_SIDE = 256
 LEVEL_THRESHOLD = 3.0  # module docstring
 LEVELLED_MAPS = ("basecolor", "roughness", "metallic")
 PATCH_DISTANCES = (2.6, 3.2, 3.8, 4.4)
+# The best patches tried where the chosen one would read as a disc itself (patch_disk).
+PATCH_TRIES = 8
 # The share of the scoring disk the photo must clip before a smooth disk counts as lost texture,
 # and the maps whose texture can be lost: a metallic map is mostly plain (0 or 1), and a patch of it
 # from elsewhere brings metal into a dielectric disc (measured: the OOD renders' disc metal 0.07 →
@@ -239,12 +246,12 @@ class _Window:
         return fits_rows.view(-1, 1) & fits_columns.view(1, -1)
 
 
-def find_patch(maps: Tensor, centre: tuple[float, float]) -> tuple[int, int] | None:
-    """The displacement ``(dy, dx)`` of the patch that best replaces the hotspot disk (module
-    docstring): its repaired disk's sources inside the image; the least mismatch between its
-    surroundings and the disk's, plus how much busier its inside is than the disk's surroundings
-    (a patch must not bring a grout line or a plank edge into a plain area). ``None`` when no
-    candidate fits inside the image.
+def patch_candidates(maps: Tensor, centre: tuple[float, float]) -> list[tuple[int, int]]:
+    """The displacements ``(dy, dx)`` of the patches that could replace the hotspot disk (module
+    docstring), best first: their repaired disk's sources inside the image; ranked by the mismatch
+    between their surroundings and the disk's, plus how much busier their inside is than the disk's
+    surroundings (a patch must not bring a grout line or a plank edge into a plain area). Empty when
+    no candidate fits inside the image.
 
     Shape: maps ``(8, H, W)``.
     """
@@ -258,7 +265,7 @@ def find_patch(maps: Tensor, centre: tuple[float, float]) -> tuple[int, int] | N
     contrast = local_contrast(work, scales, MAP_GROUPS)[None]
     around = window.read(work)
     calm = float(window.read(contrast)[0][ring].mean()) if ring.any() else 0.0
-    best: tuple[float, tuple[int, int]] | None = None
+    scored: list[tuple[float, tuple[int, int]]] = []
     for reach in PATCH_DISTANCES:
         for step in range(PATCH_DIRECTIONS):
             angle = 2.0 * math.pi * step / PATCH_DIRECTIONS
@@ -271,10 +278,40 @@ def find_patch(maps: Tensor, centre: tuple[float, float]) -> tuple[int, int] | N
                 copy_error(window.read(work, dy, dx), around, scales, MAP_GROUPS)[matched].mean()
             )
             busier = max(0.0, float(window.read(contrast, dy, dx)[0][disk].mean()) - calm)
-            score = mismatch + BUSY_WEIGHT * busier
-            if best is None or score < best[0]:
-                best = (score, (dy, dx))
-    return best[1] if best is not None else None
+            scored.append((mismatch + BUSY_WEIGHT * busier, (dy, dx)))
+    return [offset for _, offset in sorted(scored, key=lambda candidate: candidate[0])]
+
+
+def patch_disk(
+    maps: Tensor,
+    centre: tuple[float, float],
+    names: tuple[str, ...],
+    level_radius: float,
+    level_threshold: float,
+) -> tuple[Tensor, tuple[int, int] | None]:
+    """The maps ``names`` with the hotspot disk replaced by the best patch (:func:`patch_candidates`,
+    :func:`fill_disk`) that does not itself read as a disc: where the disc's level is checked
+    (``level_radius`` > 0), a patch whose ring medians step above ``level_threshold`` in a map the
+    check reads (a terrazzo chip as large as the disc, copied onto the hotspot) gives way to the next of
+    the :data:`PATCH_TRIES` best, and where every one does, the one that steps least is taken;
+    with the displacement used (``None``: no candidate fits, the maps unchanged).
+
+    Shape: ``(8, H, W)`` → ``(8, H, W)``.
+    """
+    candidates = patch_candidates(maps, centre)
+    if not candidates:
+        return maps, None
+    checked = tuple(name for name in names if name in LEVELLED_MAPS) if level_radius > 0 else ()
+    tried: list[tuple[float, Tensor, tuple[int, int]]] = []
+    for offset in candidates[:PATCH_TRIES] if checked else candidates[:1]:
+        patched = fill_disk(maps, centre, offset, names)
+        scores = level_scores(patched, centre, level_radius) if checked else {}
+        step = max((scores[name] for name in checked), default=0.0)
+        if step <= level_threshold:
+            return patched, offset
+        tried.append((step, patched, offset))
+    _, patched, offset = min(tried, key=lambda trial: trial[0])
+    return patched, offset
 
 
 def fill_disk(
@@ -440,8 +477,11 @@ def repair_flash_mark(
         if scores[name] > threshold
         or (share >= CLIPPED_DISK_SHARE and name in TEXTURED_MAPS and scores[name] < 1.0 / threshold)
     )
-    offset = find_patch(levelled_maps, centre) if leaked else None
-    repaired = fill_disk(levelled_maps, centre, offset, leaked) if offset is not None else levelled_maps
+    repaired, offset = (
+        patch_disk(levelled_maps, centre, leaked, radius, level_threshold)
+        if leaked
+        else (levelled_maps, None)
+    )
     record = FlashMark(
         centre=(float(centre[0]), float(centre[1])),
         radius=mark_radius(height, width),
