@@ -355,6 +355,22 @@ def test_a_metallic_disc_wider_than_a_narrow_highlight_is_levelled_out_to_the_ma
     assert float(maps[7, disc(mark)].mean()) < 0.05
 
 
+def test_a_darker_disc_around_a_photo_without_a_highlight_is_levelled() -> None:
+    # A matte surface (or a glossy tile's pinpoint glint) shows no highlight ring, but the network
+    # may still darken the base colour around the hotspot out to the mark's radius.
+    truth = wood(seed=5)
+    truth[6] = 1.0
+    photo, frame = clipped_render(truth, 0.0)
+    assert highlight_radius(photo, frame) == 0.0
+    inside = disc(mark_radius(SIZE, SIZE))
+    network = truth.clone()
+    network[0:3] = torch.where(inside, 0.8 * truth[0:3], truth[0:3])
+    maps, record = remove_flash(network, photo, frame)
+    assert record.mark.levelled == ("basecolor",)
+    error = lambda m: float((m[0:3, inside] - truth[0:3, inside]).abs().mean())  # noqa: E731
+    assert error(maps) < 0.2 * error(network)
+
+
 def test_bad_shapes_are_refused() -> None:
     maps = wood()
     with pytest.raises(ValueError, match="clipped"):

@@ -533,11 +533,11 @@ def remove_flash(
     filled (:func:`fill_clipped`, ``clipped`` defaulting to :func:`clipped_mask` of the photo; with
     a ``lattice`` (two vectors ``(dx, dy)``) or ``stripes`` (their direction ``(dx, dy)``), the
     hotspot's disc too, from its twins elsewhere in the pattern, :class:`Twins`), the
-    hotspot's disc levelled within the flash mark's radius or the highlight's, whichever is larger,
-    and a leaked blotch patched (:func:`~brdfgan.core.flash_mark.repair_flash_mark`), and thin dark
-    features' metal lowered
-    (:func:`suppress_false_metal`). A photo with nothing clipped, no highlight and no thin dark
-    feature under metal returns the maps unchanged, bit for bit.
+    thin dark features' metal lowered (:func:`suppress_false_metal`), then the hotspot's disc
+    levelled within the flash mark's radius or the highlight's, whichever is larger, and a leaked
+    blotch patched (:func:`~brdfgan.core.flash_mark.repair_flash_mark`). Maps of a photo with nothing
+    clipped and no thin dark feature under metal, with no disc or blotch around the hotspot, come
+    back unchanged, bit for bit.
 
     ``restore_texture`` (``--tileable``): a disc whose texture the clipping took gets a patch of
     the maps' own texture (:func:`~brdfgan.core.flash_mark.repair_flash_mark`'s lost texture). A
@@ -573,11 +573,11 @@ def remove_flash(
         clipped = clipped & (distance > reach)
     fill = fill_clipped(maps, clipped, twins=twins)
     hotspot = (float(frame[0, 0]), float(frame[0, 1]))
-    # Where the photo shows a highlight, the disc's level is read over the mark's radius or the
-    # highlight's, whichever is larger: the network's marks span up to a tenth of the side whatever
-    # the highlight's reach (a metallic disc past a glossy paint's narrow highlight). Without one,
-    # nothing is levelled: a plain tile in grout would read as a disc.
-    level_radius = max(mark_radius(*maps.shape[-2:]), radius) if radius > 0 else 0.0
+    # The disc's level is read over the mark's radius or the highlight's, whichever is larger: the
+    # network's marks span up to a tenth of the side whatever the highlight's reach (a metallic disc
+    # past a glossy paint's narrow highlight; a darker disc around a glossy tile's pinpoint glint,
+    # whose highlight reaches no ring at all).
+    level_radius = max(mark_radius(*maps.shape[-2:]), radius)
     # Thin dark features' metal first: lowered in the ring around the disc, it would leave the
     # disc's own metal standing out of a level that was read before.
     lowered_maps, _ = suppress_false_metal(fill.maps, photo)
