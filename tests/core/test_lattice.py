@@ -344,6 +344,19 @@ def test_a_lattice_of_two_cells_a_side_has_its_perspective_fitted_to_the_whole_m
     assert find_perspective(square_on, find_lattice(square_on)) is None
 
 
+def test_a_windows_perspective_completed_by_a_self_match_keeps_its_own_spreads() -> None:
+    # A windows' spread (px) and a self-match residual do not compare: the composition keeps the
+    # first fit's pair and names both methods.
+    windows = Perspective((1e-4, 0.0), (96.0, 96.0), (0.0096, 0.0), 1.2, 0.3)
+    rest = Perspective((2e-5, 1e-5), (96.0, 96.0), (0.00192, 0.00096), 0.5, 0.4, method=SELF_MATCH)
+    both = windows.then(rest)
+    assert both.g == pytest.approx((1.2e-4, 1e-5)) and both.keystone == pytest.approx((0.01152, 0.00096))
+    assert (both.spread_before, both.spread_after) == (1.2, 0.3)
+    assert both.method == "windows, then self-match"
+    assert Perspective.from_json(json.loads(json.dumps(both.to_json()))) == both
+    assert windows.then(windows).spread_after == 0.3 and windows.then(windows).method == "windows"
+
+
 def test_a_perspective_that_overshoots_is_measured_again_on_the_maps_it_rectifies() -> None:
     truth = (0.02, -0.015)
     g = (truth[0] / (SIZE / 2), truth[1] / (SIZE / 2))

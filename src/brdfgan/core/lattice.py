@@ -724,8 +724,8 @@ class Perspective:
     per pixel; ``keystone`` the scale change from the centre to the right and bottom edges
     (``g · half side``); how it was measured (``method``): from the lattices of a grid of windows
     (:data:`WINDOWS`; ``spread_before`` and ``spread_after`` their vectors' RMS distance (px) from
-    one lattice and from the model's; the stripes' frequencies for
-    :func:`~brdfgan.core.stripes.find_stripe_perspective`) or from the whole maps' match with
+    one lattice and from the model's; for :func:`~brdfgan.core.stripes.find_stripe_perspective`
+    the windows' stripe frequencies', in pixels of the period) or from the whole maps' match with
     themselves (:data:`SELF_MATCH`; the spreads are that match's residual without the keystone and
     with it, :func:`fit_self_match`)."""
 
@@ -756,14 +756,17 @@ class Perspective:
     def then(self, rest: Perspective) -> Perspective:
         """This perspective and ``rest``, measured on the maps this one rectified, as one: two
         homographies about one centre compose by adding their ``g`` (``q = d / (1 + (g₁ + g₂)·d)``);
-        the spread before is this one's, the spread after the second fit's."""
+        the spread before is this one's, the spread after the second fit's where both were measured
+        alike (else this one's: a windows' spread in pixels and a self-match residual do not
+        compare), the method both (``"windows, then self-match"``)."""
+        alike = rest.method == self.method
         return Perspective(
             g=(self.g[0] + rest.g[0], self.g[1] + rest.g[1]),
             centre=self.centre,
             keystone=(self.keystone[0] + rest.keystone[0], self.keystone[1] + rest.keystone[1]),
             spread_before=self.spread_before,
-            spread_after=rest.spread_after,
-            method=self.method,
+            spread_after=rest.spread_after if alike else self.spread_after,
+            method=self.method if alike else f"{self.method}, then {rest.method}",
         )
 
     @classmethod
@@ -825,9 +828,11 @@ def fit_perspective(centres: Tensor, vectors: Tensor) -> tuple[Tensor, Tensor, f
 def find_perspective(maps: Tensor, lattice: Lattice) -> Perspective | None:
     """The maps' mild perspective from how their lattice changes across them (module docstring,
     step 3b), or ``None``: no lattice that is periodic or just short of it
-    (:attr:`Lattice.ambiguous`), too few cells in a window, a window whose lattice
-    is not the maps', a keystone below :data:`MIN_KEYSTONE` or above :data:`MAX_KEYSTONE`, or a
-    fit that does not bring the windows' lattices together. The windows are the smallest that hold
+    (:attr:`Lattice.ambiguous`), a keystone below :data:`MIN_KEYSTONE` or above
+    :data:`MAX_KEYSTONE`, or a fit that does not bring the windows' lattices together; where no
+    window holds enough cells, or the windows saw a keystone that no fit of theirs explains (a
+    window whose lattice is not the maps' among them), the whole maps' match with themselves
+    decides instead (:func:`self_match_perspective`). The windows are the smallest that hold
     :data:`MIN_WINDOW_CELLS` cells; where those give no perspective, the largest
     (:data:`WINDOW_SHARE`) are tried: a window of two or three cells sees few of the lattice's
     peaks, and its lattice can be a pixel off, as much as a 2 % keystone moves it (a scanned tile
@@ -1023,10 +1028,11 @@ def fit_self_match(features: Tensor, start: Tensor) -> tuple[Tensor, Tensor, flo
 def self_match_perspective(
     features: Tensor, factor: Tensor, start: Tensor, size: tuple[int, int]
 ) -> Perspective | None:
-    """:func:`find_perspective` where no window holds enough cells: the perspective that makes the
-    whole maps match themselves one lattice vector on (:func:`fit_self_match`, at most
-    :data:`SELF_MATCH_SIDE` a side), kept where it leaves at most :data:`SELF_MATCH_GAIN` of the
-    residual without it and its keystone is mild (:func:`perspective_of_fit`); in the maps' pixels
+    """:func:`find_perspective` where no window holds enough cells or no grid of windows agrees:
+    the perspective that makes the whole maps match themselves one lattice vector on
+    (:func:`fit_self_match`, at most :data:`SELF_MATCH_SIDE` a side), kept where it leaves at most
+    :data:`SELF_MATCH_GAIN` of the residual without it and its keystone is mild
+    (:func:`perspective_of_fit`); in the maps' pixels
     (``size`` ``(H, W)``, ``factor`` the maps' pixels per feature pixel, ``start`` the lattice
     vectors in the features' pixels).
 
