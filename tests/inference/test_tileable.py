@@ -144,6 +144,22 @@ def test_a_lattice_whose_cells_do_not_fit_keeps_the_cut(monkeypatch: pytest.Monk
     assert round_trip(record)["lattice"] is not None
 
 
+def test_a_diagonal_lattice_too_turned_for_whole_cells_names_the_flag_that_fits_them(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Two cells a side, 20° off the axes (a checkerboard of slabs at 45°, the phone turned 25°): no
+    # whole cells within 15° of the frame, one once the pattern is turned onto its own axes.
+    maps = noise_maps(5)
+    turned = Lattice((polar(90.0, 20.0), polar(90.0, 110.0)), 0.3, True, notes="2-D lattice")
+    monkeypatch.setattr(pipeline, "find_lattice", lambda _: turned)
+    tiled, record = make_tileable(maps, HOTSPOT)
+    assert torch.equal(tiled, todays_tile(maps)) and record.cells is None
+    assert record.note is not None and "within 15° of their axes" in record.note
+    assert "--align-pattern turns the pattern onto its own axes, where 1 whole cell(s) fit" in record.note
+    _, with_flag = make_tileable(maps, HOTSPOT, align_pattern=True)
+    assert with_flag.cells is not None and with_flag.cells.aligned and with_flag.note is None
+
+
 def test_stripes_are_tiled_by_whole_periods_across_them_and_recorded() -> None:
     maps = planks(11.3, 30.0)
     assert not find_lattice(maps).periodic

@@ -40,6 +40,7 @@ from brdfgan.core.flash_mark import FlashMark, repair_flash_mark
 from brdfgan.core.lattice import (
     ALL_FEATURES,
     MAX_STRETCH,
+    MAX_TURN_DEG,
     MIN_CELL_MATCH,
     PROMINENCE_THRESHOLD,
     CellTiling,
@@ -446,7 +447,7 @@ def make_tileable(
             repaired, lattice, cells = rectified, straight, straight_cells
         else:
             perspective = None
-    note = _lattice_note(lattice, cells, align_pattern)
+    note = _lattice_note(lattice, cells, align_pattern, (height, width))
     stripes = None
     # Cells that do not match each other (setts whose joints wander along their rows) keep nothing
     # whole; where the maps have stripes, their rows are the pattern to keep.
@@ -529,16 +530,33 @@ def _stripes_note(lattice: Lattice, stripes: Stripes, match: float | None = None
     return None
 
 
-def _lattice_note(lattice: Lattice, cells: CellTiling | None, align_pattern: bool) -> str | None:
+def _lattice_note(
+    lattice: Lattice, cells: CellTiling | None, align_pattern: bool, size: tuple[int, int]
+) -> str | None:
     """The one line ``material.json`` (and the run's warnings) get where the lattice decision is worth a
-    look: an ambiguous score, a lattice whose cells do not fit, ``--align-pattern`` with nothing
-    to align. ``None`` otherwise."""
+    look: an ambiguous score, a lattice whose cells do not fit (with, where they would fit turned
+    onto the pattern's own axes, the flag that does it), ``--align-pattern`` with nothing to align.
+    ``None`` otherwise. ``size``: the maps' ``(H, W)``."""
     score = f"score {lattice.score:.3f}, threshold {PROMINENCE_THRESHOLD}"
     if lattice.periodic and cells is None:
-        return (
-            f"a lattice was found ({score}) but no whole number of its cells fits the maps with a "
-            f"stretch of at most {MAX_STRETCH}: tiled by the minimum-error cut"
+        note = (
+            f"a lattice was found ({score}) but no whole number of its cells fits the maps within "
+            f"{MAX_TURN_DEG:g}° of their axes and a stretch of at most {MAX_STRETCH}: tiled by the "
+            "minimum-error cut"
         )
+        # A pattern whose cells all lie about 15° or more off the axes (a diagonal grid turned by
+        # a phone) fits once turned onto its own axes, which only the user may ask for.
+        aligned = (
+            None
+            if align_pattern or lattice.vectors is None
+            else choose_cells(lattice.vectors, *size, align=True)
+        )
+        if aligned is not None:
+            note += (
+                f"; --align-pattern turns the pattern onto its own axes, where {aligned.cells} "
+                "whole cell(s) fit"
+            )
+        return note
     if lattice.ambiguous:
         path = "by whole lattice cells" if cells is not None else "by the minimum-error cut"
         return f"the pattern is ambiguously periodic ({score}): tiled {path}"
