@@ -290,14 +290,22 @@ def detection_features(maps: Tensor) -> tuple[Tensor, Tensor]:
 
     Shape: ``(8, H, W)`` → ``(3, h, w)``, ``(2,)``.
     """
-    height, width = maps.shape[-2:]
-    features = pattern_features(maps.detach().double())
-    scale = max(height, width) / DETECT_SIDE
+    return area_shrink(pattern_features(maps.detach().double()), DETECT_SIDE)
+
+
+def area_shrink(image: Tensor, side: int) -> tuple[Tensor, Tensor]:
+    """``image`` area-averaged to at most ``side`` pixels a side (as it is where it is no larger),
+    and the factor ``(x, y)`` from its new pixels to its old ones (1 where it was not shrunk).
+
+    Shape: ``(C, H, W)`` → ``(C, h, w)``, ``(2,)`` float64.
+    """
+    height, width = image.shape[-2:]
+    scale = max(height, width) / side
     if scale > 1.0:
         size = (max(1, round(height / scale)), max(1, round(width / scale)))
-        features = F.interpolate(features[None], size=size, mode="area")[0]
-    small_h, small_w = features.shape[-2:]
-    return features, torch.tensor([width / small_w, height / small_h], dtype=torch.float64)
+        image = F.interpolate(image[None], size=size, mode="area")[0]
+    small_h, small_w = image.shape[-2:]
+    return image, torch.tensor([width / small_w, height / small_h], dtype=torch.float64)
 
 
 def feature_groups(features: Tensor, choice: str) -> tuple[Tensor, tuple[int, ...]]:
@@ -717,6 +725,15 @@ WINDOWS = "windows"
 SELF_MATCH = "self-match"
 
 
+def through_perspective(rectified: Tensor, g: Tensor) -> Tensor:
+    """The image offsets ``d = q / (1 − g·q)`` from the centre that show the rectified offsets
+    ``q`` through the perspective ``g`` (per pixel; :class:`Perspective`). Differentiable in both.
+
+    Shape: ``(*, 2)``, ``(2,)`` → ``(*, 2)``.
+    """
+    return rectified / (1.0 - (rectified * g).sum(dim=-1, keepdim=True))
+
+
 @dataclass(frozen=True)
 class Perspective:
     """A mild perspective of the maps (module docstring, step 3b): image offset ``d`` from the maps'
@@ -740,8 +757,7 @@ class Perspective:
         """Rectified positions → the maps' positions. Shape: ``(*, 2)`` → ``(*, 2)``."""
         centre = torch.tensor(self.centre, dtype=rectified.dtype, device=rectified.device)
         g = torch.tensor(self.g, dtype=rectified.dtype, device=rectified.device)
-        q = rectified - centre
-        return centre + q / (1.0 - (q * g).sum(dim=-1, keepdim=True))
+        return centre + through_perspective(rectified - centre, g)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -958,11 +974,10 @@ def self_match_residual(features: Tensor, g: Tensor, vectors: Tensor, points: Te
     height, width = features.shape[-2:]
     centre = torch.tensor([width / 2, height / 2], dtype=points.dtype, device=points.device)
     scale = torch.tensor([2.0 / width, 2.0 / height], dtype=points.dtype, device=points.device)
-    lo, hi = torch.ones_like(centre), torch.stack([centre[0] * 2, centre[1] * 2]) - 1.0
+    lo, hi = torch.ones_like(centre), 2.0 * centre - 1.0
 
     def seen(shift: Tensor) -> tuple[Tensor, Tensor]:
-        q = points + shift
-        image = centre + q / (1.0 - (q * g).sum(dim=-1, keepdim=True))
+        image = centre + through_perspective(points + shift, g)
         grid = (image * scale - 1.0).to(features.dtype)
         values = F.grid_sample(
             features[None], grid[None, None], mode="bilinear", padding_mode="border", align_corners=False
@@ -1038,16 +1053,11 @@ def self_match_perspective(
 
     Shape: ``(C, h, w)`` → :class:`Perspective` or ``None``.
     """
-    small_h, small_w = features.shape[-2:]
-    shrink = max(1.0, max(small_h, small_w) / SELF_MATCH_SIDE)
-    if shrink > 1.0:
-        shape = (max(1, round(small_h / shrink)), max(1, round(small_w / shrink)))
-        features = F.interpolate(features[None], size=shape, mode="area")[0]
-    to_small = torch.tensor([features.shape[-1] / small_w, features.shape[-2] / small_h], dtype=torch.float64)
-    g, _, before, after = fit_self_match(features, start * to_small)
+    small, shrink = area_shrink(features, SELF_MATCH_SIDE)
+    g, _, before, after = fit_self_match(small, start / shrink)
     # g · d is the same in any pixels: per maps' pixel, g divided by the maps' pixels per small one.
     return perspective_of_fit(
-        g * to_small / factor, size, before, after, gain=SELF_MATCH_GAIN, method=SELF_MATCH
+        g / (shrink * factor), size, before, after, gain=SELF_MATCH_GAIN, method=SELF_MATCH
     )[0]
 
 
